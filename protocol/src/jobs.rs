@@ -1,0 +1,259 @@
+//! Point-table jobs as fixed sequences of frames (brief edition §4-2, §5-3; complete edition
+//! §7-3-1), each step with the response that confirms it.
+//!
+//! Writing goes through the edit area: Q1 loads the row, T4 sets the address, W4 writes (the
+//! address then increments), V5 stores the row to non-volatile memory. V5 wears that memory
+//! (about 100,000 writes per area), so a caller should compare before it writes.
+
+use crate::command::{Command, Request};
+use crate::memory::{flgp, PointField};
+use crate::reply::{MemoryCode, Reply};
+use crate::types::{Acceleration, Address, Axis, PositionNo, Pulses, Transfer, Velocity};
+
+/// The response that confirms a step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Expect {
+    /// A direct-format response that is not a rejection (Q1).
+    Accepted,
+    /// A T4 response echoing this address.
+    AddressEcho(Address),
+    /// A W4 response with this next address (the write address + 1).
+    NextAddress(Address),
+    /// A V5 response (the value is the write count).
+    WriteCount,
+    /// An R4 response (the value is the data read).
+    Data,
+}
+
+/// Why a response does not confirm a step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StepError {
+    /// The controller rejected the command, for this reason (a warning code).
+    Rejected(crate::alarm::AlarmCode),
+    /// The response is of another kind or echoes another address.
+    Unexpected,
+}
+
+impl Expect {
+    /// Check `reply` (already matched to the request by [`Reply::answers`]). Returns the
+    /// response's value (data, count, address) when it has one.
+    pub fn check(self, reply: &Reply) -> Result<Option<u32>, StepError> {
+        if let Some(reason) = reply.rejection() {
+            return Err(StepError::Rejected(reason));
+        }
+        match (self, *reply) {
+            (Expect::Accepted, Reply::Status { .. }) => Ok(None),
+            (
+                Expect::AddressEcho(want),
+                Reply::Memory {
+                    code: MemoryCode::SetWriteAddress,
+                    value,
+                    ..
+                },
+            )
+            | (
+                Expect::NextAddress(want),
+                Reply::Memory {
+                    code: MemoryCode::WriteMemory,
+                    value,
+                    ..
+                },
+            ) if value == want.0 => Ok(Some(value)),
+            (
+                Expect::WriteCount,
+                Reply::Memory {
+                    code: MemoryCode::Store,
+                    value,
+                    ..
+                },
+            )
+            | (
+                Expect::Data,
+                Reply::Memory {
+                    code: MemoryCode::ReadMemory,
+                    value,
+                    ..
+                },
+            ) => Ok(Some(value)),
+            _ => Err(StepError::Unexpected),
+        }
+    }
+}
+
+/// One frame of a job and the response that confirms it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Step {
+    /// What to send.
+    pub request: Request,
+    /// What must come back.
+    pub expect: Expect,
+}
+
+fn step(axis: Axis, command: Command, expect: Expect) -> Step {
+    Step {
+        request: Request::new(axis, command),
+        expect,
+    }
+}
+
+fn load(axis: Axis, point: PositionNo) -> Step {
+    step(
+        axis,
+        Command::LoadToEdit(Transfer::Point(point)),
+        Expect::Accepted,
+    )
+}
+
+fn store(axis: Axis, point: PositionNo) -> Step {
+    step(
+        axis,
+        Command::StoreFromEdit(Transfer::Point(point)),
+        Expect::WriteCount,
+    )
+}
+
+fn address(axis: Axis, field: PointField) -> Step {
+    let address = field.address();
+    step(
+        axis,
+        Command::SetWriteAddress { address },
+        Expect::AddressEcho(address),
+    )
+}
+
+fn write(axis: Axis, field: PointField, value: u32) -> Step {
+    step(
+        axis,
+        Command::WriteMemory { value },
+        Expect::NextAddress(field.address().next()),
+    )
+}
+
+/// Change one field of an existing point: Q1, T4, W4, V5 (brief edition §5-3 1).
+pub fn write_field(axis: Axis, point: PositionNo, field: PointField, value: u32) -> [Step; 4] {
+    [
+        load(axis, point),
+        address(axis, field),
+        write(axis, field, value),
+        store(axis, point),
+    ]
+}
+
+/// A whole point as the brief edition writes one (§5-3 2).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PointData {
+    /// 0x400 PCMD.
+    pub position: Pulses,
+    /// 0x404 VCMD.
+    pub velocity: Velocity,
+    /// 0x405 ACMD.
+    pub acceleration: Acceleration,
+    /// 0x401 FLGP: which fields override the common defaults (the example writes 0xC0).
+    pub flags: u32,
+    /// 0x403 INP, pulses.
+    pub band: u32,
+    /// 0x409 MXAC.
+    pub max_acceleration: u32,
+}
+
+impl PointData {
+    /// FLGP making the row's band, velocity, acceleration and MXAC count: 0xC0, as the brief
+    /// edition's example writes (it labels this write "push force 0"; the complete edition's
+    /// memory map shows 0x401 is FLGP).
+    pub const FLAGS_MOTION_AND_BAND: u32 = flgp::BAND | flgp::MOTION;
+
+    /// The fields in the order the brief edition writes them, with their values.
+    pub fn fields(&self) -> [(PointField, u32); 6] {
+        [
+            (PointField::Position, self.position.to_wire()),
+            (PointField::Velocity, self.velocity.get().into()),
+            (PointField::Acceleration, self.acceleration.get().into()),
+            (PointField::Flags, self.flags),
+            (PointField::Band, self.band),
+            (PointField::MaxAcceleration, self.max_acceleration),
+        ]
+    }
+}
+
+/// Write a whole new point: Q1, six T4 + W4 pairs, V5 (the 14 frames of brief edition §5-3 2).
+pub fn write_point(axis: Axis, point: PositionNo, data: &PointData) -> [Step; 14] {
+    let [f0, f1, f2, f3, f4, f5] = data.fields();
+    let pair =
+        |(field, value): (PointField, u32)| [address(axis, field), write(axis, field, value)];
+    let [a0, w0] = pair(f0);
+    let [a1, w1] = pair(f1);
+    let [a2, w2] = pair(f2);
+    let [a3, w3] = pair(f3);
+    let [a4, w4] = pair(f4);
+    let [a5, w5] = pair(f5);
+    [
+        load(axis, point),
+        a0,
+        w0,
+        a1,
+        w1,
+        a2,
+        w2,
+        a3,
+        w3,
+        a4,
+        w4,
+        a5,
+        w5,
+        store(axis, point),
+    ]
+}
+
+/// Read a point back: Q1, then R4 of every documented field ([`PointField::ALL`]).
+pub fn read_point(axis: Axis, point: PositionNo) -> [Step; 10] {
+    let read = |field: PointField| {
+        step(
+            axis,
+            Command::ReadMemory {
+                address: field.address(),
+            },
+            Expect::Data,
+        )
+    };
+    let [f0, f1, f2, f3, f4, f5, f6, f7, f8] = PointField::ALL;
+    [
+        load(axis, point),
+        read(f0),
+        read(f1),
+        read(f2),
+        read(f3),
+        read(f4),
+        read(f5),
+        read(f6),
+        read(f7),
+        read(f8),
+    ]
+}
+
+/// The values of a read-back, in [`PointField::ALL`] order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PointReadback(pub [u32; 9]);
+
+impl PointReadback {
+    /// The value of one field.
+    pub fn get(&self, field: PointField) -> u32 {
+        PointField::ALL
+            .iter()
+            .zip(self.0.iter())
+            .find(|(f, _)| **f == field)
+            .map_or(0, |(_, v)| *v)
+    }
+
+    /// Whether writing `data` would change nothing (so V5, which wears the memory, can be
+    /// skipped).
+    pub fn matches(&self, data: &PointData) -> bool {
+        data.fields()
+            .iter()
+            .all(|&(field, value)| self.get(field) == value)
+    }
+}

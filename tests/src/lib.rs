@@ -1,0 +1,1 @@
+//! Host-side tools and test harnesses for the Robo Cylinder gateway.
