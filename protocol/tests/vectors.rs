@@ -3,6 +3,9 @@
 //! Frames are written as the documents print them: the 14 characters between STX and ETX.
 //! Where an example contradicts a stated rule, the test is named `*_contradicts_*`, follows the
 //! rule, and says why in its comment.
+//!
+//! Lengths are in 0.01 mm and speeds in 0.01 mm/s, so `Length(56_80)` reads as 56.80 mm.
+#![allow(clippy::inconsistent_digit_grouping)]
 
 use protocol::frame::{bcc, Frame};
 use protocol::memory::{self, PointField};
