@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# Every test of the project, on a fresh machine: installs what it needs first.
+#
+#   scripts/test-all.sh            # what CI runs (.ci/run calls this)
+#   FUZZ_SECONDS=300 scripts/test-all.sh   # a longer fuzzing run
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+step() { printf '\n==> %s\n' "$*"; }
+
+step "toolchain (rust-toolchain.toml: pinned rustc, thumbv7em-none-eabihf, rustfmt, clippy)"
+# A plain `cargo` does not add the targets/components the file lists when the toolchain itself
+# is already installed; `rustup toolchain install` with no argument does.
+rustup toolchain install
+
+step "format"
+cargo fmt --all -- --check
+
+step "clippy: host crates (protocol, rc-host), warnings denied"
+cargo clippy --all-targets --locked -- -D warnings
+
+step "clippy: firmware for thumbv7em-none-eabihf, warnings denied"
+cargo clippy -p rc-gateway --target thumbv7em-none-eabihf --locked -- -D warnings
+
+step "protocol: no_std build (with defmt) for the firmware target"
+cargo clippy -p protocol --target thumbv7em-none-eabihf --features defmt --locked -- -D warnings
+
+step "tests: protocol (codec, vectors, properties) and host crate (rcframe)"
+cargo test --locked
+
+step "firmware: release build"
+cargo fw --locked
+
+step "demo: README's run-without-hardware command"
+scripts/demo.sh > /dev/null
+
+step "fuzz: every target for ${FUZZ_SECONDS:=30} s"
+FUZZ_SECONDS="$FUZZ_SECONDS" scripts/fuzz.sh
+
+step "all tests passed"
