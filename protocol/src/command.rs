@@ -264,7 +264,7 @@ impl Command {
     fn read(r: &mut Reader<'_>) -> Result<Command, Error> {
         let char = r.byte()?;
         let code = Code::from_char(char).ok_or(Error::UnknownCommand { code: [char, 0] })?;
-        // Every layout is 11 characters; `rest` says how many filler zeros close it.
+        // Every layout is 11 characters; `zeros` is how many filler zeros close it.
         let (command, zeros) = match code {
             Code::ReadMemory | Code::SetWriteAddress | Code::WriteMemory => {
                 function_number(r, char, b'4')?;
@@ -291,7 +291,7 @@ impl Command {
                     b'3' => {
                         let typ = r.hex_u8()?;
                         if typ != 0x01 {
-                            return Reader::out_of_range(Field::TransferType, typ);
+                            return Err(Field::TransferType.out_of_range(typ));
                         }
                         (Command::MoveToPoint(PositionNo::decode(r.hex_u8()?)?), 5)
                     }
@@ -316,7 +316,7 @@ impl Command {
                 // The inner command must itself be valid and bufferable.
                 let inner = buffered.command()?;
                 if !inner.bufferable() {
-                    return Reader::out_of_range(Field::BufferedCommand, inner.code().to_char());
+                    return Err(Field::BufferedCommand.out_of_range(inner.code().to_char()));
                 }
                 (Command::Buffer(buffered), 0)
             }
@@ -324,10 +324,7 @@ impl Command {
             Code::SetResponseDelay => {
                 r.literal(b"trw")?;
                 let value = r.hex_u8()?;
-                let rtim = Rtim::new(value).ok_or(Error::FieldOutOfRange {
-                    field: Field::Rtim,
-                    value: value.into(),
-                })?;
+                let rtim = Rtim::new(value).ok_or(Field::Rtim.out_of_range(value))?;
                 (Command::SetResponseDelay(rtim), 5)
             }
             Code::Servo => {
@@ -335,7 +332,7 @@ impl Command {
                 let on = match flag {
                     b'0' => false,
                     b'1' => true,
-                    _ => return Reader::out_of_range(Field::Servo, flag),
+                    _ => return Err(Field::Servo.out_of_range(flag)),
                 };
                 (Command::Servo(on), 9)
             }
@@ -343,18 +340,13 @@ impl Command {
             Code::SetVelocityAcceleration => {
                 let vtyp = r.byte()?;
                 if vtyp != b'2' {
-                    return Reader::out_of_range(Field::VelocityType, vtyp);
+                    return Err(Field::VelocityType.out_of_range(vtyp));
                 }
                 let v = r.hex_u16()?;
                 let a = r.hex_u16()?;
-                let velocity = Velocity::new(v).ok_or(Error::FieldOutOfRange {
-                    field: Field::Velocity,
-                    value: v.into(),
-                })?;
-                let acceleration = Acceleration::new(a).ok_or(Error::FieldOutOfRange {
-                    field: Field::Acceleration,
-                    value: a.into(),
-                })?;
+                let velocity = Velocity::new(v).ok_or(Field::Velocity.out_of_range(v))?;
+                let acceleration =
+                    Acceleration::new(a).ok_or(Field::Acceleration.out_of_range(a))?;
                 (
                     Command::SetVelocityAcceleration {
                         velocity,
@@ -390,9 +382,9 @@ fn read_transfer(r: &mut Reader<'_>) -> Result<Transfer, Error> {
     let pos = r.hex_u8()?;
     match (typ, pos) {
         (0x00, 0x00) => Ok(Transfer::CommonParameters),
-        (0x00, _) => Reader::out_of_range(Field::PositionNo, pos),
+        (0x00, _) => Err(Field::PositionNo.out_of_range(pos)),
         (0x01, _) => Ok(Transfer::Point(PositionNo::decode(pos)?)),
-        _ => Reader::out_of_range(Field::TransferType, typ),
+        _ => Err(Field::TransferType.out_of_range(typ)),
     }
 }
 

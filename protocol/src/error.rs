@@ -99,6 +99,16 @@ pub enum Error {
     },
 }
 
+impl Field {
+    /// The error for this field holding `value`.
+    pub(crate) fn out_of_range(self, value: impl Into<u32>) -> Error {
+        Error::FieldOutOfRange {
+            field: self,
+            value: value.into(),
+        }
+    }
+}
+
 impl fmt::Display for Error {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {

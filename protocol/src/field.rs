@@ -2,7 +2,7 @@
 //! through these two types, so that position bookkeeping lives in one place and an error always
 //! names the index of the offending byte in the 16-byte frame.
 
-use crate::error::{Error, Field};
+use crate::error::Error;
 use crate::frame::DATA_LEN;
 use crate::hex;
 
@@ -85,14 +85,6 @@ impl<'a> Reader<'a> {
     /// A 4-digit hex number.
     pub(crate) fn hex_u16(&mut self) -> Result<u16, Error> {
         self.hex(4).map(|v| (v & 0xFFFF) as u16)
-    }
-
-    /// Fail with [`Error::FieldOutOfRange`].
-    pub(crate) fn out_of_range<T>(field: Field, value: impl Into<u32>) -> Result<T, Error> {
-        Err(Error::FieldOutOfRange {
-            field,
-            value: value.into(),
-        })
     }
 }
 

@@ -169,7 +169,7 @@ impl Reply {
             if num != memory.function_number() {
                 return match crate::hex::value(num) {
                     Some(8..=15) => read_status(&mut r, axis, code),
-                    _ => Reader::out_of_range(Field::FunctionNumber, num),
+                    _ => Err(Field::FunctionNumber.out_of_range(num)),
                 };
             }
             r.byte()?;

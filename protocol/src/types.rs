@@ -99,10 +99,7 @@ impl PositionNo {
     }
 
     pub(crate) fn decode(value: u8) -> Result<PositionNo, Error> {
-        PositionNo::new(value).ok_or(Error::FieldOutOfRange {
-            field: Field::PositionNo,
-            value: value.into(),
-        })
+        PositionNo::new(value).ok_or(Field::PositionNo.out_of_range(value))
     }
 }
 
@@ -217,10 +214,7 @@ impl HomeDirection {
         match code {
             0x07 => Ok(HomeDirection::MotorEnd),
             0x08 => Ok(HomeDirection::NonMotorEnd),
-            _ => Err(Error::FieldOutOfRange {
-                field: Field::HomeDirection,
-                value: code.into(),
-            }),
+            _ => Err(Field::HomeDirection.out_of_range(code)),
         }
     }
 }
@@ -248,10 +242,7 @@ impl ResetKind {
         match code {
             0x02 => Ok(ResetKind::InitializeData),
             0x03 => Ok(ResetKind::AlarmReset),
-            _ => Err(Error::FieldOutOfRange {
-                field: Field::ResetKind,
-                value: code.into(),
-            }),
+            _ => Err(Field::ResetKind.out_of_range(code)),
         }
     }
 }
@@ -292,10 +283,7 @@ impl DataType {
         match code {
             0x00 => Ok(DataType::CommonParameters),
             0x01 => Ok(DataType::PositionData),
-            _ => Err(Error::FieldOutOfRange {
-                field: Field::TransferType,
-                value: code.into(),
-            }),
+            _ => Err(Field::TransferType.out_of_range(code)),
         }
     }
 }
