@@ -24,6 +24,8 @@ pub enum Expect {
     WriteCount,
     /// An R4 response (the value is the data read).
     Data,
+    /// Any response that is not a rejection (the value, for a memory response).
+    Reply,
 }
 
 /// Why a response does not confirm a step.
@@ -44,6 +46,7 @@ impl Expect {
             return Err(StepError::Rejected(reason));
         }
         match (self, *reply) {
+            (Expect::Reply, _) => Ok(reply.memory_value()),
             (Expect::Accepted, Reply::Status { .. }) => Ok(None),
             (
                 Expect::AddressEcho(want),

@@ -18,6 +18,7 @@
 //! | [`units`] | mm, mm/s and G in the controller's units |
 //! | [`memory`] | The controller's memory map |
 //! | [`jobs`] | Point-table reads and writes as frame sequences |
+//! | [`engine`] | The bus master: what to send next, time-outs, retries, polling, jobs |
 //! | [`line`] | Break, baud rates, the communication-change broadcast |
 //!
 //! ```
@@ -52,6 +53,7 @@
 pub mod alarm;
 pub mod command;
 pub mod deframer;
+pub mod engine;
 pub mod error;
 mod field;
 pub mod frame;

@@ -1,0 +1,248 @@
+//! Jobs: what the PLC side asks for, as programs of frames and waits.
+//!
+//! A program is computed on demand from the job ([`program`]), so an active job is only its
+//! description and a cursor: nothing is stored per step, nothing is allocated.
+
+use crate::jobs::{self, Expect, PointData, PointReadback, Step};
+use crate::memory::PointField;
+use crate::{
+    Acceleration, AlarmCode, Axis, Command, HomeDirection, PositionNo, Pulses, Request, ResetKind,
+    StatusReport, Velocity,
+};
+
+/// Identifies a submitted job in [`Event::JobDone`](super::Event::JobDone).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct JobId(pub u32);
+
+/// What to do with one axis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum JobKind {
+    /// Send one command and report its response.
+    Command(Command),
+    /// Servo on or off, then wait until the status shows it.
+    Servo(bool),
+    /// The homing procedure (complete edition §6-2): wait ready (PFIN), `o`, wait for ZFIN.
+    Home(HomeDirection),
+    /// Q3, then wait for positioning complete.
+    MoveToPoint(PositionNo),
+    /// `a`, then wait for positioning complete.
+    MoveAbsolute(Pulses),
+    /// `m`, then wait. Never resent on time-out: the outcome is then unknown (§5 (2)).
+    MoveRelative(Pulses),
+    /// Start a jog: `a` to the given stroke end; done when accepted. End it with [`JobKind::Stop`].
+    Jog(Pulses),
+    /// `d`: cancel the remaining motion. Goes before every other frame and cancels the axis'
+    /// running and queued jobs.
+    Stop,
+    /// Servo off, then `r03` (the document requires the servo off for an alarm reset, §4-4-16).
+    AlarmReset,
+    /// `v2`: velocity and acceleration of the execution area.
+    SetMotion {
+        /// Velocity.
+        velocity: Velocity,
+        /// Acceleration.
+        acceleration: Acceleration,
+    },
+    /// Change one point-table field: Q1, T4, W4, V5.
+    WriteField {
+        /// Point.
+        point: PositionNo,
+        /// Field.
+        field: PointField,
+        /// Value.
+        value: u32,
+    },
+    /// Write a whole point (14 frames), then read it back and compare if `verify`.
+    WritePoint {
+        /// Point.
+        point: PositionNo,
+        /// Data.
+        data: PointData,
+        /// Read back and compare after writing.
+        verify: bool,
+    },
+    /// Read a point back (Q1 + R4 of every field).
+    ReadPoint(PositionNo),
+}
+
+/// A job for an axis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Job {
+    /// The axis.
+    pub axis: Axis,
+    /// What to do.
+    pub kind: JobKind,
+}
+
+/// What a finished job returns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum JobOutput {
+    /// Nothing beyond success.
+    Done,
+    /// The status the last response carried.
+    Status(StatusReport),
+    /// The 32-bit value of the last memory response (R4 data, V5 write count, ...).
+    Value(u32),
+    /// A point read back.
+    Point(PointReadback),
+}
+
+/// Why a job failed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum JobError {
+    /// A frame got no valid response after every allowed retry.
+    Timeout,
+    /// An `m` got no response: it may or may not have moved. The position is re-read.
+    OutcomeUnknown,
+    /// The controller rejected a command with this warning code.
+    Rejected(AlarmCode),
+    /// The axis went into alarm (error code) while the job waited.
+    Alarm(AlarmCode),
+    /// A response did not confirm the step (wrong echoed address, wrong kind).
+    Unexpected,
+    /// A stop cancelled it.
+    Cancelled,
+    /// The read-back differs from what was written.
+    VerifyFailed,
+    /// The awaited state did not come within the motion time-out.
+    WaitTimeout,
+}
+
+/// A state the job waits for, judged on status responses received after its last command.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub(crate) enum Condition {
+    /// PFIN on: ready to move (§6-2 step 1), or positioning complete (§6-3).
+    InPosition,
+    /// ZFIN and PFIN on: homing complete (§6-2 step 3).
+    Homed,
+    /// The servo bit equals this.
+    Servo(bool),
+}
+
+impl Condition {
+    /// Whether `report` satisfies the condition.
+    pub(crate) fn met(self, report: &StatusReport) -> bool {
+        match self {
+            Condition::InPosition => report.outputs.pfin(),
+            Condition::Homed => report.outputs.zfin() && report.outputs.pfin(),
+            Condition::Servo(on) => report.status.servo() == on,
+        }
+    }
+}
+
+/// One operation of a program.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Op {
+    /// Send a frame and check its response.
+    Send(Step),
+    /// Wait until a status satisfies the condition.
+    Await(Condition),
+}
+
+/// A direct command whose status response must not be a rejection.
+fn send(axis: Axis, command: Command) -> Op {
+    Op::Send(Step {
+        request: Request::new(axis, command),
+        expect: Expect::Accepted,
+    })
+}
+
+/// The `index`-th operation of `job`'s program, or `None` past its end.
+pub(crate) fn program(job: &Job, index: usize) -> Option<Op> {
+    let axis = job.axis;
+    let one = |ops: &[Op]| ops.get(index).copied();
+    match job.kind {
+        JobKind::Command(command) => one(&[Op::Send(Step {
+            request: Request::new(axis, command),
+            expect: Expect::Reply,
+        })]),
+        JobKind::Servo(on) => one(&[
+            send(axis, Command::Servo(on)),
+            Op::Await(Condition::Servo(on)),
+        ]),
+        JobKind::Home(direction) => one(&[
+            Op::Await(Condition::InPosition),
+            send(axis, Command::Home(direction)),
+            Op::Await(Condition::Homed),
+        ]),
+        JobKind::MoveToPoint(point) => one(&[
+            send(axis, Command::MoveToPoint(point)),
+            Op::Await(Condition::InPosition),
+        ]),
+        JobKind::MoveAbsolute(position) => one(&[
+            send(axis, Command::MoveAbsolute(position)),
+            Op::Await(Condition::InPosition),
+        ]),
+        JobKind::MoveRelative(distance) => one(&[
+            send(axis, Command::MoveRelative(distance)),
+            Op::Await(Condition::InPosition),
+        ]),
+        JobKind::Jog(end) => one(&[send(axis, Command::MoveAbsolute(end))]),
+        JobKind::Stop => one(&[send(axis, Command::CancelMotion)]),
+        JobKind::AlarmReset => one(&[
+            send(axis, Command::Servo(false)),
+            send(axis, Command::Reset(ResetKind::AlarmReset)),
+        ]),
+        JobKind::SetMotion {
+            velocity,
+            acceleration,
+        } => one(&[send(
+            axis,
+            Command::SetVelocityAcceleration {
+                velocity,
+                acceleration,
+            },
+        )]),
+        JobKind::WriteField {
+            point,
+            field,
+            value,
+        } => jobs::write_field(axis, point, field, value)
+            .get(index)
+            .copied()
+            .map(Op::Send),
+        JobKind::WritePoint {
+            point,
+            data,
+            verify,
+        } => {
+            let write = jobs::write_point(axis, point, &data);
+            match index.checked_sub(write.len()) {
+                None => write.get(index).copied().map(Op::Send),
+                Some(_) if !verify => None,
+                Some(i) => jobs::read_point(axis, point).get(i).copied().map(Op::Send),
+            }
+        }
+        JobKind::ReadPoint(point) => jobs::read_point(axis, point)
+            .get(index)
+            .copied()
+            .map(Op::Send),
+    }
+}
+
+/// Where in the program an R4 of a read-back lands in the [`PointReadback`]: the read-back
+/// program is Q1 then one R4 per [`PointField::ALL`] entry.
+pub(crate) fn readback_slot(job: &Job, index: usize) -> Option<usize> {
+    let start = match job.kind {
+        JobKind::ReadPoint(_) => 0,
+        JobKind::WritePoint { verify: true, .. } => 14,
+        _ => return None,
+    };
+    index
+        .checked_sub(start + 1)
+        .filter(|&i| i < PointField::ALL.len())
+}
+
+/// The data a `WritePoint` job wrote, to compare with its read-back.
+pub(crate) fn written(job: &Job) -> Option<PointData> {
+    match job.kind {
+        JobKind::WritePoint { data, .. } => Some(data),
+        _ => None,
+    }
+}
