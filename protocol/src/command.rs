@@ -92,6 +92,28 @@ impl Code {
         }
     }
 
+    /// The name the documents use: `R4`, `T4`, `W4`, `Q` (Q1/Q2/Q3 all answer `Q`), `V5`, `a`...
+    pub const fn mnemonic(self) -> &'static str {
+        match self {
+            Code::ReadMemory => "R4",
+            Code::SetWriteAddress => "T4",
+            Code::WriteMemory => "W4",
+            Code::Transfer => "Q",
+            Code::Store => "V5",
+            Code::MoveAbsolute => "a",
+            Code::CancelMotion => "d",
+            Code::Buffer => "h",
+            Code::MoveRelative => "m",
+            Code::Status => "n",
+            Code::Home => "o",
+            Code::SetResponseDelay => "p",
+            Code::Servo => "q",
+            Code::Reset => "r",
+            Code::ExecuteBuffered => "t",
+            Code::SetVelocityAcceleration => "v",
+        }
+    }
+
     /// The code of a character, if it is one.
     pub fn from_char(c: u8) -> Option<Code> {
         Code::ALL.into_iter().find(|code| code.to_char() == c)
@@ -191,6 +213,16 @@ impl Command {
             Command::Reset(_) => Code::Reset,
             Command::ExecuteBuffered => Code::ExecuteBuffered,
             Command::SetVelocityAcceleration { .. } => Code::SetVelocityAcceleration,
+        }
+    }
+
+    /// The name the documents use: `Q1`, `Q2`, `Q3`, or the code's [`Code::mnemonic`].
+    pub const fn mnemonic(&self) -> &'static str {
+        match self {
+            Command::LoadToEdit(_) => "Q1",
+            Command::EditToExecution(_) => "Q2",
+            Command::MoveToPoint(_) => "Q3",
+            _ => self.code().mnemonic(),
         }
     }
 

@@ -157,6 +157,12 @@ impl Deframer {
         self.rejected.get(..self.rejected_len).unwrap_or(&[])
     }
 
+    /// The bytes of the candidate being collected (empty between frames): what a capture that
+    /// ends mid-frame leaves behind.
+    pub fn pending(&self) -> &[u8] {
+        self.buf.get(..self.len).unwrap_or(&[])
+    }
+
     /// Swallow the echo of `sent`, which the gateway is about to transmit (see the
     /// [module documentation](self)). Any partial candidate is dropped as noise.
     pub fn expect_echo(&mut self, sent: &[u8; FRAME_LEN]) {

@@ -71,6 +71,8 @@ pub use command::{Buffered, Code, Command, Request};
 pub use deframer::Deframer;
 pub use error::{Error, Field};
 pub use frame::{Frame, Packet};
+/// The `nb` crate, whose `Result` the [`Deframer`] returns.
+pub use nb;
 pub use reply::{MemoryCode, Mismatch, Reply};
 pub use status::{Inputs, Outputs, Status, StatusReport};
 pub use types::{

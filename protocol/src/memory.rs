@@ -48,6 +48,29 @@ pub mod common {
     pub const ODPW: Address = Address(0x019);
     /// OTIM: homing time-out (16 ms units).
     pub const OTIM: Address = Address(0x01A);
+
+    /// Every common parameter with its code in §7-2-1.
+    pub const NAMED: [(Address, &str); 19] = [
+        (LIMM, "LIMM"),
+        (LIML, "LIML"),
+        (ZONM, "ZONM"),
+        (ZONL, "ZONL"),
+        (BRSL, "BRSL"),
+        (OVCM, "OVCM"),
+        (OACC, "OACC"),
+        (RTIM, "RTIM"),
+        (INP, "INP"),
+        (VCMD, "VCMD"),
+        (ACMD, "ACMD"),
+        (SPOW, "SPOW"),
+        (DPOW, "DPOW"),
+        (PLG0, "PLG0"),
+        (MXAC, "MXAC"),
+        (PSWT, "PSWT"),
+        (REG1, "REG1"),
+        (ODPW, "ODPW"),
+        (OTIM, "OTIM"),
+    ];
 }
 
 /// The point-table row in the edit area (§7-2-2; brief edition §4-3 4). Q1 loads a row here,
@@ -110,6 +133,21 @@ impl PointField {
         })
     }
 
+    /// The field's code in the complete edition's memory map (§7-2-2).
+    pub const fn code(self) -> &'static str {
+        match self {
+            PointField::Position => "PCMD",
+            PointField::Flags => "FLGP",
+            PointField::Band => "INP",
+            PointField::Velocity => "VCMD",
+            PointField::Acceleration => "ACMD",
+            PointField::PushCurrent => "SPOW",
+            PointField::MovingCurrent => "DPOW",
+            PointField::ServoGain => "PLG0",
+            PointField::MaxAcceleration => "MXAC",
+        }
+    }
+
     /// The field at an edit-area address.
     pub fn from_address(address: Address) -> Option<PointField> {
         PointField::ALL
@@ -148,3 +186,38 @@ pub const VNOW: Address = Address(0x7401);
 pub const ROM_VERSION: Address = Address(0x6800);
 /// Offset from an edit-area address to its execution-area mirror (§7-3-2).
 pub const EXECUTION_OFFSET: u32 = 0x7800;
+
+/// Where a documented address is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Area {
+    /// Common parameters (§7-2-1).
+    Common,
+    /// The point-table row (§7-2-2).
+    Point,
+    /// The execution-area mirror of a common parameter or point field (§7-3-2).
+    Execution,
+    /// Read-only monitors (§7-2-4, §7-2-5).
+    Monitor,
+}
+
+/// The code and area of a documented address, e.g. `0x7400` -> `("PNOW", Monitor)`.
+pub fn name(address: Address) -> Option<(&'static str, Area)> {
+    const MONITORS: [(Address, &str); 3] = [(PNOW, "PNOW"), (VNOW, "VNOW"), (ROM_VERSION, "ROM")];
+    let edit = |address: Address| {
+        common::NAMED
+            .iter()
+            .find(|(a, _)| *a == address)
+            .map(|(_, n)| (*n, Area::Common))
+            .or_else(|| PointField::from_address(address).map(|f| (f.code(), Area::Point)))
+    };
+    MONITORS
+        .iter()
+        .find(|(a, _)| *a == address)
+        .map(|(_, n)| (*n, Area::Monitor))
+        .or_else(|| edit(address))
+        .or_else(|| {
+            let mirrored = Address(address.0.checked_sub(EXECUTION_OFFSET)?);
+            edit(mirrored).map(|(n, _)| (n, Area::Execution))
+        })
+}
