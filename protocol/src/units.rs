@@ -181,11 +181,17 @@ pub struct Scale {
 }
 
 /// Integer division of `n` by a positive `d`, rounded to nearest, halves away from zero.
+/// Never overflows: it does not form `2 * n` (a public caller may pass any `i64`).
 const fn div_round(n: i64, d: i64) -> i64 {
-    if n >= 0 {
-        (2 * n + d) / (2 * d)
+    let (quotient, remainder) = (n / d, n % d);
+    // |remainder| < d, and every divisor here is small (at most 588_399), so 2 * |remainder|
+    // cannot overflow.
+    if 2 * remainder.abs() < d {
+        quotient
+    } else if n >= 0 {
+        quotient + 1
     } else {
-        -((-2 * n + d) / (2 * d))
+        quotient - 1
     }
 }
 
