@@ -1,1 +1,2 @@
 //! Host-side tools and test harnesses for the Robo Cylinder gateway.
+pub mod sim;
