@@ -1,2 +1,3 @@
 //! Host-side tools and test harnesses for the Robo Cylinder gateway.
+pub mod harness;
 pub mod sim;

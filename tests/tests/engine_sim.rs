@@ -1,0 +1,240 @@
+//! The bus-master engine against the simulated controllers, in virtual time: establishment,
+//! jobs end to end, and a dead axis that comes back.
+
+use protocol::engine::*;
+use protocol::jobs::PointData;
+use protocol::line::Baud;
+use protocol::units::{Accel, Length, Scale, Speed};
+use protocol::*;
+use rc_host::harness::Harness;
+use rc_host::sim::{Bus, BusConfig};
+
+const MS: u64 = 1000;
+const S: u64 = 1_000_000;
+
+fn axis(n: u8) -> Axis {
+    Axis::new(n).unwrap()
+}
+
+/// `n` controllers fresh from power-up (9.6 kbit/s, RTIM 255 ms) and an engine that
+/// establishes 115.2 kbit/s with RTIM 3 ms, run until established and every axis online.
+fn established(n: u8) -> Harness {
+    let axes: Vec<Axis> = (0..n).map(axis).collect();
+    let bus = Bus::with_axes(BusConfig::default(), &axes);
+    let engine = Engine::new(Config {
+        axes: AxisSet::first(n),
+        baud: Baud::B115200,
+        rtim: Rtim::MIN,
+        establish: true,
+        ..Config::default()
+    });
+    let mut h = Harness::new(engine, bus);
+    h.run_until_event(10 * S, |e| *e == Event::Established)
+        .expect("establishment finishes");
+    h.run_until(h.now + 200 * MS);
+    for a in &axes {
+        assert_eq!(h.engine.axis(*a).link, Link::Online, "axis {a:?}");
+    }
+    h
+}
+
+fn run_job(h: &mut Harness, job: Job, timeout: u64) -> Result<JobOutput, JobError> {
+    let id = h.engine.submit(job).expect("queued");
+    match h.run_until_event(
+        timeout,
+        |e| matches!(e, Event::JobDone { id: i, .. } if *i == id),
+    ) {
+        Some((_, Event::JobDone { result, .. })) => result,
+        other => panic!("job {job:?} did not finish: {other:?}"),
+    }
+}
+
+#[test]
+fn establishment_brings_every_axis_to_115200_and_rtim_3() {
+    let mut h = established(4);
+    for a in 0..4 {
+        let c = h.bus.controller(axis(a)).unwrap();
+        assert_eq!((c.baud(), c.rtim_ms()), (Baud::B115200, 3));
+    }
+    // Polling now runs at the new rate: a status round trip is about 2 x 1.39 ms + 3 ms.
+    let start = h.sent.len();
+    h.run_until(h.now + 100 * MS);
+    let polls = h.sent.len() - start;
+    let per_transaction = 100 * MS / polls as u64;
+    let limit = timing::transaction_time(Baud::B115200, Rtim::MIN).as_micros();
+    assert!(
+        per_transaction <= limit * 105 / 100,
+        "{per_transaction} µs per poll vs {limit}"
+    );
+    assert!(h.engine.axis(axis(3)).counters.timeouts == 0);
+}
+
+#[test]
+fn home_then_absolute_move_then_point_write_with_verify() {
+    let mut h = established(2);
+    let home = run_job(
+        &mut h,
+        Job {
+            axis: axis(1),
+            kind: JobKind::Home(HomeDirection::MotorEnd),
+        },
+        10 * S,
+    );
+    assert!(home.is_ok(), "{home:?}");
+    assert!(h.bus.controller(axis(1)).unwrap().homed());
+
+    let scale = Scale::new(
+        units::Lead::from_hundredths(1200).unwrap(),
+        HomeDirection::MotorEnd,
+    );
+    let target = scale.position_to_wire(Length(25_00)).unwrap();
+    let moved = run_job(
+        &mut h,
+        Job {
+            axis: axis(1),
+            kind: JobKind::MoveAbsolute(target),
+        },
+        10 * S,
+    );
+    assert!(moved.is_ok(), "{moved:?}");
+    let c = h.bus.controller(axis(1)).unwrap();
+    assert!(!c.moving());
+    assert_eq!(c.position(), i64::from(target.0));
+
+    let data = PointData {
+        position: target,
+        velocity: scale.velocity(Speed(50_00)).unwrap(),
+        acceleration: scale.acceleration(Accel(30)).unwrap(),
+        flags: PointData::FLAGS_MOTION_AND_BAND,
+        band: scale.band_to_wire(Length(10)).unwrap(),
+        max_acceleration: 0,
+    };
+    let point = PositionNo::new(7).unwrap();
+    let written = run_job(
+        &mut h,
+        Job {
+            axis: axis(1),
+            kind: JobKind::WritePoint {
+                point,
+                data,
+                verify: true,
+            },
+        },
+        10 * S,
+    );
+    match written {
+        Ok(JobOutput::Point(readback)) => assert!(readback.matches(&data)),
+        other => panic!("{other:?}"),
+    }
+    // Move away, then to the point: Q3 7 brings it back to 25 mm.
+    run_job(
+        &mut h,
+        Job {
+            axis: axis(1),
+            kind: JobKind::MoveAbsolute(Pulses(0)),
+        },
+        10 * S,
+    )
+    .unwrap();
+    run_job(
+        &mut h,
+        Job {
+            axis: axis(1),
+            kind: JobKind::MoveToPoint(point),
+        },
+        10 * S,
+    )
+    .unwrap();
+    assert_eq!(
+        h.bus.controller(axis(1)).unwrap().position(),
+        i64::from(target.0)
+    );
+}
+
+#[test]
+fn rejected_move_before_homing_reports_the_warning() {
+    let mut h = established(1);
+    let result = run_job(
+        &mut h,
+        Job {
+            axis: axis(0),
+            kind: JobKind::MoveAbsolute(Pulses(-800)),
+        },
+        2 * S,
+    );
+    assert_eq!(result, Err(JobError::Rejected(AlarmCode(0x71))));
+    assert_eq!(
+        h.engine
+            .axis(axis(0))
+            .counters
+            .rejections_of(AlarmCode(0x71)),
+        1
+    );
+}
+
+#[test]
+fn stop_cancels_a_move_in_progress() {
+    let mut h = established(1);
+    run_job(
+        &mut h,
+        Job {
+            axis: axis(0),
+            kind: JobKind::Home(HomeDirection::MotorEnd),
+        },
+        10 * S,
+    )
+    .unwrap();
+    let id = h
+        .engine
+        .submit(Job {
+            axis: axis(0),
+            kind: JobKind::MoveAbsolute(Pulses(-40_000)),
+        })
+        .unwrap();
+    h.run_until(h.now + 300 * MS);
+    assert!(h.bus.controller(axis(0)).unwrap().moving());
+    let stop = run_job(
+        &mut h,
+        Job {
+            axis: axis(0),
+            kind: JobKind::Stop,
+        },
+        S,
+    );
+    assert!(stop.is_ok(), "{stop:?}");
+    assert!(h.events.iter().any(|(_, e)| matches!(e,
+        Event::JobDone { id: i, result: Err(JobError::Cancelled), .. } if *i == id)));
+    h.run_until(h.now + 500 * MS);
+    let c = h.bus.controller(axis(0)).unwrap();
+    assert!(!c.moving());
+    assert!(c.position() > -40_000, "stopped short of the target");
+}
+
+#[test]
+fn a_silent_axis_goes_offline_and_rejoins_without_stalling_the_others() {
+    let mut h = established(4);
+    h.bus.set_silent(axis(2), true);
+    h.run_until_event(2 * S, |e| *e == Event::Offline(axis(2)))
+        .expect("offline");
+    // Live axes keep being polled while axis 2 is probed at the reduced rate.
+    let before = h.engine.axis(axis(0)).counters.replies;
+    let probes_before = h.engine.axis(axis(2)).counters.frames_sent;
+    h.run_until(h.now + 2 * S);
+    let polled = h.engine.axis(axis(0)).counters.replies - before;
+    let probes = h.engine.axis(axis(2)).counters.frames_sent - probes_before;
+    // Three live axes at the wire limit get 2 s / (3 transactions) polls each; a dead axis
+    // probed every 500 ms (one Trt of ~24 ms each time) costs them a few percent at most.
+    let cycle = 3 * timing::transaction_time(Baud::B115200, Rtim::MIN).as_micros();
+    let ideal = (2 * S / cycle) as u32;
+    assert!(
+        polled * 100 >= ideal * 90,
+        "axis 0 answered {polled} polls in 2 s, ideal {ideal}"
+    );
+    assert!(
+        probes <= 5,
+        "axis 2 probed {probes} times in 2 s (interval 500 ms)"
+    );
+    h.bus.set_silent(axis(2), false);
+    h.run_until_event(2 * S, |e| *e == Event::Online(axis(2)))
+        .expect("back online");
+}
