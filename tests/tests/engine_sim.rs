@@ -238,3 +238,60 @@ fn a_silent_axis_goes_offline_and_rejoins_without_stalling_the_others() {
     h.run_until_event(2 * S, |e| *e == Event::Online(axis(2)))
         .expect("back online");
 }
+
+#[test]
+fn synchronized_start_moves_two_axes_at_the_same_instant() {
+    let mut h = established(3);
+    for a in [0, 2] {
+        run_job(
+            &mut h,
+            Job {
+                axis: axis(a),
+                kind: JobKind::Home(HomeDirection::MotorEnd),
+            },
+            10 * S,
+        )
+        .unwrap();
+    }
+    for (a, target) in [(0, -8_000), (2, -12_000)] {
+        let buffered = Buffered::new(&Command::MoveAbsolute(Pulses(target))).unwrap();
+        let r = run_job(
+            &mut h,
+            Job {
+                axis: axis(a),
+                kind: JobKind::Command(Command::Buffer(buffered)),
+            },
+            S,
+        );
+        assert!(r.is_ok(), "{r:?}");
+        assert!(h.bus.controller(axis(a)).unwrap().buffered().is_some());
+    }
+    let set = AxisSet::default().with(axis(0)).with(axis(2));
+    let started = run_job(
+        &mut h,
+        Job {
+            axis: axis(0),
+            kind: JobKind::StartBuffered(set),
+        },
+        5 * S,
+    );
+    assert!(started.is_ok(), "{started:?}");
+    let (c0, c2) = (
+        h.bus.controller(axis(0)).unwrap(),
+        h.bus.controller(axis(2)).unwrap(),
+    );
+    assert!(c0.buffered().is_none() && c2.buffered().is_none());
+    assert!(c0.last_move_start().is_some_and(|t| t > 0));
+    assert_eq!(
+        c0.last_move_start(),
+        c2.last_move_start(),
+        "one t starts both"
+    );
+    // Exactly one `t` went out.
+    let ts = h
+        .sent
+        .iter()
+        .filter(|(_, r)| r.command == Command::ExecuteBuffered)
+        .count();
+    assert_eq!(ts, 1);
+}

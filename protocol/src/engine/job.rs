@@ -65,6 +65,11 @@ pub enum JobKind {
     },
     /// Read a point back (Q1 + R4 of every field).
     ReadPoint(PositionNo),
+    /// Synchronized start (complete edition §6-4): `t` to this job's axis, which every axis
+    /// receives, then wait until each axis of the set reports its buffered bit clear. Buffer the
+    /// commands first with [`JobKind::Command`]`(`[`Command::Buffer`]`)` on each axis. `t` is not
+    /// resent on a time-out (§5 (3)); the polls tell which axes started.
+    StartBuffered(super::AxisSet),
 }
 
 /// A job for an axis.
@@ -123,6 +128,8 @@ pub(crate) enum Condition {
     Homed,
     /// The servo bit equals this.
     Servo(bool),
+    /// Every axis of the set reports no buffered command (judged by the engine across axes).
+    Unbuffered(super::AxisSet),
 }
 
 impl Condition {
@@ -132,6 +139,7 @@ impl Condition {
             Condition::InPosition => report.outputs.pfin(),
             Condition::Homed => report.outputs.zfin() && report.outputs.pfin(),
             Condition::Servo(on) => report.status.servo() == on,
+            Condition::Unbuffered(_) => !report.status.buffered(),
         }
     }
 }
@@ -219,6 +227,10 @@ pub(crate) fn program(job: &Job, index: usize) -> Option<Op> {
                 Some(i) => jobs::read_point(axis, point).get(i).copied().map(Op::Send),
             }
         }
+        JobKind::StartBuffered(axes) => one(&[
+            send(axis, Command::ExecuteBuffered),
+            Op::Await(Condition::Unbuffered(axes.with(axis))),
+        ]),
         JobKind::ReadPoint(point) => jobs::read_point(axis, point)
             .get(index)
             .copied()

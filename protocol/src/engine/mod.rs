@@ -548,6 +548,7 @@ impl Engine {
             self.emit(Event::Status { axis, report });
         }
         self.check_await(now, axis, &report);
+        self.check_cross_axis_waits(now, axis);
     }
 
     fn check_await(&mut self, now: Instant, axis: Axis, report: &StatusReport) {
@@ -562,8 +563,37 @@ impl Engine {
         }
         if report.outputs.alarm_active() && report.alarm.level() == crate::alarm::Level::Error {
             self.fail_job(axis, JobError::Alarm(report.alarm));
+        } else if let job::Condition::Unbuffered(axes) = condition {
+            if self.all_unbuffered(axes, active.since) {
+                self.advance(now, axis);
+            }
         } else if condition.met(report) {
             self.advance(now, axis);
+        }
+    }
+
+    /// Whether every axis of `axes` reported, after `since`, that it has no buffered command.
+    fn all_unbuffered(&self, axes: AxisSet, since: Instant) -> bool {
+        axes.iter().all(|a| {
+            let state = self.axis(a);
+            state.report_at.is_some_and(|t| t > since)
+                && state.report.is_some_and(|r| !r.status.buffered())
+        })
+    }
+
+    /// Jobs on other axes that wait for this axis too (a synchronized start).
+    fn check_cross_axis_waits(&mut self, now: Instant, axis: Axis) {
+        for lead in Axis::all().filter(|&a| a != axis) {
+            let Some(active) = self.active.get(index(lead)).copied().flatten() else {
+                continue;
+            };
+            if let Some(Op::Await(job::Condition::Unbuffered(axes))) =
+                program(&active.job, usize::from(active.cursor))
+            {
+                if axes.contains(axis) && self.all_unbuffered(axes, active.since) {
+                    self.advance(now, lead);
+                }
+            }
         }
     }
 
