@@ -222,10 +222,12 @@ fn a_silent_axis_goes_offline_and_rejoins_without_stalling_the_others() {
     h.run_until(h.now + 2 * S);
     let polled = h.engine.axis(axis(0)).counters.replies - before;
     let probes = h.engine.axis(axis(2)).counters.frames_sent - probes_before;
-    // Three live axes at the wire limit get 2 s / (3 transactions) polls each; a dead axis
-    // probed every 500 ms (one Trt of ~24 ms each time) costs them a few percent at most.
+    // Three live axes at the wire limit get 2 s / (3 transactions) polls each. A dead axis costs
+    // them a fast probe (one Trt, ~24 ms) every 500 ms and, every 5 s, one try at the power-up
+    // settings (a ~310 ms time-out at 9.6 kbit/s, RTIM 255 ms).
+    let rejoin_try = 310 * MS;
     let cycle = 3 * timing::transaction_time(Baud::B115200, Rtim::MIN).as_micros();
-    let ideal = (2 * S / cycle) as u32;
+    let ideal = ((2 * S - rejoin_try) / cycle) as u32;
     assert!(
         polled * 100 >= ideal * 90,
         "axis 0 answered {polled} polls in 2 s, ideal {ideal}"
@@ -294,4 +296,36 @@ fn synchronized_start_moves_two_axes_at_the_same_instant() {
         .filter(|(_, r)| r.command == Command::ExecuteBuffered)
         .count();
     assert_eq!(ts, 1);
+}
+
+#[test]
+fn a_power_cycled_axis_rejoins_at_its_stored_rate_without_stalling_the_others() {
+    let mut h = established(4);
+    let cycled = axis(1);
+    h.bus
+        .schedule_power_cycle(cycled, h.now + 100 * MS, 50 * MS);
+    h.run_until_event(2 * S, |e| *e == Event::Offline(cycled))
+        .expect("offline after power cycle");
+    let back = h.run_until_event(10 * S, |e| *e == Event::Online(cycled));
+    assert!(back.is_some(), "rejoined");
+    let c = h.bus.controller(cycled).unwrap();
+    assert_eq!((c.baud(), c.rtim_ms()), (Baud::B115200, 3));
+    // While it rejoined, axis 0 was never left unpolled for more than a few hundred ms.
+    let polls: Vec<u64> = h
+        .sent
+        .iter()
+        .filter(|(_, r)| r.axis == axis(0) && r.command == Command::Status)
+        .map(|(t, _)| *t)
+        .collect();
+    let worst = polls.windows(2).map(|w| w[1] - w[0]).max().unwrap();
+    assert!(
+        worst < 400 * MS,
+        "axis 0 waited {} ms between polls",
+        worst / MS
+    );
+    // The others were never reset: no break after the initial establishment.
+    assert_eq!(h.engine.bus_counters().establishments, 1);
+    for a in [0, 2, 3] {
+        assert_eq!(h.engine.axis(axis(a)).link, Link::Online);
+    }
 }

@@ -116,6 +116,11 @@ pub struct Config {
     pub probe_interval: Duration,
     /// How long a job waits for a state (in position, homed) before it fails.
     pub motion_timeout: Duration,
+    /// How often an offline axis is also tried at the power-up line settings (9.6 kbit/s,
+    /// RTIM 255 ms) and, if it answers there, reconfigured like §6-1 for that axis alone
+    /// (only with [`Config::establish`]: a controller that was power-cycled or replaced comes
+    /// back at its stored settings).
+    pub rejoin_interval: Duration,
 }
 
 impl Default for Config {
@@ -130,6 +135,7 @@ impl Default for Config {
             position_reads_per_cycle: 4,
             probe_interval: Duration::from_millis(500),
             motion_timeout: Duration::from_millis(60_000),
+            rejoin_interval: Duration::from_millis(5_000),
         }
     }
 }
@@ -207,6 +213,7 @@ enum Origin {
     Job,
     Stop(JobId),
     Establish,
+    Rejoin,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -254,6 +261,10 @@ pub struct Engine {
     position_credit: u8,
     position_due: AxisSet,
     probe_due: [Instant; AXES],
+    rejoin: Option<(Axis, u8)>,
+    rejoin_due: [Instant; AXES],
+    rejoin_turn: bool,
+    pending: Option<(Request, Origin, u8)>,
     next_id: u32,
     bus: BusCounters,
 }
@@ -299,6 +310,10 @@ impl Engine {
             position_credit: config.position_reads_per_cycle,
             position_due: AxisSet::default(),
             probe_due: [Instant(0); AXES],
+            rejoin: None,
+            rejoin_due: [Instant(0); AXES],
+            rejoin_turn: false,
+            pending: None,
             next_id: 0,
             bus: BusCounters::default(),
         }
@@ -483,7 +498,10 @@ impl Engine {
             state.counters.count_rejection(code);
             state.last_error = Some(LinkError::Rejected(code));
         }
-        self.set_link(now, axis, Link::Online);
+        if flight.origin != Origin::Rejoin {
+            // Online means answering at the bus rate; a rejoin talks at the power-up rate.
+            self.set_link(now, axis, Link::Online);
+        }
         if let Some(report) = reply.report() {
             self.update_report(now, axis, *report);
         }
@@ -505,6 +523,7 @@ impl Engine {
             }
             Origin::Job => self.job_reply(now, axis, &reply),
             Origin::Establish => self.establish_reply(axis, &flight.request, &reply),
+            Origin::Rejoin => self.rejoin_reply(axis, &flight.request),
         }
     }
 
@@ -689,15 +708,30 @@ impl Engine {
                 return output;
             }
         }
-        if self.line_baud != self.config.baud {
-            self.line_baud = self.config.baud;
+        if let Some(output) = self.rejoin_line_action(now) {
+            return output;
+        }
+        let next = match self.pending.take() {
+            Some(next) => next,
+            None => match self.next_transaction(now) {
+                Some(next) => next,
+                None => return Output::Idle(self.next_deadline()),
+            },
+        };
+        // Each transaction at its rate: a rejoining axis at the power-up rate, the rest at ours.
+        let baud = if next.1 == Origin::Rejoin {
+            crate::line::BAUD_AFTER_BREAK
+        } else {
+            self.config.baud
+        };
+        if self.line_baud != baud {
+            self.line_baud = baud;
             self.deframer.reset();
-            return Output::Line(LineAction::SetBaud(self.config.baud));
+            self.pending = Some(next);
+            return Output::Line(LineAction::SetBaud(baud));
         }
-        match self.next_transaction(now) {
-            Some((request, origin, attempt)) => self.start(now, request, origin, attempt),
-            None => Output::Idle(self.next_deadline()),
-        }
+        let (request, origin, attempt) = next;
+        self.start(now, request, origin, attempt)
     }
 
     fn start(&mut self, now: Instant, request: Request, origin: Origin, attempt: u8) -> Output {
@@ -735,7 +769,7 @@ impl Engine {
         }
         let may_retry = flight.attempt < self.config.retries
             && flight.request.command.resendable()
-            && flight.origin != Origin::Probe;
+            && !matches!(flight.origin, Origin::Probe | Origin::Rejoin);
         if may_retry {
             let attempt = flight.attempt.saturating_add(1);
             if flight.origin == Origin::Job {
@@ -785,6 +819,14 @@ impl Engine {
                 self.set_link(now, axis, Link::Offline);
                 self.establish_next_axis(axis);
             }
+            Origin::Rejoin => {
+                // Not at the power-up settings either: it is still the bus' RTIM we probe with.
+                self.rejoin = None;
+                let rtim = self.config.rtim;
+                if let Some(state) = self.state(axis) {
+                    state.rtim = rtim;
+                }
+            }
         }
     }
 
@@ -823,7 +865,14 @@ impl Engine {
         if let Some(next) = self.next_job_frame() {
             return Some(next);
         }
-        // 4. Polling.
+        // 4. A rejoining axis' next step, every other turn with polling.
+        self.rejoin_turn = !self.rejoin_turn;
+        if self.rejoin_turn {
+            if let Some(next) = self.next_rejoin_frame() {
+                return Some(next);
+            }
+        }
+        // 5. Polling.
         self.next_poll(now)
     }
 
@@ -900,6 +949,9 @@ impl Engine {
                 if let Some(slot) = self.probe_due.get_mut(index(axis)) {
                     *slot = now + self.config.probe_interval;
                 }
+                if self.start_rejoin(now, axis) {
+                    continue;
+                }
                 return Some((Request::new(axis, Command::Status), Origin::Probe, 0));
             }
             return Some((Request::new(axis, Command::Status), Origin::Poll, 0));
@@ -923,6 +975,73 @@ impl Engine {
             .filter_map(|a| self.probe_due.get(index(a)).copied());
         let waits = self.active.iter().flatten().filter_map(|a| a.wait_deadline);
         probes.chain(waits).min()
+    }
+
+    // ------------------------------------------------------------ rejoin of one axis
+
+    /// Begin reconfiguring `axis` at the power-up settings, if it is time to try.
+    fn start_rejoin(&mut self, now: Instant, axis: Axis) -> bool {
+        let due = self.rejoin_due.get(index(axis)).copied().unwrap_or(now);
+        if !self.config.establish || self.rejoin.is_some() || now < due {
+            return false;
+        }
+        if let Some(slot) = self.rejoin_due.get_mut(index(axis)) {
+            *slot = now + self.config.rejoin_interval;
+        }
+        if let Some(state) = self.state(axis) {
+            state.rtim = RTIM_AFTER_BREAK;
+        }
+        self.rejoin = Some((axis, 0));
+        true
+    }
+
+    /// Steps 0-4 are the frames of §6-1 steps 2-6 for the axis.
+    fn next_rejoin_frame(&mut self) -> Option<(Request, Origin, u8)> {
+        let (axis, step) = self.rejoin?;
+        let command = establish::configure(step, self.config.baud, self.config.rtim)?;
+        Some((Request::new(axis, command), Origin::Rejoin, 0))
+    }
+
+    fn rejoin_reply(&mut self, axis: Axis, request: &Request) {
+        if let Command::SetResponseDelay(rtim) = request.command {
+            if let Some(state) = self.state(axis) {
+                state.rtim = rtim;
+            }
+        }
+        if let Some((a, step)) = self.rejoin {
+            self.rejoin = Some((a, step.saturating_add(1)));
+        }
+    }
+
+    /// After the five frames: the broadcast (three times, at the power-up rate, where only the
+    /// rejoining axis listens), then the axis takes the new settings 150 ms later.
+    fn rejoin_line_action(&mut self, now: Instant) -> Option<Output> {
+        let (axis, step) = self.rejoin?;
+        let configured = establish::configure(step, self.config.baud, self.config.rtim).is_some();
+        if configured {
+            return None;
+        }
+        let sent = step.saturating_sub(5);
+        if sent < COMM_CHANGE_REPEATS {
+            if self.line_baud != crate::line::BAUD_AFTER_BREAK {
+                self.line_baud = crate::line::BAUD_AFTER_BREAK;
+                self.deframer.reset();
+                return Some(Output::Line(LineAction::SetBaud(self.line_baud)));
+            }
+            self.rejoin = Some((axis, step.saturating_add(1)));
+            self.free_at = now + timing::frame_time(self.line_baud);
+            return Some(Output::Line(LineAction::CommChange));
+        }
+        self.rejoin = None;
+        let settle = Duration::from_millis(u64::from(COMM_CHANGE_SETTLE_MS) + 10);
+        let rtim = self.config.rtim;
+        if let Some(state) = self.state(axis) {
+            state.rtim = rtim;
+        }
+        if let Some(slot) = self.probe_due.get_mut(index(axis)) {
+            *slot = now + settle;
+        }
+        None
     }
 
     // ------------------------------------------------------------ establishment (§6-1)
