@@ -127,11 +127,26 @@ fn timeout_is_trt_and_retries_then_offline_and_probes_slowly() {
     let c = engine.axis(axis(0)).counters;
     assert_eq!((c.frames_sent, c.timeouts, c.retries), (3, 3, 2));
     assert!(events(&mut engine).contains(&Event::Offline(axis(0))));
-    // The next probe waits for the probe interval.
+    // Probes back off: the first after FIRST_PROBE, then twice as long each time, up to
+    // probe_interval (no retries for a probe).
     now = offline_at;
-    let probe = next_frame(&mut engine, &mut now);
-    assert_eq!(probe.command, Command::Status);
-    assert!(now >= offline_at + engine.config().probe_interval);
+    let mut probes = vec![];
+    for _ in 0..7 {
+        let probe = next_frame(&mut engine, &mut now);
+        assert_eq!(probe.command, Command::Status);
+        probes.push(now);
+    }
+    let gaps: Vec<u64> = std::iter::once(probes[0].0 - offline_at.0)
+        .chain(
+            probes
+                .windows(2)
+                .map(|w| (w[1].0 - w[0].0) - trt.as_micros()),
+        )
+        .collect();
+    assert_eq!(
+        gaps,
+        [20_000, 40_000, 80_000, 160_000, 320_000, 500_000, 500_000]
+    );
 }
 
 #[test]

@@ -66,7 +66,7 @@ impl Counters {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum LinkError {
-    /// No valid response within Trt, after every allowed retry.
+    /// No valid response (none within Trt, or only corrupted ones), after every allowed retry.
     Timeout,
     /// The controller rejected the command with this warning code.
     Rejected(AlarmCode),

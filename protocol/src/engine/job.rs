@@ -100,7 +100,8 @@ pub enum JobOutput {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum JobError {
-    /// A frame got no valid response after every allowed retry.
+    /// A frame got no valid response (none in time, or only corrupted ones) after every
+    /// allowed retry.
     Timeout,
     /// An `m` got no response: it may or may not have moved. The position is re-read.
     OutcomeUnknown,

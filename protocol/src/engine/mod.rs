@@ -21,12 +21,14 @@
 //!   command; a response counts only if it parses, has a good BCC, comes from the addressed axis
 //!   and echoes the command character ([`Reply::answers`](crate::Reply::answers));
 //! - time-out Trt = 20 + RTIM + 160/Kbr ms (200 + ... for V5) from the end of the command;
+//!   a corrupted response ends the attempt at once (the line is free), without waiting for Trt;
 //!   up to [`Config::retries`] resends; `m` is never resent (its outcome is reported unknown and
 //!   the position re-read), `t` is not resent, and a W4 is resent only after its T4;
 //! - order: a stop (`d`) before everything (never behind another axis' retry), then a pending
 //!   retry, then job frames, then polling: status (`n`) round-robin over the configured axes,
 //!   a bounded number of position reads (R4 PNOW) per cycle for moving axes, and offline axes
-//!   probed only every [`Config::probe_interval`] so that they cannot starve live ones;
+//!   probed with a doubling back-off up to [`Config::probe_interval`] so that they cannot
+//!   starve live ones;
 //! - at start, the communication establishment procedure (§6-1) if configured.
 
 mod axis;
@@ -57,6 +59,9 @@ pub const AXES: usize = 16;
 pub const QUEUE_LEN: usize = 32;
 /// Events kept until read; older ones are dropped and counted when it overflows.
 pub const EVENT_LEN: usize = 64;
+
+/// The first probe of an axis that just went offline follows this soon.
+pub const FIRST_PROBE: Duration = Duration::from_millis(20);
 
 /// A set of axes, bit n = axis n.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -112,7 +117,9 @@ pub struct Config {
     pub echo: bool,
     /// Position reads (R4 PNOW) per polling cycle for moving axes.
     pub position_reads_per_cycle: u8,
-    /// How often an offline axis is probed.
+    /// How often an offline axis is probed, at most: the first probe follows after
+    /// [`FIRST_PROBE`] and the interval doubles with each unanswered probe up to this, so that
+    /// an axis lost to a burst of noise is back quickly and a dead one costs little.
     pub probe_interval: Duration,
     /// How long a job waits for a state (in position, homed) before it fails.
     pub motion_timeout: Duration,
@@ -220,8 +227,21 @@ enum Origin {
 struct InFlight {
     request: Request,
     origin: Origin,
+    /// No valid response by then: a time-out.
     deadline: Instant,
+    /// The answer cannot be complete before this (command, RTIM, response on the wire); a bad
+    /// frame that ends earlier is someone else's.
+    earliest_reply: Instant,
     attempt: u8,
+}
+
+/// Why an attempt failed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Failure {
+    /// Nothing valid within Trt.
+    Timeout,
+    /// The answer arrived corrupted (bad BCC): the line is free now, no need to wait for Trt.
+    Corrupted,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -261,6 +281,7 @@ pub struct Engine {
     position_credit: u8,
     position_due: AxisSet,
     probe_due: [Instant; AXES],
+    probe_backoff: [Duration; AXES],
     rejoin: Option<(Axis, u8)>,
     rejoin_due: [Instant; AXES],
     rejoin_turn: bool,
@@ -310,6 +331,7 @@ impl Engine {
             position_credit: config.position_reads_per_cycle,
             position_due: AxisSet::default(),
             probe_due: [Instant(0); AXES],
+            probe_backoff: [FIRST_PROBE; AXES],
             rejoin: None,
             rejoin_due: [Instant(0); AXES],
             rejoin_turn: false,
@@ -447,23 +469,28 @@ impl Engine {
             match self.deframer.push(byte) {
                 Ok(Packet::Frame(frame)) => self.on_frame(now, &frame),
                 Ok(Packet::CommChange) | Err(nb::Error::WouldBlock) => {}
-                Err(nb::Error::Other(error)) => self.on_bad_candidate(error),
+                Err(nb::Error::Other(error)) => self.on_bad_candidate(now, error),
             }
         }
     }
 
-    fn on_bad_candidate(&mut self, error: Error) {
-        let Some(axis) = self.in_flight.map(|f| f.request.axis) else {
+    fn on_bad_candidate(&mut self, now: Instant, error: Error) {
+        let Some(flight) = self.in_flight else {
             self.bus.unsolicited = self.bus.unsolicited.wrapping_add(1);
             return;
         };
-        if let Some(state) = self.state(axis) {
+        let bad_bcc = matches!(error, Error::BadBcc { .. });
+        if let Some(state) = self.state(flight.request.axis) {
             let c = &mut state.counters;
-            if matches!(error, Error::BadBcc { .. }) {
+            if bad_bcc {
                 c.bcc_errors = c.bcc_errors.wrapping_add(1);
             } else {
                 c.bad_replies = c.bad_replies.wrapping_add(1);
             }
+        }
+        if bad_bcc && now >= flight.earliest_reply {
+            // A whole frame ended: whoever sent it is done and the line is free.
+            self.attempt_failed(now, flight, Failure::Corrupted);
         }
     }
 
@@ -528,7 +555,6 @@ impl Engine {
     }
 
     fn set_link(&mut self, now: Instant, axis: Axis, link: Link) {
-        let probe_interval = self.config.probe_interval;
         let Some(state) = self.state(axis) else {
             return;
         };
@@ -539,8 +565,11 @@ impl Engine {
         match link {
             Link::Online => self.emit(Event::Online(axis)),
             Link::Offline => {
+                if let Some(backoff) = self.probe_backoff.get_mut(index(axis)) {
+                    *backoff = FIRST_PROBE;
+                }
                 if let Some(due) = self.probe_due.get_mut(index(axis)) {
-                    *due = now + probe_interval;
+                    *due = now + FIRST_PROBE;
                 }
                 self.emit(Event::Offline(axis));
                 // A job that waits on an axis that no longer answers cannot finish.
@@ -697,7 +726,7 @@ impl Engine {
             if now < flight.deadline {
                 return Output::Idle(Some(flight.deadline));
             }
-            self.on_timeout(now, flight);
+            self.attempt_failed(now, flight, Failure::Timeout);
         }
         self.expire_waits(now);
         if now < self.free_at {
@@ -746,6 +775,11 @@ impl Engine {
         let is_v5 = matches!(request.command, Command::StoreFromEdit(_));
         let deadline =
             now + timing::frame_time(baud).plus(timing::response_timeout(baud, state.rtim, is_v5));
+        let rtim = Duration::from_millis(u64::from(state.rtim.get()));
+        let earliest_reply = now
+            + timing::frame_time(baud)
+                .plus(rtim)
+                .plus(timing::frame_time(baud));
         let frame = request.emit();
         if self.config.echo {
             self.deframer.expect_echo(&frame.to_bytes());
@@ -754,18 +788,24 @@ impl Engine {
             request,
             origin,
             deadline,
+            earliest_reply,
             attempt,
         });
         Output::Transmit(frame)
     }
 
-    fn on_timeout(&mut self, now: Instant, flight: InFlight) {
+    fn attempt_failed(&mut self, now: Instant, flight: InFlight, failure: Failure) {
         self.in_flight = None;
-        self.free_at = now;
-        self.deframer.reset();
         let axis = flight.request.axis;
-        if let Some(state) = self.state(axis) {
-            state.counters.timeouts = state.counters.timeouts.wrapping_add(1);
+        match failure {
+            Failure::Timeout => {
+                self.free_at = now;
+                self.deframer.reset();
+                if let Some(state) = self.state(axis) {
+                    state.counters.timeouts = state.counters.timeouts.wrapping_add(1);
+                }
+            }
+            Failure::Corrupted => self.free_at = now + timing::HOST_GAP,
         }
         let may_retry = flight.attempt < self.config.retries
             && flight.request.command.resendable()
@@ -789,7 +829,8 @@ impl Engine {
             state.last_error = Some(LinkError::Timeout);
         }
         match flight.origin {
-            Origin::Poll | Origin::Position | Origin::Probe => {
+            Origin::Probe => self.probe_after(now, axis),
+            Origin::Poll | Origin::Position => {
                 self.set_link(now, axis, Link::Offline);
             }
             Origin::Job => {
@@ -946,10 +987,8 @@ impl Engine {
                 if now < due {
                     continue;
                 }
-                if let Some(slot) = self.probe_due.get_mut(index(axis)) {
-                    *slot = now + self.config.probe_interval;
-                }
                 if self.start_rejoin(now, axis) {
+                    self.probe_after(now, axis);
                     continue;
                 }
                 return Some((Request::new(axis, Command::Status), Origin::Probe, 0));
@@ -957,6 +996,23 @@ impl Engine {
             return Some((Request::new(axis, Command::Status), Origin::Poll, 0));
         }
         None
+    }
+
+    /// Schedule the next probe of an offline axis: twice the last wait, up to
+    /// [`Config::probe_interval`], counted from now (the end of the failed attempt).
+    fn probe_after(&mut self, now: Instant, axis: Axis) {
+        let max = self.config.probe_interval;
+        let i = index(axis);
+        let wait = self
+            .probe_backoff
+            .get(i)
+            .map_or(max, |b| Duration(b.0.saturating_mul(2)).min(max));
+        if let Some(backoff) = self.probe_backoff.get_mut(i) {
+            *backoff = wait;
+        }
+        if let Some(due) = self.probe_due.get_mut(i) {
+            *due = now + wait;
+        }
     }
 
     fn oldest_position_due(&self) -> Option<Axis> {
