@@ -6,13 +6,41 @@
 
 use crate::sim::Bus;
 use protocol::engine::{Engine, Event, Instant, Output};
+use protocol::line::Baud;
 use protocol::frame::COMM_CHANGE;
 use protocol::line::{LineAction, BREAK_MS};
 
-/// Engine + simulated bus + virtual clock.
-pub struct Harness {
-    /// The bus master under test.
-    pub engine: Engine,
+/// What the harness drives: the engine itself, or something that owns one (the gateway).
+pub trait BusMaster {
+    /// What to do at `now`.
+    fn poll(&mut self, now: Instant) -> Output;
+    /// Bytes from the line.
+    fn receive(&mut self, now: Instant, bytes: &[u8]);
+    /// The engine's events, for masters that pass them on.
+    fn next_event(&mut self) -> Option<Event>;
+    /// The rate the master starts at.
+    fn line_baud(&self) -> Baud;
+}
+
+impl BusMaster for Engine {
+    fn poll(&mut self, now: Instant) -> Output {
+        Engine::poll(self, now)
+    }
+    fn receive(&mut self, now: Instant, bytes: &[u8]) {
+        Engine::receive(self, now, bytes);
+    }
+    fn next_event(&mut self) -> Option<Event> {
+        Engine::next_event(self)
+    }
+    fn line_baud(&self) -> Baud {
+        Engine::line_baud(self)
+    }
+}
+
+/// Bus master + simulated bus + virtual clock.
+pub struct Harness<M: BusMaster = Engine> {
+    /// The bus master under test (an [`Engine`], or a gateway that owns one).
+    pub engine: M,
     /// The simulated line and controllers.
     pub bus: Bus,
     /// Virtual time, microseconds.
@@ -23,9 +51,9 @@ pub struct Harness {
     pub sent: Vec<(u64, protocol::Request)>,
 }
 
-impl Harness {
+impl<M: BusMaster> Harness<M> {
     /// The engine starts with the bus at time 0; the bus' host side starts at the engine's rate.
-    pub fn new(engine: Engine, mut bus: Bus) -> Harness {
+    pub fn new(engine: M, mut bus: Bus) -> Harness<M> {
         bus.set_host_baud(engine.line_baud());
         Harness {
             engine,

@@ -9,7 +9,9 @@
 //! Every time is a `u64` count of microseconds of virtual time; nothing reads a clock or sleeps.
 //! A test (or a bus master under test) sends with [`Bus::host_send`], asks [`Bus::next_event`]
 //! when something will happen and runs the bus with [`Bus::advance`], which returns the bytes
-//! the host received. [`host::ScriptedHost`] wraps that loop for scripted exchanges.
+//! the host received. [`host::ScriptedHost`] wraps that loop for scripted exchanges, and
+//! [`realtime::RealTime`] runs it against the wall clock for a real master (the only part that
+//! reads a clock).
 //!
 //! | Module | What it models |
 //! |---|---|
@@ -23,6 +25,7 @@
 //! | [`fault`] | Seeded fault injection |
 //! | [`stats`] | Counters of everything that happened, injected faults included |
 //! | [`host`] | A scripted host for tests |
+//! | [`realtime`] | The bus against the wall clock, for a real master behind a PTY or TCP socket |
 //! | [`rng`] | The deterministic generator |
 
 mod commands;
@@ -34,6 +37,7 @@ pub mod fault;
 pub mod host;
 pub mod memory;
 pub mod motion;
+pub mod realtime;
 pub mod rng;
 pub mod stats;
 pub mod wire;

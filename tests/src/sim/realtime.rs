@@ -1,0 +1,756 @@
+//! The simulator in real time: a real bus master talks to simulated controllers through a
+//! pseudo-terminal or a loopback TCP socket.
+//!
+//! [`RealTime`] owns a [`Bus`] and runs it against the wall clock. The master (the host-side
+//! gateway, the firmware under QEMU, a person with a terminal program) sees a serial line with
+//! controllers on it; the controllers see a host whose bytes arrive at the line rate. The
+//! `rc-sim` binary is a command line around it.
+//!
+//! # Clock mapping
+//! Virtual time is the bus's time when [`RealTime::run`] starts plus the microseconds of
+//! [`Instant`] elapsed since, so one virtual µs is one real µs. Each pass of the loop:
+//! 1. reads the termios speed of the pseudo-terminal (see *Baud rate* below);
+//! 2. reads whatever bytes the master has written and hands each read to
+//!    [`Bus::host_send`] at the current time: the bytes go out back to back at the host's line
+//!    rate, from now or from the end of the host's previous transmission, so a frame written in
+//!    one `write` takes its exact wire time (1.39 ms at 115.2 kbit/s) before the controllers
+//!    have it;
+//! 3. runs the bus to now ([`Bus::advance`]) and writes the bytes the host received to the
+//!    master (kept in a queue while the master does not read; a full queue drops the oldest
+//!    bytes, like a receiver overrun, counted in [`RealTimeStats::overrun_bytes`]);
+//! 4. sleeps (`ppoll`, µs resolution) until the master writes, the next bus event
+//!    ([`Bus::next_event`]: a byte arriving, a reply starting) or at most
+//!    [`Options::max_sleep`], whichever comes first.
+//!
+//! **Limits.** Inside the simulator every time is exact: a reply starts exactly RTIM after the
+//! last byte of the command was received, bytes are 10 bit times apart, collisions and faults
+//! happen as in virtual time. What the host's scheduler adds is *delivery jitter* only: a byte
+//! is written to the master when the loop wakes after the byte's arrival time, usually within
+//! tens of µs, occasionally a few ms on a loaded machine ([`RealTimeStats::max_lag_us`]
+//! records the worst), and a command counts from when the loop read it, not from when the master
+//! wrote it. A master whose time-outs are the §5 ones (tens of ms) does not notice; a test of
+//! sub-millisecond timing belongs in virtual time, not here. A pseudo-terminal or a socket has
+//! no line rate of its own: bytes written by the master are available at once, and the
+//! simulator alone paces them.
+//!
+//! # Baud rate
+//! The host's rate starts at the bus's [`BusConfig::host_baud`]; [`bus_at_line`] builds a bus
+//! whose host *and* controllers start at a given rate and RTIM (the controllers power up with
+//! that BRSL/RTIM stored, [`ControllerConfig::stored_line`]), so that a master configured to
+//! skip the establishment procedure (`establish = false`) talks to them at once.
+//!
+//! On a pseudo-terminal the master may change its rate: the terminal's termios (one set, shared
+//! by every descriptor of the slave; on Linux `tcgetattr` on the master side returns it too)
+//! holds the speed the master set with `tcsetattr`, as `serialport`, `stty` and QEMU's `serial`
+//! character device do. Each pass reads it and, when it *changes* to one of the rates termios
+//! can express (9600, 19200, 38400, 57600, 115200 bit/s), applies it with
+//! [`Bus::set_host_baud`] ([`Options::follow_baud`], on by default). 14.4, 28.8 and 76.8 kbit/s
+//! have no termios constant: for a master at those rates, give its rate as the starting rate
+//! and turn `follow_baud` off. A speed set between two passes applies to every byte read in the
+//! next pass. Over TCP the rate never changes.
+//!
+//! **QEMU.** The STM32L4x5 USART model passes the guest's rate (BRR) to its character device;
+//! the `serial` backend opened on [`Pty::path`] (`-chardev serial,id=rs485,path=/dev/pts/N`)
+//! turns it into the termios rate at or above 10/11 of it, so a firmware at a rate termios has
+//! is followed, and one at 14.4, 28.8 or 76.8 kbit/s shows up as the next rate up (use
+//! `follow_baud` off). QEMU's own `pty` backend and its `socket` backend (which can connect to
+//! a [`TcpServer`]) carry bytes only. The model does not implement sending a break (SBKRQ).
+//!
+//! # Break
+//! A break cannot be seen through either transport. Linux pseudo-terminals have no
+//! `break_ctl`: `tcsendbreak` and `TIOCSBRK` on the slave succeed and do nothing, and the master
+//! side sees no byte and no packet-mode event (checked on Linux 6.x; `PARMRK` only marks
+//! breaks a *receiving* UART detected, which a pseudo-terminal never does). A raw TCP stream has
+//! no out-of-band signal either, and no in-band escape is defined: every byte the master writes
+//! is a byte on the line. So:
+//! - the default is a master that does not establish: controllers power up at the line settings
+//!   given (see above);
+//! - [`Options::slow_baud_is_break`] (off by default, pseudo-terminal only) treats the master
+//!   switching its speed *to* 9.6 kbit/s as a break: the §6-1 procedure (and the gateway's
+//!   engine) switches to 9.6 kbit/s right before its break, and after a break every controller
+//!   is at 9.6 kbit/s anyway, so the rest of the procedure (configuration at 9.6 kbit/s and
+//!   RTIM 255 ms, the communication-change broadcast, the switch to the new rate) then runs as on
+//!   a real line. The emulated break lasts [`EMULATED_BREAK_US`], more than 10 bit times at
+//!   9.6 kbit/s, so that it ends before the master's first byte after its own (invisible)
+//!   200 ms break. It is a heuristic: *any* switch to 9.6 kbit/s breaks the line, including the
+//!   gateway engine's rejoin probe of an offline axis at the power-up settings, which then
+//!   knocks every other axis back to 9.6 kbit/s and RTIM 255 ms. Use it to test establishment
+//!   with every configured axis present, not with missing or power-cycled axes.
+//!
+//! # Transports
+//! - [`Pty`]: a pseudo-terminal pair. The master opens [`Pty::path`] (`/dev/pts/N`) as its
+//!   serial port. The simulator keeps a slave descriptor open itself, so the terminal stays
+//!   configured in raw mode at the starting speed between clients and the master side never
+//!   sees a hang-up: the master may close and reopen the port at will, and the simulator runs
+//!   until stopped. Bytes the simulator wrote while nobody read stay in the terminal's input
+//!   queue until a client reads or flushes it.
+//! - [`TcpServer`]: a listening socket on a loopback address (anything else is refused), raw
+//!   bytes in both directions, one client at a time. When the client disconnects the run ends
+//!   ([`Ended::Disconnected`]) unless [`Options::reconnect`] is set, in which case the next
+//!   client is accepted and the bus carries on as it was (controllers keep their state, like a
+//!   bus whose gateway was unplugged). A client that connects while another one is connected
+//!   waits in the backlog.
+//!
+//! Either way the bus runs from the start of [`RealTime::run`], client or not.
+
+use std::collections::VecDeque;
+use std::fs::File;
+use std::io::{self, Read, Write};
+use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::os::fd::{AsFd, BorrowedFd};
+use std::os::unix::fs::OpenOptionsExt;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use nix::errno::Errno;
+use nix::fcntl::{fcntl, FcntlArg, OFlag};
+use nix::libc::tcflag_t;
+use nix::poll::{ppoll, PollFd, PollFlags};
+use nix::pty::{grantpt, posix_openpt, ptsname_r, unlockpt, PtyMaster};
+use nix::sys::termios::{self, BaudRate, ControlFlags, SetArg, Termios};
+use nix::sys::time::TimeSpec;
+use protocol::frame::{Frame, Packet};
+use protocol::line::Baud;
+use protocol::{Axis, Deframer, Reply, Request, Rtim};
+
+use super::bus::{Bus, BusConfig};
+use super::controller::ControllerConfig;
+use super::stats::BusStats;
+
+/// How long an emulated break lasts (µs): more than 10 bit times at 9.6 kbit/s (1042 µs), and
+/// short enough to end before the master's next byte.
+pub const EMULATED_BREAK_US: u64 = 2_000;
+
+/// Reads per pass of the loop, at most (4 KiB each).
+const MAX_READS_PER_PASS: usize = 16;
+
+/// How the adapter runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Options {
+    /// Follow the pseudo-terminal's termios speed (see the [module documentation](self)).
+    pub follow_baud: bool,
+    /// Treat a switch of the pseudo-terminal's speed to 9.6 kbit/s as a break (a heuristic for
+    /// masters that establish; see the [module documentation](self) for when it misfires).
+    pub slow_baud_is_break: bool,
+    /// TCP: accept another client after a disconnection instead of ending the run.
+    pub reconnect: bool,
+    /// End the run after this long, if set.
+    pub duration: Option<Duration>,
+    /// The longest sleep between two passes (how quickly a stop request is seen).
+    pub max_sleep: Duration,
+    /// Bytes kept for a master that does not read before the oldest are dropped.
+    pub queue_limit: usize,
+    /// Print every frame, decoded, and every line event on standard error.
+    pub log: bool,
+}
+
+impl Default for Options {
+    fn default() -> Options {
+        Options {
+            follow_baud: true,
+            slow_baud_is_break: false,
+            reconnect: false,
+            duration: None,
+            max_sleep: Duration::from_millis(5),
+            queue_limit: 64 * 1024,
+            log: false,
+        }
+    }
+}
+
+/// Why a run ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ended {
+    /// The stop flag was raised.
+    Stopped,
+    /// [`Options::duration`] elapsed.
+    Duration,
+    /// The TCP client disconnected (without [`Options::reconnect`]).
+    Disconnected,
+}
+
+/// What the adapter itself has counted (the bus counts the rest: [`Bus::stats`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct RealTimeStats {
+    /// Bytes read from the master.
+    pub bytes_from_master: u64,
+    /// Reads that returned bytes (each one transmission on the bus).
+    pub reads: u64,
+    /// Bytes written to the master.
+    pub bytes_to_master: u64,
+    /// Bytes dropped because the master did not read them.
+    pub overrun_bytes: u64,
+    /// Host rate changes followed from the pseudo-terminal.
+    pub baud_changes: u64,
+    /// Breaks emulated ([`Options::slow_baud_is_break`]).
+    pub emulated_breaks: u64,
+    /// TCP clients accepted.
+    pub clients: u64,
+    /// The latest the loop handled a byte for the master after its arrival on the line (µs).
+    pub max_lag_us: u64,
+}
+
+/// A bus whose host and controllers (one at each of `axes`, otherwise factory-configured) all
+/// start at `baud` and `rtim`, for a master that does not run the establishment procedure.
+/// `config.host_baud` is replaced by `baud`.
+pub fn bus_at_line(config: BusConfig, axes: &[Axis], baud: Baud, rtim: Rtim) -> Bus {
+    let mut bus = Bus::new(BusConfig {
+        host_baud: baud,
+        ..config
+    });
+    for &axis in axes {
+        bus.add_controller(
+            axis,
+            ControllerConfig {
+                stored_line: Some((baud, rtim)),
+                ..ControllerConfig::default()
+            },
+        );
+    }
+    bus
+}
+
+/// The simulator against the wall clock; see the [module documentation](self).
+#[derive(Debug)]
+pub struct RealTime {
+    bus: Bus,
+    options: Options,
+    stats: RealTimeStats,
+    queue: VecDeque<u8>,
+    log: FrameLog,
+}
+
+impl RealTime {
+    /// An adapter around `bus`.
+    pub fn new(bus: Bus, options: Options) -> RealTime {
+        RealTime {
+            bus,
+            options,
+            stats: RealTimeStats::default(),
+            queue: VecDeque::new(),
+            log: FrameLog::default(),
+        }
+    }
+
+    /// The bus.
+    pub fn bus(&self) -> &Bus {
+        &self.bus
+    }
+
+    /// The bus, to change it between runs.
+    pub fn bus_mut(&mut self) -> &mut Bus {
+        &mut self.bus
+    }
+
+    /// The bus, giving up the adapter.
+    pub fn into_bus(self) -> Bus {
+        self.bus
+    }
+
+    /// What the bus has counted.
+    pub fn bus_stats(&self) -> &BusStats {
+        self.bus.stats()
+    }
+
+    /// What the adapter has counted.
+    pub fn stats(&self) -> &RealTimeStats {
+        &self.stats
+    }
+
+    /// The options.
+    pub fn options(&self) -> &Options {
+        &self.options
+    }
+
+    /// Run the bus against the wall clock, talking to the master through `transport`, until
+    /// `stop` is raised (checked at least every [`Options::max_sleep`]), the duration elapses or
+    /// the TCP client leaves. Fails on an I/O error of the transport.
+    pub fn run(&mut self, transport: &mut Transport, stop: &AtomicBool) -> io::Result<Ended> {
+        let started = Instant::now();
+        let origin = self.bus.now();
+        let clock = |at: Instant| {
+            let elapsed = at.saturating_duration_since(started).as_micros();
+            origin.saturating_add(u64::try_from(elapsed).unwrap_or(u64::MAX))
+        };
+        let deadline = self.options.duration.map(|d| started + d);
+        let mut buf = [0u8; 4096];
+        loop {
+            let wall = Instant::now();
+            let now = clock(wall);
+            if stop.load(Ordering::Relaxed) {
+                self.deliver(now, transport)?;
+                return Ok(Ended::Stopped);
+            }
+            if deadline.is_some_and(|d| wall >= d) {
+                self.deliver(now, transport)?;
+                return Ok(Ended::Duration);
+            }
+
+            if let Some(baud) = transport.speed_change()? {
+                self.line_rate(now, baud);
+            }
+            // Bounded, so that a master writing without pause cannot stall the bus.
+            for _ in 0..MAX_READS_PER_PASS {
+                match transport.read(&mut buf)? {
+                    Input::Bytes(n) => {
+                        let bytes = buf.get(..n).unwrap_or(&[]);
+                        self.stats.reads += 1;
+                        self.stats.bytes_from_master += bytes.len() as u64;
+                        if self.options.log {
+                            self.log.host(now, bytes);
+                        }
+                        self.bus.host_send(now, bytes);
+                    }
+                    Input::Connected(peer) => {
+                        self.stats.clients += 1;
+                        self.queue.clear();
+                        self.note(now, &format!("client {peer} connected"));
+                    }
+                    Input::Closed => {
+                        self.queue.clear();
+                        self.note(now, "client disconnected");
+                        if !self.options.reconnect {
+                            self.bus.advance(now);
+                            return Ok(Ended::Disconnected);
+                        }
+                    }
+                    Input::Nothing => break,
+                }
+            }
+
+            self.deliver(now, transport)?;
+
+            let now = clock(Instant::now());
+            let mut sleep = self.options.max_sleep;
+            if let Some(at) = self.bus.next_event() {
+                sleep = sleep.min(Duration::from_micros(at.saturating_sub(now)));
+            }
+            if let Some(d) = deadline {
+                sleep = sleep.min(d.saturating_duration_since(Instant::now()));
+            }
+            transport.wait(sleep, !self.queue.is_empty())?;
+        }
+    }
+
+    /// Run on a new thread until [`Handle::stop`] (or the end of the run).
+    pub fn spawn(self, transport: Transport) -> io::Result<Handle> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = Arc::clone(&stop);
+        let thread = std::thread::Builder::new()
+            .name("rc-sim".into())
+            .spawn(move || {
+                let mut realtime = self;
+                let mut transport = transport;
+                let ended = realtime.run(&mut transport, &flag)?;
+                Ok(Outcome { realtime, ended })
+            })?;
+        Ok(Handle {
+            stop,
+            thread: Some(thread),
+        })
+    }
+
+    fn line_rate(&mut self, now: u64, baud: Baud) {
+        if !self.options.follow_baud || baud == self.bus.host_baud() {
+            return;
+        }
+        self.bus.set_host_baud(baud);
+        self.stats.baud_changes += 1;
+        self.note(now, &format!("master at {} bit/s", baud.bits_per_second()));
+        if self.options.slow_baud_is_break && baud == Baud::B9600 {
+            self.bus.host_break(now, EMULATED_BREAK_US);
+            self.stats.emulated_breaks += 1;
+            self.note(now, "break (emulated: master switched to 9600 bit/s)");
+        }
+    }
+
+    /// Run the bus to `now` and write what the host received to the master, as far as it
+    /// takes it.
+    fn deliver(&mut self, now: u64, transport: &mut Transport) -> io::Result<()> {
+        let received = self.bus.advance(now);
+        for &(at, byte) in &received {
+            self.stats.max_lag_us = self.stats.max_lag_us.max(now.saturating_sub(at));
+            self.queue.push_back(byte);
+        }
+        if self.options.log {
+            self.log.master(&received);
+        }
+        let excess = self.queue.len().saturating_sub(self.options.queue_limit);
+        if excess > 0 {
+            self.queue.drain(..excess);
+            self.stats.overrun_bytes += excess as u64;
+        }
+        self.flush(transport)
+    }
+
+    fn flush(&mut self, transport: &mut Transport) -> io::Result<()> {
+        while !self.queue.is_empty() {
+            let (front, _) = self.queue.as_slices();
+            let written = transport.write(front)?;
+            if written == 0 {
+                break;
+            }
+            self.queue.drain(..written.min(self.queue.len()));
+            self.stats.bytes_to_master += written as u64;
+        }
+        Ok(())
+    }
+
+    fn note(&self, now: u64, what: &str) {
+        if self.options.log {
+            eprintln!("{} -- {what}", stamp(now));
+        }
+    }
+}
+
+/// How a spawned run ended, with the adapter for its counters.
+#[derive(Debug)]
+pub struct Outcome {
+    /// The adapter, its bus and counters as the run left them.
+    pub realtime: RealTime,
+    /// Why the run ended.
+    pub ended: Ended,
+}
+
+/// A run on its own thread ([`RealTime::spawn`]). Dropping it stops the run and waits for the
+/// thread, so that nothing outlives it.
+#[derive(Debug)]
+pub struct Handle {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<io::Result<Outcome>>>,
+}
+
+impl Handle {
+    /// Ask the run to stop, wait for it, and return how it ended (it may have ended before).
+    pub fn stop(self) -> io::Result<Outcome> {
+        self.stop.store(true, Ordering::Relaxed);
+        self.join()
+    }
+
+    /// Wait for the run to end by itself (duration, disconnection).
+    pub fn join(mut self) -> io::Result<Outcome> {
+        match self.thread.take() {
+            Some(thread) => thread
+                .join()
+                .unwrap_or_else(|_| Err(io::Error::other("the simulator thread panicked"))),
+            None => Err(io::Error::other("the simulator thread was already joined")),
+        }
+    }
+
+    /// Whether the run has ended.
+    pub fn is_finished(&self) -> bool {
+        self.thread.as_ref().is_none_or(JoinHandle::is_finished)
+    }
+}
+
+impl Drop for Handle {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+// ------------------------------------------------------------------------------- transports
+
+/// Where the master is.
+#[derive(Debug)]
+pub enum Transport {
+    /// A pseudo-terminal.
+    Pty(Pty),
+    /// A loopback TCP socket.
+    Tcp(TcpServer),
+}
+
+enum Input {
+    Bytes(usize),
+    Connected(SocketAddr),
+    Closed,
+    Nothing,
+}
+
+impl Transport {
+    fn speed_change(&mut self) -> io::Result<Option<Baud>> {
+        match self {
+            Transport::Pty(pty) => pty.speed_change(),
+            Transport::Tcp(_) => Ok(None),
+        }
+    }
+
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<Input> {
+        match self {
+            Transport::Pty(pty) => pty.read(buf),
+            Transport::Tcp(tcp) => tcp.read(buf),
+        }
+    }
+
+    /// Bytes written; 0 when the master cannot take more now (or is not there).
+    fn write(&mut self, bytes: &[u8]) -> io::Result<usize> {
+        let result = match self {
+            Transport::Pty(pty) => pty.master.write(bytes),
+            Transport::Tcp(tcp) => match tcp.client.as_mut() {
+                Some(client) => client.write(bytes),
+                None => return Ok(0),
+            },
+        };
+        match result {
+            Ok(n) => Ok(n),
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => Ok(0),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => Ok(0),
+            // The client went away mid-write; the next read reports it.
+            Err(e) if matches!(self, Transport::Tcp(_)) && disconnection(&e) => Ok(0),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Sleep up to `timeout`, or until the master has written (or connected), or can take
+    /// more bytes if `output` is pending.
+    fn wait(&self, timeout: Duration, output: bool) -> io::Result<()> {
+        let (fd, connected) = match self {
+            Transport::Pty(pty) => (pty.master.as_fd(), true),
+            Transport::Tcp(tcp) => match tcp.client.as_ref() {
+                Some(client) => (client.as_fd(), true),
+                None => (tcp.listener.as_fd(), false),
+            },
+        };
+        wait_fd(fd, timeout, output && connected)
+    }
+}
+
+fn wait_fd(fd: BorrowedFd<'_>, timeout: Duration, output: bool) -> io::Result<()> {
+    let mut events = PollFlags::POLLIN;
+    if output {
+        events |= PollFlags::POLLOUT;
+    }
+    let mut fds = [PollFd::new(fd, events)];
+    match ppoll(&mut fds, Some(TimeSpec::from_duration(timeout)), None) {
+        Ok(_) | Err(Errno::EINTR) => Ok(()),
+        Err(e) => Err(e.into()),
+    }
+}
+
+fn disconnection(e: &io::Error) -> bool {
+    matches!(
+        e.kind(),
+        io::ErrorKind::ConnectionReset
+            | io::ErrorKind::ConnectionAborted
+            | io::ErrorKind::BrokenPipe
+            | io::ErrorKind::NotConnected
+            | io::ErrorKind::UnexpectedEof
+    )
+}
+
+/// A pseudo-terminal pair; the master opens [`path`](Self::path) as its serial port.
+#[derive(Debug)]
+pub struct Pty {
+    master: PtyMaster,
+    /// Held open so that the terminal keeps its settings and never hangs up.
+    slave: File,
+    path: PathBuf,
+    /// The last termios speed seen (the `CBAUD` bits).
+    speed: tcflag_t,
+}
+
+impl Pty {
+    /// A new pair, the terminal in raw mode at `baud` (if termios has a constant for it; else
+    /// its default speed, which is then not taken as the master's rate).
+    pub fn open(baud: Baud) -> io::Result<Pty> {
+        let master = posix_openpt(OFlag::O_RDWR | OFlag::O_NOCTTY)?;
+        grantpt(&master)?;
+        unlockpt(&master)?;
+        let path = PathBuf::from(ptsname_r(&master)?);
+        let slave = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .custom_flags(nix::libc::O_NOCTTY)
+            .open(&path)?;
+        let mut attrs = termios::tcgetattr(&slave)?;
+        termios::cfmakeraw(&mut attrs);
+        if let Some(rate) = termios_rate(baud) {
+            termios::cfsetspeed(&mut attrs, rate)?;
+        }
+        termios::tcsetattr(&slave, SetArg::TCSANOW, &attrs)?;
+        let flags = OFlag::from_bits_retain(fcntl(&master, FcntlArg::F_GETFL)?);
+        fcntl(&master, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK))?;
+        let speed = raw_speed(&termios::tcgetattr(&slave)?);
+        Ok(Pty {
+            master,
+            slave,
+            path,
+            speed,
+        })
+    }
+
+    /// The slave device, `/dev/pts/N`.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The rate the master set, when it changed since the last call and is one of the rates.
+    fn speed_change(&mut self) -> io::Result<Option<Baud>> {
+        let speed = raw_speed(&termios::tcgetattr(&self.slave)?);
+        if speed == self.speed {
+            return Ok(None);
+        }
+        self.speed = speed;
+        Ok(baud_of_speed(speed))
+    }
+
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<Input> {
+        match self.master.read(buf) {
+            Ok(0) => Ok(Input::Nothing),
+            Ok(n) => Ok(Input::Bytes(n)),
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => Ok(Input::Nothing),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => Ok(Input::Nothing),
+            // EIO: no slave open. Cannot happen while `slave` is held; nothing to read anyway.
+            Err(e) if e.raw_os_error() == Some(Errno::EIO as i32) => Ok(Input::Nothing),
+            Err(e) => Err(e),
+        }
+    }
+}
+
+/// The speed bits of the control flags (`cfgetospeed` without its panic on unknown values).
+fn raw_speed(attrs: &Termios) -> tcflag_t {
+    (attrs.control_flags & ControlFlags::CBAUD).bits()
+}
+
+fn termios_rate(baud: Baud) -> Option<BaudRate> {
+    match baud {
+        Baud::B9600 => Some(BaudRate::B9600),
+        Baud::B19200 => Some(BaudRate::B19200),
+        Baud::B38400 => Some(BaudRate::B38400),
+        Baud::B57600 => Some(BaudRate::B57600),
+        Baud::B115200 => Some(BaudRate::B115200),
+        Baud::B14400 | Baud::B28800 | Baud::B76800 => None,
+    }
+}
+
+fn baud_of_speed(speed: tcflag_t) -> Option<Baud> {
+    Baud::ALL
+        .into_iter()
+        .find(|&baud| termios_rate(baud).is_some_and(|rate| rate as tcflag_t == speed))
+}
+
+/// A listening socket on a loopback address, one client at a time.
+#[derive(Debug)]
+pub struct TcpServer {
+    listener: TcpListener,
+    client: Option<TcpStream>,
+}
+
+impl TcpServer {
+    /// Listen on `addr`, which must be a loopback address (127.0.0.0/8 or ::1); port 0 picks a
+    /// free port ([`local_addr`](Self::local_addr)).
+    pub fn bind(addr: SocketAddr) -> io::Result<TcpServer> {
+        if !addr.ip().is_loopback() {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("{addr} is not a loopback address; the simulator listens on loopback only"),
+            ));
+        }
+        let listener = TcpListener::bind(addr)?;
+        listener.set_nonblocking(true)?;
+        Ok(TcpServer {
+            listener,
+            client: None,
+        })
+    }
+
+    /// The address listened on.
+    pub fn local_addr(&self) -> io::Result<SocketAddr> {
+        self.listener.local_addr()
+    }
+
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<Input> {
+        let Some(client) = self.client.as_mut() else {
+            return match self.listener.accept() {
+                Ok((stream, peer)) => {
+                    stream.set_nonblocking(true)?;
+                    stream.set_nodelay(true)?;
+                    self.client = Some(stream);
+                    Ok(Input::Connected(peer))
+                }
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => Ok(Input::Nothing),
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => Ok(Input::Nothing),
+                // A client that gave up while in the backlog.
+                Err(e) if disconnection(&e) => Ok(Input::Nothing),
+                Err(e) => Err(e),
+            };
+        };
+        match client.read(buf) {
+            Ok(0) => {
+                self.client = None;
+                Ok(Input::Closed)
+            }
+            Ok(n) => Ok(Input::Bytes(n)),
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => Ok(Input::Nothing),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => Ok(Input::Nothing),
+            Err(e) if disconnection(&e) => {
+                self.client = None;
+                Ok(Input::Closed)
+            }
+            Err(e) => Err(e),
+        }
+    }
+}
+
+// ------------------------------------------------------------------------------------- log
+
+/// Decodes both directions for [`Options::log`].
+#[derive(Clone, Debug, Default)]
+struct FrameLog {
+    from_master: Deframer,
+    to_master: Deframer,
+}
+
+impl FrameLog {
+    fn host(&mut self, now: u64, bytes: &[u8]) {
+        for &byte in bytes {
+            let line = describe(&mut self.from_master, byte, |frame| {
+                Request::parse(frame).map(|r| format!("{r:?}"))
+            });
+            if let Some(line) = line {
+                eprintln!("{} >> {line}", stamp(now));
+            }
+        }
+    }
+
+    fn master(&mut self, received: &[(u64, u8)]) {
+        for &(at, byte) in received {
+            let line = describe(&mut self.to_master, byte, |frame| {
+                Reply::parse(frame).map(|r| format!("{r:?}"))
+            });
+            if let Some(line) = line {
+                eprintln!("{} << {line}", stamp(at));
+            }
+        }
+    }
+}
+
+fn describe(
+    deframer: &mut Deframer,
+    byte: u8,
+    parse: impl Fn(&Frame) -> Result<String, protocol::Error>,
+) -> Option<String> {
+    match deframer.push(byte) {
+        Ok(Packet::CommChange) => Some("communication-change broadcast".into()),
+        Ok(Packet::Frame(frame)) => Some(match parse(&frame) {
+            Ok(text) => text,
+            Err(e) => format!("{frame:?}: {e:?}"),
+        }),
+        Err(protocol::nb::Error::WouldBlock) => None,
+        Err(protocol::nb::Error::Other(e)) => Some(format!(
+            "bad frame {:?}: {e:?}",
+            String::from_utf8_lossy(deframer.rejected())
+        )),
+    }
+}
+
+/// Virtual time as seconds with µs.
+fn stamp(us: u64) -> String {
+    format!("{:>4}.{:06}", us / 1_000_000, us % 1_000_000)
+}
