@@ -6,8 +6,8 @@
 
 use crate::sim::Bus;
 use protocol::engine::{Engine, Event, Instant, Output};
-use protocol::line::Baud;
 use protocol::frame::COMM_CHANGE;
+use protocol::line::Baud;
 use protocol::line::{LineAction, BREAK_MS};
 
 /// What the harness drives: the engine itself, or something that owns one (the gateway).
