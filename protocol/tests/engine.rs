@@ -84,19 +84,31 @@ fn polls_every_configured_axis_round_robin_with_host_gap() {
     let mut engine = Engine::new(config(3));
     let mut now = Instant(0);
     let mut seen = vec![];
-    for _ in 0..6 {
+    let mut address = 0;
+    while seen.len() < 9 {
         let request = next_frame(&mut engine, &mut now);
         let replied_at = now + engine::Duration::from_millis(5);
-        reply(&mut engine, &mut now, ready(&request));
+        reply(&mut engine, &mut now, answer(&request, &mut address));
         assert_eq!(
             engine.poll(now),
             Output::Idle(Some(replied_at + timing::HOST_GAP))
         );
         seen.push((request.axis.get(), request.command));
     }
-    let axes: Vec<u8> = seen.iter().map(|s| s.0).collect();
-    assert_eq!(axes, [0, 1, 2, 0, 1, 2]);
-    assert!(seen.iter().all(|s| s.1 == Command::Status));
+    // Status polls round-robin; each axis' position is read once after it first answers.
+    let polls: Vec<u8> = seen
+        .iter()
+        .filter(|s| s.1 == Command::Status)
+        .map(|s| s.0)
+        .collect();
+    assert_eq!(polls, [0, 1, 2, 0, 1, 2]);
+    let reads: Vec<u8> = seen
+        .iter()
+        .filter(|s| s.1 != Command::Status)
+        .map(|s| s.0)
+        .collect();
+    assert_eq!(reads, [0, 1, 2]);
+    assert!(engine.axis(axis(2)).position.is_some());
     let online: Vec<_> = events(&mut engine)
         .into_iter()
         .filter(|e| matches!(e, Event::Online(_)))
@@ -227,10 +239,13 @@ fn w4_is_resent_after_its_t4() {
 fn stop_goes_before_another_axis_retry_and_cancels_queued_jobs() {
     let mut engine = Engine::new(config(2));
     let mut now = Instant(0);
-    for _ in 0..2 {
-        let poll = next_frame(&mut engine, &mut now);
-        reply(&mut engine, &mut now, ready(&poll));
+    let mut address = 0;
+    // Both axes answer their first poll and their position read.
+    for _ in 0..4 {
+        let request = next_frame(&mut engine, &mut now);
+        reply(&mut engine, &mut now, answer(&request, &mut address));
     }
+    assert!(engine.axis(axis(0)).position.is_some() && engine.axis(axis(1)).position.is_some());
     let home = engine
         .submit(Job {
             axis: axis(1),
@@ -349,6 +364,9 @@ fn establishment_follows_section_6_1() {
             "CommChange",
             "CommChange",
             "SetBaud(B115200)",
+            // Each axis answered during the procedure: its position is read once first.
+            "0:ReadMemory",
+            "1:ReadMemory",
             "0:Status",
         ]
         .map(String::from),

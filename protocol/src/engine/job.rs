@@ -31,6 +31,18 @@ pub enum JobKind {
     MoveAbsolute(Pulses),
     /// `m`, then wait. Never resent on time-out: the outcome is then unknown (§5 (2)).
     MoveRelative(Pulses),
+    /// `v2` then `a` (or `m` if `relative`), then wait: a move with its own velocity and
+    /// acceleration as one job, so that a rejected `v` never lets the move run at a stale speed.
+    DirectMove {
+        /// Target position (or distance if `relative`).
+        target: Pulses,
+        /// `m` instead of `a`.
+        relative: bool,
+        /// Velocity.
+        velocity: Velocity,
+        /// Acceleration.
+        acceleration: Acceleration,
+    },
     /// Start a jog: `a` to the given stroke end; done when accepted. End it with [`JobKind::Stop`].
     Jog(Pulses),
     /// `d`: cancel the remaining motion. Goes before every other frame and cancels the axis'
@@ -154,6 +166,20 @@ pub(crate) enum Op {
     Await(Condition),
 }
 
+/// The last op of every move: read where it stopped, so that the job finishes with the final
+/// position already known (a PLC reads PNOW when PEND comes on).
+fn read_position(axis: Axis) -> Op {
+    Op::Send(Step {
+        request: Request::new(
+            axis,
+            Command::ReadMemory {
+                address: crate::memory::PNOW,
+            },
+        ),
+        expect: Expect::Data,
+    })
+}
+
 /// A direct command whose status response must not be a rejection.
 fn send(axis: Axis, command: Command) -> Op {
     Op::Send(Step {
@@ -183,14 +209,41 @@ pub(crate) fn program(job: &Job, index: usize) -> Option<Op> {
         JobKind::MoveToPoint(point) => one(&[
             send(axis, Command::MoveToPoint(point)),
             Op::Await(Condition::InPosition),
+            read_position(axis),
         ]),
         JobKind::MoveAbsolute(position) => one(&[
             send(axis, Command::MoveAbsolute(position)),
             Op::Await(Condition::InPosition),
+            read_position(axis),
         ]),
         JobKind::MoveRelative(distance) => one(&[
             send(axis, Command::MoveRelative(distance)),
             Op::Await(Condition::InPosition),
+            read_position(axis),
+        ]),
+        JobKind::DirectMove {
+            target,
+            relative,
+            velocity,
+            acceleration,
+        } => one(&[
+            send(
+                axis,
+                Command::SetVelocityAcceleration {
+                    velocity,
+                    acceleration,
+                },
+            ),
+            send(
+                axis,
+                if relative {
+                    Command::MoveRelative(target)
+                } else {
+                    Command::MoveAbsolute(target)
+                },
+            ),
+            Op::Await(Condition::InPosition),
+            read_position(axis),
         ]),
         JobKind::Jog(end) => one(&[send(axis, Command::MoveAbsolute(end))]),
         JobKind::Stop => one(&[send(axis, Command::CancelMotion)]),

@@ -532,14 +532,17 @@ impl Engine {
         if let Some(report) = reply.report() {
             self.update_report(now, axis, *report);
         }
+        let reads_pnow =
+            matches!(flight.request.command, Command::ReadMemory { address } if address == PNOW);
+        if let (true, Some(position), Some(state)) =
+            (reads_pnow, reply.position(), self.state(axis))
+        {
+            // Whoever asked (polling, a job), PNOW is PNOW.
+            state.position = Some(position);
+            state.position_at = Some(now);
+        }
         match flight.origin {
-            Origin::Poll | Origin::Probe => {}
-            Origin::Position => {
-                if let (Some(position), Some(state)) = (reply.position(), self.state(axis)) {
-                    state.position = Some(position);
-                    state.position_at = Some(now);
-                }
-            }
+            Origin::Poll | Origin::Probe | Origin::Position => {}
             Origin::Stop(id) => {
                 let result = match (reply.rejection(), reply.report()) {
                     (Some(code), _) => Err(JobError::Rejected(code)),
@@ -563,7 +566,11 @@ impl Engine {
         }
         state.link = link;
         match link {
-            Link::Online => self.emit(Event::Online(axis)),
+            Link::Online => {
+                // Read its position once, so that it is known before the first move.
+                self.position_due = self.position_due.with(axis);
+                self.emit(Event::Online(axis));
+            }
             Link::Offline => {
                 if let Some(backoff) = self.probe_backoff.get_mut(index(axis)) {
                     *backoff = FIRST_PROBE;
