@@ -1,0 +1,126 @@
+//! The RTU frame, or ADU (Serial Line §2.1, §2.5.1): unit id (1 byte), PDU (function code +
+//! data, at most 253 bytes, Application Protocol §4.1), CRC (2 bytes, low byte first). So a frame
+//! is 4 to 256 bytes.
+
+use core::fmt;
+
+use super::crc;
+
+/// The longest RTU frame (Serial Line §2.5.1: 1 + 253 + 2 bytes).
+pub const MAX_ADU_LEN: usize = 256;
+
+/// The longest PDU (Application Protocol §4.1).
+pub const MAX_PDU_LEN: usize = 253;
+
+/// The shortest frame: unit id, function code, CRC.
+const MIN_ADU_LEN: usize = 4;
+
+/// Why a burst of bytes is not a frame. Such bursts are discarded and never answered.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FrameError {
+    /// Fewer than 4 bytes.
+    TooShort,
+    /// More than [`MAX_ADU_LEN`] bytes before a t3.5 silence.
+    TooLong,
+    /// The CRC does not match.
+    Crc,
+    /// A silence longer than t1.5 but shorter than t3.5 between two characters
+    /// (Serial Line §2.5.1.1: the frame is incomplete and discarded).
+    BadGap,
+}
+
+impl fmt::Display for FrameError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            FrameError::TooShort => "Modbus frame shorter than 4 bytes",
+            FrameError::TooLong => "Modbus frame longer than 256 bytes",
+            FrameError::Crc => "Modbus frame with a bad CRC",
+            FrameError::BadGap => "Modbus frame broken by a silence longer than t1.5",
+        })
+    }
+}
+
+/// A received frame whose length and CRC are valid; a view of the bytes (smoltcp style).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Adu<'a> {
+    bytes: &'a [u8],
+}
+
+impl<'a> Adu<'a> {
+    /// Checks the length (4..=256) and the CRC of a whole frame.
+    pub fn new_checked(bytes: &'a [u8]) -> Result<Adu<'a>, FrameError> {
+        if bytes.len() < MIN_ADU_LEN {
+            Err(FrameError::TooShort)
+        } else if bytes.len() > MAX_ADU_LEN {
+            Err(FrameError::TooLong)
+        } else if !crc::is_valid(bytes) {
+            Err(FrameError::Crc)
+        } else {
+            Ok(Adu { bytes })
+        }
+    }
+
+    /// The unit id (slave address): 0 broadcast, 1..=247 slaves, 248..=255 reserved
+    /// (Serial Line §2.2).
+    pub fn unit(&self) -> u8 {
+        self.bytes.first().copied().unwrap_or(0)
+    }
+
+    /// The function code (first PDU byte).
+    pub fn function(&self) -> u8 {
+        self.pdu().first().copied().unwrap_or(0)
+    }
+
+    /// The PDU: function code and data, without unit id and CRC (1..=253 bytes).
+    pub fn pdu(&self) -> &'a [u8] {
+        let end = self.bytes.len().saturating_sub(2);
+        self.bytes.get(1..end).unwrap_or(&[])
+    }
+
+    /// The whole frame, CRC included.
+    pub fn as_bytes(&self) -> &'a [u8] {
+        self.bytes
+    }
+}
+
+/// Writes a frame into a byte slice, never past its end.
+pub(crate) struct Writer<'a> {
+    buf: &'a mut [u8],
+    len: usize,
+}
+
+impl<'a> Writer<'a> {
+    /// An empty frame in `buf`.
+    pub(crate) fn new(buf: &'a mut [u8]) -> Writer<'a> {
+        Writer { buf, len: 0 }
+    }
+
+    /// Appends one byte; `None` if the buffer is full.
+    pub(crate) fn byte(&mut self, byte: u8) -> Option<()> {
+        *self.buf.get_mut(self.len)? = byte;
+        self.len += 1;
+        Some(())
+    }
+
+    /// Appends a big-endian 16-bit value (Application Protocol §4.2).
+    pub(crate) fn u16(&mut self, value: u16) -> Option<()> {
+        self.bytes(&value.to_be_bytes())
+    }
+
+    /// Appends bytes; `None` (and nothing written) if they do not fit.
+    pub(crate) fn bytes(&mut self, bytes: &[u8]) -> Option<()> {
+        let end = self.len.checked_add(bytes.len())?;
+        self.buf.get_mut(self.len..end)?.copy_from_slice(bytes);
+        self.len = end;
+        Some(())
+    }
+
+    /// Appends the CRC of everything written and returns the frame length.
+    pub(crate) fn finish(mut self) -> Option<usize> {
+        let crc = crc::checksum(self.buf.get(..self.len)?);
+        self.bytes(&crc::to_wire(crc))?;
+        Some(self.len)
+    }
+}

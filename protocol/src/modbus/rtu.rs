@@ -1,0 +1,235 @@
+//! Where RTU frames end: silence on the line (Serial Line §2.5.1.1).
+//!
+//! A frame is the bytes between two silences of at least **t3.5** (3.5 character times). A
+//! character is 11 bits in RTU mode (start, 8 data, parity or a second stop bit, stop; Serial
+//! Line §2.5.1). Above 19200 baud the timers are fixed: t1.5 = 750 µs and t3.5 = 1750 µs.
+//!
+//! The [`Receiver`] never reads a clock: the caller stamps each byte with [`Receiver::push`] and
+//! calls [`Receiver::poll`] at [`Receiver::next_deadline`] (or any later time) to collect the
+//! frame once the line has been quiet for t3.5.
+//!
+//! Inside a frame, a silence longer than **t1.5** but shorter than t3.5 makes the frame
+//! incomplete (Serial Line §2.5.1.1, "control and waiting" state): every byte up to the next
+//! t3.5 silence is discarded and the burst is reported as [`FrameError::BadGap`]. This check
+//! needs byte timestamps accurate to a few hundred µs (stamp bytes in the receive interrupt or
+//! DMA half/idle event, not when a task gets round to reading them); if they are not, turn it off
+//! with [`Receiver::without_gap_check`] — the CRC still rejects a garbled frame. Many masters and
+//! slaves (FreeModbus, libmodbus) do not check t1.5 at all.
+//!
+//! A burst longer than 256 bytes is discarded as it arrives (nothing beyond 256 bytes is kept)
+//! and reported once, as [`FrameError::TooLong`], when it ends. Frames are never lost to a
+//! panic or an overflow; a complete frame not polled before the next byte arrives is dropped and
+//! counted in [`ReceiverCounters::overruns`].
+
+use super::adu::{Adu, FrameError, MAX_ADU_LEN};
+use crate::engine::{Duration, Instant};
+
+/// Bits per character in RTU mode (Serial Line §2.5.1).
+pub const BITS_PER_CHAR: u64 = 11;
+
+/// Above this baud rate, t1.5 and t3.5 are fixed (Serial Line §2.5.1.1).
+const FIXED_TIMERS_ABOVE: u32 = 19_200;
+
+/// `chars` tenths of a character time at `baud_bps`, rounded up to a microsecond.
+const fn tenths_of_char(tenths: u64, baud_bps: u32) -> Duration {
+    let bps = if baud_bps == 0 { 1 } else { baud_bps as u64 };
+    Duration((tenths * BITS_PER_CHAR * 1_000_000).div_ceil(bps * 10))
+}
+
+/// The end-of-frame silence t3.5 (Serial Line §2.5.1.1): 3.5 character times of 11 bits,
+/// rounded up to a microsecond, or 1750 µs above 19200 baud.
+///
+/// ```
+/// use protocol::modbus::t3_5;
+/// assert_eq!(t3_5(9_600).as_micros(), 4_011); // 38.5 bits / 9600 bps = 4010.4 µs
+/// assert_eq!(t3_5(19_200).as_micros(), 2_006);
+/// assert_eq!(t3_5(38_400).as_micros(), 1_750);
+/// ```
+pub const fn t3_5(baud_bps: u32) -> Duration {
+    if baud_bps > FIXED_TIMERS_ABOVE {
+        Duration::from_micros(1_750)
+    } else {
+        tenths_of_char(35, baud_bps)
+    }
+}
+
+/// The inter-character time-out t1.5 (Serial Line §2.5.1.1): 1.5 character times of 11 bits,
+/// rounded up to a microsecond, or 750 µs above 19200 baud.
+pub const fn t1_5(baud_bps: u32) -> Duration {
+    if baud_bps > FIXED_TIMERS_ABOVE {
+        Duration::from_micros(750)
+    } else {
+        tenths_of_char(15, baud_bps)
+    }
+}
+
+/// What the receiver has seen (wrapping counters).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ReceiverCounters {
+    /// Frames with a good length and CRC.
+    pub frames: u32,
+    /// Bursts of 1 to 3 bytes.
+    pub too_short: u32,
+    /// Bursts longer than 256 bytes.
+    pub too_long: u32,
+    /// Bursts with a bad CRC.
+    pub crc_errors: u32,
+    /// Bursts broken by a silence between t1.5 and t3.5.
+    pub bad_gaps: u32,
+    /// Bursts (good or bad) that ended but were not polled before the next byte came.
+    pub overruns: u32,
+}
+
+/// The state of the current burst of bytes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Burst {
+    /// The line has been quiet for t3.5 (or nothing was ever received).
+    Idle,
+    /// Collecting a frame.
+    Receiving,
+    /// More than 256 bytes: discarding until silence.
+    TooLong,
+    /// A t1.5 gap was seen: discarding until silence.
+    BadGap,
+}
+
+/// Collects bytes into frames; see the [module documentation](self).
+#[derive(Clone, Debug)]
+pub struct Receiver {
+    buf: [u8; MAX_ADU_LEN],
+    len: usize,
+    burst: Burst,
+    last_byte: Instant,
+    t1_5: Option<Duration>,
+    t3_5: Duration,
+    counters: ReceiverCounters,
+}
+
+impl Receiver {
+    /// A receiver for `baud_bps`, with the t1.5 gap check on, assuming an idle line.
+    pub const fn new(baud_bps: u32) -> Receiver {
+        Receiver::with_timing(Some(t1_5(baud_bps)), t3_5(baud_bps))
+    }
+
+    /// A receiver with explicit timers; `t1_5: None` turns the gap check off.
+    pub const fn with_timing(t1_5: Option<Duration>, t3_5: Duration) -> Receiver {
+        Receiver {
+            buf: [0; MAX_ADU_LEN],
+            len: 0,
+            burst: Burst::Idle,
+            last_byte: Instant(0),
+            t1_5,
+            t3_5,
+            counters: ReceiverCounters {
+                frames: 0,
+                too_short: 0,
+                too_long: 0,
+                crc_errors: 0,
+                bad_gaps: 0,
+                overruns: 0,
+            },
+        }
+    }
+
+    /// The same receiver without the t1.5 gap check (for byte timestamps with jitter).
+    pub const fn without_gap_check(mut self) -> Receiver {
+        self.t1_5 = None;
+        self
+    }
+
+    /// The end-of-frame silence in use.
+    pub const fn t3_5(&self) -> Duration {
+        self.t3_5
+    }
+
+    /// The inter-character time-out in use, if the gap check is on.
+    pub const fn t1_5(&self) -> Option<Duration> {
+        self.t1_5
+    }
+
+    /// A byte received at `now`.
+    pub fn push(&mut self, now: Instant, byte: u8) {
+        if self.burst != Burst::Idle {
+            let gap = now.since(self.last_byte);
+            if gap >= self.t3_5 {
+                // The previous burst ended and the caller did not poll it: it is lost.
+                let _ = self.finish();
+                self.counters.overruns = self.counters.overruns.wrapping_add(1);
+            } else if self.burst == Burst::Receiving && self.t1_5.is_some_and(|t1_5| gap > t1_5) {
+                self.burst = Burst::BadGap;
+                self.len = 0;
+            }
+        }
+        if self.burst == Burst::Idle {
+            self.burst = Burst::Receiving;
+            self.len = 0;
+        }
+        self.last_byte = now;
+        if self.burst == Burst::Receiving {
+            if let Some(slot) = self.buf.get_mut(self.len) {
+                *slot = byte;
+                self.len += 1;
+            } else {
+                self.burst = Burst::TooLong;
+                self.len = 0;
+            }
+        }
+    }
+
+    /// The frame that ended with a t3.5 silence before `now`, or why that burst is not one;
+    /// `None` while the line is idle or the silence is shorter than t3.5.
+    pub fn poll(&mut self, now: Instant) -> Option<Result<Adu<'_>, FrameError>> {
+        if self.burst == Burst::Idle || now.since(self.last_byte) < self.t3_5 {
+            return None;
+        }
+        Some(self.finish())
+    }
+
+    /// When [`poll`](Self::poll) will next have something: t3.5 after the last byte of a burst;
+    /// `None` while idle.
+    pub fn next_deadline(&self) -> Option<Instant> {
+        match self.burst {
+            Burst::Idle => None,
+            _ => Some(self.last_byte + self.t3_5),
+        }
+    }
+
+    /// Whether a burst is in progress (the line is not known to be quiet for t3.5).
+    pub fn is_busy(&self) -> bool {
+        self.burst != Burst::Idle
+    }
+
+    /// Drops the burst in progress, if any (e.g. bytes heard while the gateway transmitted).
+    pub fn reset(&mut self) {
+        self.burst = Burst::Idle;
+        self.len = 0;
+    }
+
+    /// What has been counted since the receiver was made.
+    pub fn counters(&self) -> ReceiverCounters {
+        self.counters
+    }
+
+    /// Ends the current burst: the frame, or its error (counted either way).
+    fn finish(&mut self) -> Result<Adu<'_>, FrameError> {
+        let burst = self.burst;
+        self.burst = Burst::Idle;
+        let result = match burst {
+            Burst::TooLong => Err(FrameError::TooLong),
+            Burst::BadGap => Err(FrameError::BadGap),
+            Burst::Idle | Burst::Receiving => {
+                Adu::new_checked(self.buf.get(..self.len).unwrap_or(&[]))
+            }
+        };
+        let counter = match result {
+            Ok(_) => &mut self.counters.frames,
+            Err(FrameError::TooShort) => &mut self.counters.too_short,
+            Err(FrameError::TooLong) => &mut self.counters.too_long,
+            Err(FrameError::Crc) => &mut self.counters.crc_errors,
+            Err(FrameError::BadGap) => &mut self.counters.bad_gaps,
+        };
+        *counter = counter.wrapping_add(1);
+        result
+    }
+}

@@ -1,0 +1,410 @@
+//! The slave: carries out a checked request against a [`DataModel`] and encodes the reply
+//! (Application Protocol §6 for normal replies, §7 for exceptions; Serial Line §2.2 for
+//! unicast and broadcast).
+//!
+//! - Unit 0 is a broadcast: writes (FC05, FC06, FC0F, FC10) are applied and never answered;
+//!   anything else sent to unit 0 is ignored.
+//! - A unit the model does not [serve](DataModel::serves) is ignored: the frame is another
+//!   slave's request, or another slave's reply.
+//! - A PDU that is not a request at all (function code 0 or 0x80 and above) is not answered.
+//! - Everything else gets exactly one reply: the normal one, or the function code with bit 7 set
+//!   and an [`Exception`] code.
+//!
+//! Memory: the reply goes to a caller-provided [`ReplyBuffer`] (256 bytes, the longest ADU).
+//! The model reads into and writes from scratch arrays inside the [`Slave`], sized to the
+//! Modbus maxima: 2000 `bool`s (FC01/02 read at most 2000 bits, FC0F writes at most 1968) and 125
+//! `u16`s (FC03/04 read at most 125 registers, FC10 writes at most 123), 2250 bytes in all. A
+//! packed 250-byte bit buffer would be smaller, but [`DataModel`] takes `&[bool]`, and handing
+//! it a long write in chunks would break "validate everything before applying anything". Keeping
+//! the scratch in the `Slave` (typically a `static` or a task's state) rather than on the stack
+//! keeps [`Slave::handle`]'s stack frame small.
+
+use super::adu::{Adu, FrameError, Writer, MAX_ADU_LEN};
+use super::pdu::{self, PduError, Request, MAX_READ_BITS, MAX_READ_REGISTERS};
+use super::rtu::Receiver;
+use super::{BitTable, DataModel, Exception, RegisterTable, BROADCAST};
+use crate::engine::Instant;
+
+/// What [`Slave::handle`] did with a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Handled {
+    /// Transmit the first `len` bytes of the [`ReplyBuffer`] (a normal or an exception reply).
+    Reply(usize),
+    /// A broadcast write, applied if the model accepted it; no reply.
+    Broadcast,
+    /// For another unit, or a broadcast that is not a write; no reply.
+    Ignored,
+    /// Not a request (function code 0 or 0x80 and above); no reply.
+    Malformed,
+}
+
+/// What the slave has counted (wrapping counters).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SlaveCounters {
+    /// Frames with a good CRC handed to [`Slave::handle`], for any unit.
+    pub frames: u32,
+    /// Bursts with a bad CRC seen by [`Slave::poll`].
+    pub crc_errors: u32,
+    /// Bursts of fewer than 4 bytes seen by [`Slave::poll`].
+    pub too_short: u32,
+    /// Bursts longer than 256 bytes seen by [`Slave::poll`].
+    pub too_long: u32,
+    /// Bursts broken by a t1.5 gap seen by [`Slave::poll`].
+    pub bad_gaps: u32,
+    /// Frames for other units, and broadcasts that are not writes.
+    pub ignored: u32,
+    /// Broadcast writes (applied or refused).
+    pub broadcasts: u32,
+    /// Broadcast writes refused (invalid, or the model returned an exception).
+    pub broadcast_errors: u32,
+    /// Exception 01 replies.
+    pub illegal_function: u32,
+    /// Exception 02 replies.
+    pub illegal_data_address: u32,
+    /// Exception 03 replies.
+    pub illegal_data_value: u32,
+    /// Exception 04 replies.
+    pub server_device_failure: u32,
+    /// Replies produced, normal and exception.
+    pub replies: u32,
+    /// PDUs that are not requests (to a served unit or broadcast).
+    pub malformed: u32,
+}
+
+impl SlaveCounters {
+    /// The number of replies with `exception`.
+    pub fn exceptions(&self, exception: Exception) -> u32 {
+        match exception {
+            Exception::IllegalFunction => self.illegal_function,
+            Exception::IllegalDataAddress => self.illegal_data_address,
+            Exception::IllegalDataValue => self.illegal_data_value,
+            Exception::ServerDeviceFailure => self.server_device_failure,
+        }
+    }
+
+    fn exception_counter(&mut self, exception: Exception) -> &mut u32 {
+        match exception {
+            Exception::IllegalFunction => &mut self.illegal_function,
+            Exception::IllegalDataAddress => &mut self.illegal_data_address,
+            Exception::IllegalDataValue => &mut self.illegal_data_value,
+            Exception::ServerDeviceFailure => &mut self.server_device_failure,
+        }
+    }
+}
+
+/// Adds one to a wrapping counter.
+fn bump(counter: &mut u32) {
+    *counter = counter.wrapping_add(1);
+}
+
+/// The reply to transmit: one ADU of at most 256 bytes.
+#[derive(Clone, Debug)]
+pub struct ReplyBuffer {
+    bytes: [u8; MAX_ADU_LEN],
+    len: usize,
+}
+
+impl Default for ReplyBuffer {
+    fn default() -> Self {
+        ReplyBuffer::new()
+    }
+}
+
+impl ReplyBuffer {
+    /// An empty buffer.
+    pub const fn new() -> ReplyBuffer {
+        ReplyBuffer {
+            bytes: [0; MAX_ADU_LEN],
+            len: 0,
+        }
+    }
+
+    /// The last reply, CRC included; empty if the last frame got none.
+    pub fn as_bytes(&self) -> &[u8] {
+        self.bytes.get(..self.len).unwrap_or(&[])
+    }
+
+    /// The length of the last reply.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether the last frame got no reply.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+}
+
+/// The Modbus RTU slave; see the [module documentation](self).
+#[derive(Clone, Debug)]
+pub struct Slave {
+    bits: [bool; MAX_READ_BITS as usize],
+    registers: [u16; MAX_READ_REGISTERS as usize],
+    counters: SlaveCounters,
+}
+
+impl Default for Slave {
+    fn default() -> Self {
+        Slave::new()
+    }
+}
+
+impl Slave {
+    /// A slave with zeroed counters.
+    pub const fn new() -> Slave {
+        Slave {
+            bits: [false; MAX_READ_BITS as usize],
+            registers: [0; MAX_READ_REGISTERS as usize],
+            counters: SlaveCounters {
+                frames: 0,
+                crc_errors: 0,
+                too_short: 0,
+                too_long: 0,
+                bad_gaps: 0,
+                ignored: 0,
+                broadcasts: 0,
+                broadcast_errors: 0,
+                illegal_function: 0,
+                illegal_data_address: 0,
+                illegal_data_value: 0,
+                server_device_failure: 0,
+                replies: 0,
+                malformed: 0,
+            },
+        }
+    }
+
+    /// What has been counted since the slave was made.
+    pub fn counters(&self) -> SlaveCounters {
+        self.counters
+    }
+
+    /// Polls `receiver` at `now` and handles the frame it completes, if any. Bursts that are
+    /// not frames are counted and returned as errors (never answered).
+    pub fn poll(
+        &mut self,
+        receiver: &mut Receiver,
+        now: Instant,
+        model: &mut impl DataModel,
+        reply: &mut ReplyBuffer,
+    ) -> Option<Result<Handled, FrameError>> {
+        match receiver.poll(now)? {
+            Ok(adu) => Some(Ok(self.handle(&adu, model, reply))),
+            Err(error) => {
+                reply.len = 0;
+                bump(match error {
+                    FrameError::Crc => &mut self.counters.crc_errors,
+                    FrameError::TooShort => &mut self.counters.too_short,
+                    FrameError::TooLong => &mut self.counters.too_long,
+                    FrameError::BadGap => &mut self.counters.bad_gaps,
+                });
+                Some(Err(error))
+            }
+        }
+    }
+
+    /// Carries out one received frame and writes its reply, if any, into `reply`.
+    pub fn handle(
+        &mut self,
+        adu: &Adu<'_>,
+        model: &mut impl DataModel,
+        reply: &mut ReplyBuffer,
+    ) -> Handled {
+        bump(&mut self.counters.frames);
+        reply.len = 0;
+        let unit = adu.unit();
+        if unit != BROADCAST && !model.serves(unit) {
+            bump(&mut self.counters.ignored);
+            return Handled::Ignored;
+        }
+        let request = match Request::parse(adu.pdu()) {
+            Err(PduError::NotARequest) => {
+                bump(&mut self.counters.malformed);
+                return Handled::Malformed;
+            }
+            Err(PduError::Exception(exception)) => Err(exception),
+            Ok(request) => Ok(request),
+        };
+        if unit == BROADCAST {
+            return self.broadcast(adu.function(), request, model);
+        }
+        let result = request.and_then(|request| {
+            self.execute(unit, &request, model)?;
+            self.encode(unit, &request, &mut reply.bytes)
+                .ok_or(Exception::ServerDeviceFailure)
+        });
+        let len = match result {
+            Ok(len) => len,
+            Err(exception) => {
+                bump(self.counters.exception_counter(exception));
+                encode_exception(unit, adu.function(), exception, &mut reply.bytes).unwrap_or(0)
+                // never: the buffer holds 256 bytes
+            }
+        };
+        reply.len = len;
+        bump(&mut self.counters.replies);
+        Handled::Reply(len)
+    }
+
+    /// A request to unit 0: writes are applied, nothing is answered.
+    fn broadcast(
+        &mut self,
+        function: u8,
+        request: Result<Request<'_>, Exception>,
+        model: &mut impl DataModel,
+    ) -> Handled {
+        if !pdu::is_write_function(function) {
+            bump(&mut self.counters.ignored);
+            return Handled::Ignored;
+        }
+        bump(&mut self.counters.broadcasts);
+        if request
+            .and_then(|request| self.execute(BROADCAST, &request, model))
+            .is_err()
+        {
+            bump(&mut self.counters.broadcast_errors);
+        }
+        Handled::Broadcast
+    }
+
+    /// Asks the model: reads fill the scratch arrays, writes are taken from them.
+    fn execute(
+        &mut self,
+        unit: u8,
+        request: &Request<'_>,
+        model: &mut impl DataModel,
+    ) -> Result<(), Exception> {
+        match *request {
+            Request::ReadCoils { address, quantity } => {
+                let out = self.bits_mut(quantity)?;
+                model.read_bits(unit, BitTable::Coils, address, out)
+            }
+            Request::ReadDiscreteInputs { address, quantity } => {
+                let out = self.bits_mut(quantity)?;
+                model.read_bits(unit, BitTable::DiscreteInputs, address, out)
+            }
+            Request::ReadHoldingRegisters { address, quantity } => {
+                let out = self.registers_mut(quantity)?;
+                model.read_registers(unit, RegisterTable::Holding, address, out)
+            }
+            Request::ReadInputRegisters { address, quantity } => {
+                let out = self.registers_mut(quantity)?;
+                model.read_registers(unit, RegisterTable::Input, address, out)
+            }
+            Request::WriteSingleCoil { address, value } => {
+                model.write_bits(unit, address, &[value])
+            }
+            Request::WriteSingleRegister { address, value } => {
+                model.write_registers(unit, address, &[value])
+            }
+            Request::WriteMultipleCoils {
+                address,
+                quantity,
+                values,
+            } => {
+                let bits = self.bits_mut(quantity)?;
+                for (index, bit) in bits.iter_mut().enumerate() {
+                    *bit = values
+                        .get(index / 8)
+                        .is_some_and(|byte| (byte >> (index % 8)) & 1 != 0);
+                }
+                model.write_bits(unit, address, bits)
+            }
+            Request::WriteMultipleRegisters { address, values } => {
+                let quantity = u16::try_from(values.len() / 2).unwrap_or(u16::MAX);
+                let registers = self.registers_mut(quantity)?;
+                for (register, pair) in registers.iter_mut().zip(values.chunks_exact(2)) {
+                    *register = match *pair {
+                        [high, low] => u16::from_be_bytes([high, low]),
+                        _ => 0,
+                    };
+                }
+                model.write_registers(unit, address, registers)
+            }
+            Request::ReturnQueryData { .. } => Ok(()),
+        }
+    }
+
+    /// The first `quantity` scratch bits, cleared.
+    fn bits_mut(&mut self, quantity: u16) -> Result<&mut [bool], Exception> {
+        let bits = self
+            .bits
+            .get_mut(..usize::from(quantity))
+            .ok_or(Exception::ServerDeviceFailure)?;
+        bits.fill(false);
+        Ok(bits)
+    }
+
+    /// The first `quantity` scratch registers, cleared.
+    fn registers_mut(&mut self, quantity: u16) -> Result<&mut [u16], Exception> {
+        let registers = self
+            .registers
+            .get_mut(..usize::from(quantity))
+            .ok_or(Exception::ServerDeviceFailure)?;
+        registers.fill(0);
+        Ok(registers)
+    }
+
+    /// The normal reply to a carried-out request (Application Protocol §6); its length.
+    fn encode(&self, unit: u8, request: &Request<'_>, out: &mut [u8]) -> Option<usize> {
+        let mut w = Writer::new(out);
+        w.byte(unit)?;
+        w.byte(request.function())?;
+        match *request {
+            Request::ReadCoils { quantity, .. } | Request::ReadDiscreteInputs { quantity, .. } => {
+                let bits = self.bits.get(..usize::from(quantity))?;
+                w.byte(u8::try_from(bits.len().div_ceil(8)).ok()?)?;
+                for chunk in bits.chunks(8) {
+                    let byte = chunk
+                        .iter()
+                        .rev()
+                        .fold(0u8, |byte, &bit| (byte << 1) | u8::from(bit));
+                    w.byte(byte)?;
+                }
+            }
+            Request::ReadHoldingRegisters { quantity, .. }
+            | Request::ReadInputRegisters { quantity, .. } => {
+                let registers = self.registers.get(..usize::from(quantity))?;
+                w.byte(u8::try_from(2 * registers.len()).ok()?)?;
+                for &register in registers {
+                    w.u16(register)?;
+                }
+            }
+            // FC05 and FC06 echo the request (§6.5, §6.6).
+            Request::WriteSingleCoil { address, value } => {
+                w.u16(address)?;
+                w.u16(if value { 0xFF00 } else { 0 })?;
+            }
+            Request::WriteSingleRegister { address, value } => {
+                w.u16(address)?;
+                w.u16(value)?;
+            }
+            Request::WriteMultipleCoils {
+                address, quantity, ..
+            } => {
+                w.u16(address)?;
+                w.u16(quantity)?;
+            }
+            Request::WriteMultipleRegisters { address, values } => {
+                w.u16(address)?;
+                w.u16(u16::try_from(values.len() / 2).ok()?)?;
+            }
+            Request::ReturnQueryData { data } => {
+                w.u16(0)?;
+                w.bytes(data)?;
+            }
+        }
+        w.finish()
+    }
+}
+
+/// An exception reply (Application Protocol §7): unit, function | 0x80, code, CRC: 5 bytes.
+fn encode_exception(unit: u8, function: u8, exception: Exception, out: &mut [u8]) -> Option<usize> {
+    let mut w = Writer::new(out);
+    w.byte(unit)?;
+    w.byte(function | 0x80)?;
+    w.byte(exception.code())?;
+    w.finish()
+}
