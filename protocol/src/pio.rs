@@ -1,0 +1,717 @@
+//! Discrete I/O (PIO) for one axis, compatible with IAI PCON PIO pattern 0: the 24 V signals a PLC
+//! wires to an IAI controller, turned into engine jobs, and the axis' status turned back into
+//! output signals.
+//!
+//! Sans-IO like the [`engine`](crate::engine): the firmware reads the input pins into a
+//! [`PioInputs`] word, calls [`Pio::sample`] with the time and the engine's
+//! [`AxisState`] (about every millisecond: every time in this module is only as fine as the
+//! sample period), submits the returned [`JobKind`] for the axis, and writes the returned
+//! [`PioOutputs`] word to the output pins. The Modbus map can expose the same words as DIPM
+//! (0x9003, [`Pio::inputs`]) and DOPM (0x9004).
+//!
+//! ```text
+//! let inputs = PioInputs::from_bits(read_pins());
+//! let (outputs, job) = pio.sample(now, inputs, engine.axis(axis), true);
+//! if let Some(kind) = job { engine.submit(Job { axis, kind })?; }
+//! write_pins(outputs.bits());
+//! ```
+//!
+//! # Signals
+//!
+//! Bit n of the word is port INn / OUTn of PCON pattern 0 (field-research §2), so a PLC program
+//! and a wiring plan for a PCON fit unchanged as far as the 16-position Robo Cylinder allows. Bits not
+//! listed are ignored (inputs) or always OFF (outputs).
+//!
+//! | Signal | Bit | Logic | Meaning | PCON pattern 0 |
+//! |---|---|---|---|---|
+//! | PC1 | IN0 | ON = 1 | Position number bit 0 | IN0 PC1 |
+//! | PC2 | IN1 | ON = 1 | Position number bit 1 | IN1 PC2 |
+//! | PC4 | IN2 | ON = 1 | Position number bit 2 | IN2 PC4 |
+//! | PC8 | IN3 | ON = 1 | Position number bit 3 (positions 0-15) | IN3 PC8 |
+//! | PC16, PC32 | IN4, IN5 | ON = 1 | The Robo Cylinder has 16 positions: ON when a strobe latches refuses that strobe (no move) | IN4 PC16, IN5 PC32 |
+//! | HOME | IN11 | rising edge | Home (`o`, direction from [`Config::home_direction`]) | IN11 HOME |
+//! | *STP | IN12 | negative: OFF = stop | OFF: cancel the motion (`d`) at once; while OFF, CSTR and HOME are ignored. ON again does not resume | IN12 *STP (pause) |
+//! | CSTR | IN13 | rising edge | Start: latch PC1-PC8, move to that point (Q3) | IN13 CSTR |
+//! | RES | IN14 | rising edge | Alarm reset (servo off, `r03`), only while an alarm is active | IN14 RES |
+//! | SON | IN15 | level | Servo on while ON, off while OFF | IN15 SON |
+//! | PM1-PM8 | OUT0-OUT3 | ON = 1 | Completed position number; the abbreviated alarm code while *ALM is OFF | OUT0-OUT3 PM1-PM8 |
+//! | MOVE | OUT6 | ON = moving | Servo on, positioning not complete, no alarm | OUT6 MOVE |
+//! | ZONE1 | OUT7 | ON = inside | The controller's ZONE (between ZONL and ZONM, homed) | OUT7 ZONE1 |
+//! | HEND | OUT10 | ON = homed | ZFIN | OUT10 HEND |
+//! | PEND | OUT11 | ON = complete | PFIN, OFF from a start until the move is complete and while CSTR is ON | OUT11 PEND |
+//! | SV | OUT12 | ON = servo on | Status servo bit | OUT12 SV |
+//! | LINK | OUT13 | ON = link OK | The gateway hears the axis (the RC has no emergency-stop signal; same polarity as *EMGS: ON = able to run) | OUT13 *EMGS |
+//! | *ALM | OUT14 | negative: OFF = alarm | OFF while the controller is in alarm, or the link is down | OUT14 *ALM |
+//!
+//! # Inputs
+//!
+//! Every input is debounced ([`Config::debounce`], default 6 ms: the input time constant IAI
+//! documents for its own controllers, which recognise an input only after it has held its new
+//! level for 6 ms, ERC2 manual §3.5.1 "Recognition of input signals"): a change counts only once
+//! the pin has read the new level on every sample for that long; 0 turns debouncing off. An
+//! input that is ON when the gateway starts must go OFF and ON again before its edge counts, so a
+//! CSTR or HOME held at power-up starts nothing.
+//!
+//! **CSTR** acts on its rising edge. The position number is latched from PC1-PC8 then, if they
+//! have been unchanged for [`Config::settle`] (default 6 ms); if they changed more recently, the
+//! strobe waits until they have been stable that long and then latches (it is never dropped, even
+//! if CSTR falls meanwhile). Neither the project's notes nor the sources searched give IAI's
+//! figure for how long before CSTR the number must be set, so the default is a choice: 6 ms, IAI's
+//! input time constant, the time an IAI controller itself needs to see a changed PC bit; a PLC
+//! program that sets the number early enough for an IAI controller is then early enough here.
+//! The job is [`JobKind::MoveToPoint`].
+//!
+//! **HOME** acts on its rising edge: [`JobKind::Home`]. A CSTR strobe waiting to latch is
+//! dropped.
+//!
+//! ***STP** is the fail-safe path. The sample on which it is recognised OFF returns
+//! [`JobKind::Stop`] (before anything else; it also drops a waiting strobe). The Robo Cylinder
+//! protocol has no pause: `d` cancels the remaining motion, so turning *STP ON again does **not**
+//! resume the interrupted move; the PLC strobes CSTR again. While *STP is OFF (or not yet
+//! recognised after start-up), CSTR and HOME are ignored, and if the axis reports moving anyway
+//! (a command from elsewhere, a stop lost while the link was down) the stop is repeated every
+//! [`STOP_REPEAT`]. The stop is returned even while the link is down (it can only help).
+//!
+//! **RES** acts on its rising edge, only while the axis reports an alarm (*ALM OFF). The Robo
+//! Cylinder resets an alarm only with the servo off ([`JobKind::AlarmReset`] turns it off first),
+//! so an unconditional reset would drop the servo of a healthy axis whenever a PLC program pulses
+//! RES without an alarm (at start-up, say).
+//!
+//! **SON** is a level: [`JobKind::Servo`]`(SON)` when SON changes, and again whenever the axis'
+//! reported servo state differs from SON and no servo job was returned for
+//! [`Config::servo_retry`] (default 1 s), while no alarm is active. This keeps a PCON's behaviour
+//! without extra state: the servo comes on at start-up and after the link returns if SON is ON,
+//! and comes back on after an alarm reset (which turns it off) while SON stays ON. SON is the
+//! owner of the servo: a servo changed by other means (Modbus) is brought back to SON.
+//!
+//! Nothing is queued for an axis whose link is down: CSTR, HOME and RES edges are ignored then
+//! (a move must not start minutes later when the link returns), and SON is re-applied by the
+//! retry rule once it is back.
+//!
+//! One job per sample: when several are due on the same sample, they go in the order Stop,
+//! servo off, alarm reset, servo on, home, move, one per sample (the others wait for the next
+//! samples, if still allowed then).
+//!
+//! # Outputs
+//!
+//! While the link is down (`link_ok` false, the engine's [`Link`] not
+//! [`Online`](Link::Online)) or before the first status, every output is OFF: *ALM OFF
+//! (alarm), LINK OFF, PEND, HEND, SV, MOVE, ZONE1 and PM OFF. A PLC then sees an alarm and
+//! nothing complete, which stops any sequence that waits for PEND or checks *ALM.
+//!
+//! Otherwise the outputs come from the axis' last status (complete edition §4-2): *ALM, ZONE1,
+//! HEND (ZFIN), PEND (PFIN), SV (status servo bit), MOVE ([`AxisState::moving`]) and PM1-PM8
+//! from the controller's own OUT byte. PM is never made up from the latched number: the
+//! controller turns PM off when it receives the Q3 and shows the number when PFIN comes on, so
+//! PM is the point it actually reached; while *ALM is OFF, PM is the abbreviated alarm code
+//! (§8-1-1). Two masks make the outputs follow the PLC's handshake before the status catches up:
+//!
+//! - from the sample that returns a move or home until the status shows it done, PEND is OFF and
+//!   PM is 0 (and HEND OFF for a home), as the controller does once it has the command (§4-2:
+//!   "PM1-PM8 turn off ... after a new PTP move command"). "Done" is judged on statuses
+//!   received after the command was returned: PFIN on with PM equal to the point; or PFIN going
+//!   off and on again (ZFIN on too for a home); the wait ends early on an alarm, a rejected
+//!   command (the axis' rejection count changes), a stop, a new move or home, or the link going
+//!   down;
+//! - while CSTR is ON, PEND is OFF (PM still shows the number), as on IAI's controllers: their
+//!   manuals say PEND is withheld while the start signal stays ON, even inside the positioning
+//!   band, while the completed position number is output (ROBONET manual, Modbus start command
+//!   CSTR, part 1 p. 135).
+//!
+//! A strobe while a move is still running is sent by the engine after that move (one job per
+//! axis at a time); PEND stays OFF until the new point is reached or, if the status showed the
+//! axis moving when the strobe came, until it has stopped and moved again.
+//!
+//! # Why [`JobKind`]
+//!
+//! [`Pio::sample`] returns the engine's own [`JobKind`] (only `Stop`, `Servo`, `AlarmReset`,
+//! `Home` and `MoveToPoint`) rather than a PIO-specific action: the gateway submits it as it is,
+//! there is no second vocabulary to map and keep in step, and tests compare exactly what the
+//! engine will run.
+
+use crate::engine::{AxisState, Duration, Instant, JobKind, Link};
+use crate::{HomeDirection, PositionNo, StatusReport};
+
+/// While *STP is OFF and the axis still reports moving, the stop is repeated this often.
+pub const STOP_REPEAT: Duration = Duration::from_millis(100);
+
+/// [`Config::servo_retry`] is at least this, so that a status that lags a servo command cannot
+/// make the retry rule submit a job on every sample.
+pub const SERVO_RETRY_MIN: Duration = Duration::from_millis(100);
+
+macro_rules! pio_bits {
+    (
+        $(#[$meta:meta])*
+        $name:ident {
+            $( $(#[$fmeta:meta])* $bit:literal => $flag:ident, $method:ident, $label:literal; )*
+        }
+    ) => {
+        $(#[$meta])*
+        #[derive(Clone, Copy, PartialEq, Eq, Default, Hash)]
+        #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+        pub struct $name(u16);
+
+        impl $name {
+            $( $(#[$fmeta])* pub const $flag: $name = $name(1 << $bit); )*
+
+            /// Every signal OFF.
+            pub const NONE: $name = $name(0);
+
+            /// The bits that carry a signal.
+            pub const MASK: u16 = 0 $( | 1 << $bit )*;
+
+            /// Each signal with its name, bit 0 first.
+            pub const NAMED: &'static [($name, &'static str)] = &[ $( ($name::$flag, $label), )* ];
+
+            /// From a word, bit n = port n; bits outside [`MASK`](Self::MASK) are dropped.
+            pub const fn from_bits(bits: u16) -> $name {
+                $name(bits & $name::MASK)
+            }
+
+            /// The word, bit n = port n.
+            pub const fn bits(self) -> u16 {
+                self.0
+            }
+
+            /// Whether every bit of `other` is set.
+            pub const fn contains(self, other: $name) -> bool {
+                self.0 & other.0 == other.0
+            }
+
+            /// This value with the bits of `other` set or cleared.
+            #[must_use]
+            pub const fn with(self, other: $name, set: bool) -> $name {
+                if set { $name(self.0 | other.0) } else { $name(self.0 & !other.0) }
+            }
+
+            $(
+                $(#[$fmeta])*
+                pub const fn $method(self) -> bool {
+                    self.contains($name::$flag)
+                }
+            )*
+
+            /// The names of the signals that are ON, bit 0 first.
+            pub fn set_names(self) -> impl Iterator<Item = &'static str> {
+                $name::NAMED.iter().filter(move |(f, _)| self.contains(*f)).map(|(_, n)| *n)
+            }
+        }
+
+        impl core::ops::BitOr for $name {
+            type Output = $name;
+            fn bitor(self, rhs: $name) -> $name {
+                $name(self.0 | rhs.0)
+            }
+        }
+
+        impl core::fmt::Debug for $name {
+            fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+                write!(f, "{}(0x{:04X}", stringify!($name), self.0)?;
+                for name in self.set_names() {
+                    write!(f, " {name}")?;
+                }
+                write!(f, ")")
+            }
+        }
+    };
+}
+
+pio_bits! {
+    /// The PLC's signals to the gateway, bit n = PCON pattern 0 port INn (1 = ON, the voltage on
+    /// the pin; *STP is negative logic, so its bit is 1 when the axis may run).
+    PioInputs {
+        /// IN0: position number bit 0.
+        0 => PC1, pc1, "PC1";
+        /// IN1: position number bit 1.
+        1 => PC2, pc2, "PC2";
+        /// IN2: position number bit 2.
+        2 => PC4, pc4, "PC4";
+        /// IN3: position number bit 3.
+        3 => PC8, pc8, "PC8";
+        /// IN4: PCON's position number bit 4; the RC has none, so a strobe with it ON is refused.
+        4 => PC16, pc16, "PC16";
+        /// IN5: PCON's position number bit 5; the RC has none, so a strobe with it ON is refused.
+        5 => PC32, pc32, "PC32";
+        /// IN11: home, on the rising edge.
+        11 => HOME, home, "HOME";
+        /// IN12: *STP, negative logic: ON = may run, OFF = stop.
+        12 => STP_N, stp_n, "*STP";
+        /// IN13: CSTR, start on the rising edge.
+        13 => CSTR, cstr, "CSTR";
+        /// IN14: RES, alarm reset on the rising edge.
+        14 => RES, res, "RES";
+        /// IN15: SON, servo on (level).
+        15 => SON, son, "SON";
+    }
+}
+
+pio_bits! {
+    /// The gateway's signals to the PLC, bit n = PCON pattern 0 port OUTn (1 = ON; *ALM is
+    /// negative logic, so its bit is 1 when there is no alarm).
+    PioOutputs {
+        /// OUT0: PM1, completed position number bit 0 (or abbreviated alarm code bit 0).
+        0 => PM1, pm1, "PM1";
+        /// OUT1: PM2.
+        1 => PM2, pm2, "PM2";
+        /// OUT2: PM4.
+        2 => PM4, pm4, "PM4";
+        /// OUT3: PM8.
+        3 => PM8, pm8, "PM8";
+        /// OUT6: MOVE, the axis is moving.
+        6 => MOVE, moving, "MOVE";
+        /// OUT7: ZONE1, the controller's ZONE output.
+        7 => ZONE1, zone1, "ZONE1";
+        /// OUT10: HEND, home complete (ZFIN).
+        10 => HEND, hend, "HEND";
+        /// OUT11: PEND, positioning complete (PFIN).
+        11 => PEND, pend, "PEND";
+        /// OUT12: SV, servo on.
+        12 => SV, sv, "SV";
+        /// OUT13: LINK, the gateway hears the axis (PCON: *EMGS, also ON = able to run).
+        13 => LINK, link, "LINK";
+        /// OUT14: *ALM, negative logic: ON = no alarm, OFF = alarm (or link down).
+        14 => ALM_N, alm_n, "*ALM";
+    }
+}
+
+impl PioInputs {
+    /// PC8..PC1 as a number 0-15.
+    pub const fn pc(self) -> u8 {
+        // The mask keeps 4 bits, so the cast is exact.
+        (self.0 & 0x0F) as u8
+    }
+
+    /// The position number PC1-PC8 select, `None` if PC16 or PC32 is ON (beyond the RC's 16).
+    pub fn position(self) -> Option<PositionNo> {
+        if self.pc16() || self.pc32() {
+            None
+        } else {
+            PositionNo::new(self.pc())
+        }
+    }
+
+    /// The inputs with PC1-PC8 set to `point` (PC16, PC32 off).
+    #[must_use]
+    pub fn with_position(self, point: PositionNo) -> PioInputs {
+        PioInputs((self.0 & !0x3F) | u16::from(point.get()))
+    }
+}
+
+impl PioOutputs {
+    /// Every output OFF: what the PLC sees while the link is down (*ALM OFF = alarm, LINK OFF).
+    pub const SAFE: PioOutputs = PioOutputs(0);
+
+    /// PM8..PM1 as a number 0-15.
+    pub const fn pm(self) -> u8 {
+        // The mask keeps 4 bits, so the cast is exact.
+        (self.0 & 0x0F) as u8
+    }
+
+    /// Whether an alarm is shown (*ALM is OFF).
+    pub const fn alarm(self) -> bool {
+        !self.alm_n()
+    }
+
+    /// The value with PM8..PM1 set to `pm` (its low 4 bits).
+    #[must_use]
+    pub const fn with_pm(self, pm: u8) -> PioOutputs {
+        PioOutputs((self.0 & !0x0F) | (pm & 0x0F) as u16)
+    }
+}
+
+/// How the PIO behaves; see the [module documentation](self).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Config {
+    /// An input changes only after reading its new level this long (0: at once). Default 6 ms,
+    /// IAI's input time constant.
+    pub debounce: Duration,
+    /// PC1-PC8 must have been stable this long when a CSTR strobe latches them; a strobe waits
+    /// until they have (0: latch at the edge). Default 6 ms.
+    pub settle: Duration,
+    /// The direction HOME homes in.
+    pub home_direction: HomeDirection,
+    /// While the reported servo state differs from SON, the servo job is repeated this often
+    /// (at least [`SERVO_RETRY_MIN`]). Default 1 s.
+    pub servo_retry: Duration,
+}
+
+impl Default for Config {
+    fn default() -> Config {
+        Config {
+            debounce: Duration::from_millis(6),
+            settle: Duration::from_millis(6),
+            home_direction: HomeDirection::MotorEnd,
+            servo_retry: Duration::from_millis(1000),
+        }
+    }
+}
+
+/// Debounced inputs: each pin counts once it has read the same level for the debounce time.
+#[derive(Clone, Copy, Debug)]
+struct Debouncer {
+    /// The last sample.
+    raw: u16,
+    /// When each pin last changed in the samples.
+    since: [Instant; 16],
+    /// The recognised levels.
+    stable: u16,
+    /// The pins recognised at least once since start-up.
+    known: u16,
+    /// Whether a sample has been taken.
+    started: bool,
+}
+
+impl Debouncer {
+    const fn new() -> Debouncer {
+        Debouncer {
+            raw: 0,
+            since: [Instant(0); 16],
+            stable: 0,
+            known: 0,
+            started: false,
+        }
+    }
+
+    /// Take a sample; returns the bits whose recognised level changed or that became known.
+    fn update(&mut self, now: Instant, raw: u16, debounce: Duration) -> u16 {
+        let changed_raw = if self.started {
+            self.raw ^ raw
+        } else {
+            PioInputs::MASK
+        };
+        self.started = true;
+        self.raw = raw;
+        let mut changed = 0;
+        for (bit, since) in self.since.iter_mut().enumerate() {
+            let m = 1u16 << bit;
+            if m & PioInputs::MASK == 0 {
+                continue;
+            }
+            if changed_raw & m != 0 {
+                *since = now;
+            }
+            if now.since(*since) < debounce {
+                continue;
+            }
+            let level = raw & m;
+            if self.known & m == 0 || self.stable & m != level {
+                changed |= m;
+                self.known |= m;
+                self.stable = (self.stable & !m) | level;
+            }
+        }
+        changed
+    }
+
+    fn on(&self, flag: PioInputs) -> bool {
+        self.stable & flag.bits() != 0
+    }
+
+    fn known(&self, flag: PioInputs) -> bool {
+        self.known & flag.bits() != 0
+    }
+
+    /// Whether `flag` went from a recognised OFF to ON in the last update.
+    fn rose(&self, flag: PioInputs, changed: u16, known_before: u16) -> bool {
+        changed & flag.bits() != 0 && known_before & flag.bits() != 0 && self.on(flag)
+    }
+}
+
+/// What a returned move or home waits for before the outputs follow the status again.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Target {
+    Point(PositionNo),
+    Home,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Phase {
+    /// The status showed the axis moving when the command was returned: wait for it to stop.
+    Before,
+    /// Waiting for the status to show the command running.
+    Ready,
+    /// The status showed it running: wait for it to complete.
+    Started,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Await {
+    target: Target,
+    since: Instant,
+    phase: Phase,
+    rejections: u32,
+}
+
+impl Await {
+    fn new(target: Target, now: Instant, axis: &AxisState, report: &StatusReport) -> Await {
+        Await {
+            target,
+            since: now,
+            phase: if report.outputs.pfin() {
+                Phase::Ready
+            } else {
+                Phase::Before
+            },
+            rejections: axis.counters.rejections,
+        }
+    }
+
+    /// Advance on the axis' status; `true` when the wait is over.
+    fn update(&mut self, axis: &AxisState, report: &StatusReport) -> bool {
+        if axis.counters.rejections != self.rejections {
+            return true;
+        }
+        if axis.report_at.is_none_or(|at| at <= self.since) {
+            return false;
+        }
+        let out = report.outputs;
+        if out.alarm_active() {
+            return true;
+        }
+        let (complete, running) = match self.target {
+            Target::Point(point) => {
+                if out.pfin() && out.pm() == point.get() {
+                    return true;
+                }
+                (out.pfin(), !out.pfin())
+            }
+            Target::Home => (out.pfin() && out.zfin(), !out.pfin() || !out.zfin()),
+        };
+        match self.phase {
+            Phase::Before if out.pfin() => self.phase = Phase::Ready,
+            Phase::Ready if running => self.phase = Phase::Started,
+            Phase::Started if complete => return true,
+            _ => {}
+        }
+        false
+    }
+}
+
+/// The PIO of one axis; see the [module documentation](self).
+#[derive(Clone, Debug)]
+pub struct Pio {
+    config: Config,
+    inputs: Debouncer,
+    /// When PC1-PC32 last changed (recognised levels).
+    pc_since: Instant,
+    /// A CSTR edge waiting for PC1-PC8 to settle.
+    strobe: bool,
+    /// A latched move not yet returned.
+    pending_move: Option<PositionNo>,
+    pending_home: bool,
+    pending_reset: bool,
+    pending_servo: Option<bool>,
+    stop_due: bool,
+    last_stop: Option<Instant>,
+    last_servo: Option<Instant>,
+    waiting: Option<Await>,
+    outputs: PioOutputs,
+}
+
+impl Pio {
+    /// A PIO with every input not yet recognised (as OFF: *STP OFF, so nothing may move until
+    /// it has read ON for the debounce time).
+    pub fn new(config: Config) -> Pio {
+        let config = Config {
+            servo_retry: config.servo_retry.max(SERVO_RETRY_MIN),
+            ..config
+        };
+        Pio {
+            config,
+            inputs: Debouncer::new(),
+            pc_since: Instant(0),
+            strobe: false,
+            pending_move: None,
+            pending_home: false,
+            pending_reset: false,
+            pending_servo: None,
+            stop_due: false,
+            last_stop: None,
+            last_servo: None,
+            waiting: None,
+            outputs: PioOutputs::SAFE,
+        }
+    }
+
+    /// The configuration in force.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// The recognised (debounced) inputs; inputs not recognised yet read OFF.
+    pub fn inputs(&self) -> PioInputs {
+        PioInputs::from_bits(self.inputs.stable)
+    }
+
+    /// The outputs of the last sample.
+    pub fn outputs(&self) -> PioOutputs {
+        self.outputs
+    }
+
+    /// Whether a CSTR strobe waits for PC1-PC8 to settle, or a move or home waits to be returned.
+    pub fn motion_pending(&self) -> bool {
+        self.strobe || self.pending_move.is_some() || self.pending_home
+    }
+
+    /// Read the inputs at `now`: the outputs to drive and the job to submit for the axis, if any.
+    ///
+    /// `axis` is the engine's state of the axis; `link_ok` is the gateway's verdict on it (for
+    /// example `false` while the bus is being set up). The link counts as up only if `link_ok`,
+    /// the engine has the axis [`Online`](Link::Online) and a status has been received.
+    pub fn sample(
+        &mut self,
+        now: Instant,
+        inputs: PioInputs,
+        axis: &AxisState,
+        link_ok: bool,
+    ) -> (PioOutputs, Option<JobKind>) {
+        let report = axis.report.filter(|_| link_ok && axis.link == Link::Online);
+
+        let known_before = self.inputs.known;
+        let changed = self.inputs.update(now, inputs.bits(), self.config.debounce);
+        let pc_bits = PioInputs::MASK & 0x3F;
+        if changed & pc_bits != 0 {
+            self.pc_since = now;
+        }
+        let may_run = self.inputs.on(PioInputs::STP_N);
+        let stp_known = self.inputs.known(PioInputs::STP_N);
+
+        // *STP: the fail-safe path first.
+        if changed & PioInputs::STP_N.bits() != 0 && !may_run {
+            self.stop_due = true;
+            self.waiting = None;
+        }
+        if stp_known
+            && !may_run
+            && report.is_some()
+            && axis.moving()
+            && self.last_stop.is_none_or(|t| now.since(t) >= STOP_REPEAT)
+        {
+            self.stop_due = true;
+        }
+
+        if let Some(report) = report {
+            // SON: on a change, and while the status disagrees (rate-limited).
+            let son = self.inputs.on(PioInputs::SON);
+            let son_bit = PioInputs::SON.bits();
+            let son_changed = changed & known_before & son_bit != 0;
+            let disagrees = self.pending_servo.is_none()
+                && !report.outputs.alarm_active()
+                && report.status.servo() != son
+                && self
+                    .last_servo
+                    .is_none_or(|t| now.since(t) >= self.config.servo_retry);
+            if self.inputs.known(PioInputs::SON) && (son_changed || disagrees) {
+                self.pending_servo = Some(son);
+            }
+            if self.inputs.rose(PioInputs::RES, changed, known_before)
+                && report.outputs.alarm_active()
+            {
+                self.pending_reset = true;
+            }
+            if may_run && self.inputs.rose(PioInputs::CSTR, changed, known_before) {
+                self.strobe = true;
+                self.pending_home = false;
+            }
+            if may_run && self.inputs.rose(PioInputs::HOME, changed, known_before) {
+                self.pending_home = true;
+                self.strobe = false;
+                self.pending_move = None;
+            }
+        } else {
+            // Nothing is kept for an axis that cannot hear it.
+            self.pending_servo = None;
+            self.pending_reset = false;
+            self.waiting = None;
+        }
+        if report.is_none() || !may_run {
+            self.strobe = false;
+            self.pending_move = None;
+            self.pending_home = false;
+        }
+        if self.strobe && now.since(self.pc_since) >= self.config.settle {
+            self.strobe = false;
+            // PC16/PC32 ON: refused (the RC has 16 positions).
+            self.pending_move = self.inputs().position();
+        }
+
+        let job = self.next_job(now, axis, report);
+
+        if let (Some(waiting), Some(report)) = (self.waiting.as_mut(), report.as_ref()) {
+            if waiting.update(axis, report) {
+                self.waiting = None;
+            }
+        }
+        self.outputs = self.outputs_for(axis, report);
+        (self.outputs, job)
+    }
+
+    /// The most urgent job due, if any; the others stay pending.
+    fn next_job(
+        &mut self,
+        now: Instant,
+        axis: &AxisState,
+        report: Option<StatusReport>,
+    ) -> Option<JobKind> {
+        if self.stop_due {
+            self.stop_due = false;
+            self.last_stop = Some(now);
+            self.strobe = false;
+            self.pending_move = None;
+            self.pending_home = false;
+            self.waiting = None;
+            return Some(JobKind::Stop);
+        }
+        let report = report?;
+        if self.pending_servo == Some(false) {
+            self.pending_servo = None;
+            self.last_servo = Some(now);
+            return Some(JobKind::Servo(false));
+        }
+        if self.pending_reset {
+            self.pending_reset = false;
+            return Some(JobKind::AlarmReset);
+        }
+        if self.pending_servo == Some(true) {
+            self.pending_servo = None;
+            self.last_servo = Some(now);
+            return Some(JobKind::Servo(true));
+        }
+        if self.pending_home {
+            self.pending_home = false;
+            self.waiting = Some(Await::new(Target::Home, now, axis, &report));
+            return Some(JobKind::Home(self.config.home_direction));
+        }
+        if let Some(point) = self.pending_move.take() {
+            self.waiting = Some(Await::new(Target::Point(point), now, axis, &report));
+            return Some(JobKind::MoveToPoint(point));
+        }
+        None
+    }
+
+    fn outputs_for(&self, axis: &AxisState, report: Option<StatusReport>) -> PioOutputs {
+        let Some(report) = report else {
+            return PioOutputs::SAFE;
+        };
+        let out = report.outputs;
+        let alarm = out.alarm_active();
+        let masked = self.waiting.is_some();
+        let homing = self
+            .waiting
+            .is_some_and(|w| matches!(w.target, Target::Home));
+        let pm = if alarm || !masked { out.pm() } else { 0 };
+        PioOutputs::NONE
+            .with_pm(pm)
+            .with(PioOutputs::MOVE, axis.moving())
+            .with(PioOutputs::ZONE1, out.zone())
+            .with(PioOutputs::HEND, out.zfin() && !homing)
+            .with(
+                PioOutputs::PEND,
+                out.pfin() && !masked && !self.inputs.on(PioInputs::CSTR),
+            )
+            .with(PioOutputs::SV, report.status.servo())
+            .with(PioOutputs::LINK, true)
+            .with(PioOutputs::ALM_N, !alarm)
+    }
+}
