@@ -19,7 +19,10 @@
 //! | [`memory`] | The controller's memory map |
 //! | [`jobs`] | Point-table reads and writes as frame sequences |
 //! | [`engine`] | The bus master: what to send next, time-outs, retries, polling, jobs |
-//! | [`line`] | Break, baud rates, the communication-change broadcast |
+//! | [`line`](mod@line) | Break, baud rates, the communication-change broadcast |
+//! | [`modbus`] | The gateway's other side: a Modbus RTU slave for the PLC ([`modbus::Slave`]) |
+//! | [`pio`] | The PLC's discrete I/O (PCON pattern 0 signals) for one axis, as jobs and outputs |
+//! | [`plc`] | What the PLC sees: the Modbus register map, commands, fail-safe |
 //!
 //! ```
 //! use protocol::{Axis, Command, Frame, Reply, Request};
@@ -61,6 +64,9 @@ mod hex;
 pub mod jobs;
 pub mod line;
 pub mod memory;
+pub mod modbus;
+pub mod pio;
+pub mod plc;
 pub mod reply;
 pub mod status;
 mod types;

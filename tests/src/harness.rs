@@ -135,3 +135,19 @@ impl<M: BusMaster> Harness<M> {
         None
     }
 }
+
+impl BusMaster for protocol::plc::Gateway {
+    fn poll(&mut self, now: Instant) -> Output {
+        protocol::plc::Gateway::poll(self, now)
+    }
+    fn receive(&mut self, now: Instant, bytes: &[u8]) {
+        protocol::plc::Gateway::receive(self, now, bytes);
+    }
+    fn next_event(&mut self) -> Option<Event> {
+        // The gateway consumes the engine's events itself (command status, sequencing).
+        None
+    }
+    fn line_baud(&self) -> Baud {
+        self.engine().line_baud()
+    }
+}

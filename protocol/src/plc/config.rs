@@ -1,0 +1,77 @@
+//! What the gateway is set up with.
+
+use crate::engine::{AxisSet, Config, Duration};
+use crate::units::{Complement, Lead, Length, Scale};
+use crate::{Axis, HomeDirection};
+
+/// The gateway's own Modbus unit id by default: 63, as IAI's RGW-SIO gateway mode uses.
+pub const DEFAULT_GATEWAY_UNIT: u8 = 63;
+
+/// PLC watchdog by default: 1 s. A PLC polls every 10-100 ms, so 1 s of silence is not a slow
+/// scan but a cut cable or a stopped PLC; 1 s of travel is also as far as a runaway axis should
+/// get. Set 0 to turn it off (then nothing stops the axes when the PLC goes away).
+pub const DEFAULT_WATCHDOG_MS: u16 = 1000;
+
+/// One axis as the PLC side needs it: units and travel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AxisConfig {
+    /// Lead, pulses/rev, home end, complement: converts the PLC's 0.01 mm to pulses.
+    pub scale: Scale,
+    /// Usable travel from home, 0.01 mm: direct moves outside 0..=stroke are refused.
+    pub stroke: Length,
+}
+
+impl Default for AxisConfig {
+    /// 6 mm lead, motor-end homing, 800 pulses/rev, 100 mm stroke.
+    fn default() -> AxisConfig {
+        AxisConfig {
+            scale: Scale {
+                lead: Lead::of(crate::units::ActuatorType::SS, crate::units::SpeedType::M),
+                pulses_per_rev: crate::units::DEFAULT_PULSES_PER_REV,
+                home: HomeDirection::MotorEnd,
+                complement: Complement::Ones,
+            },
+            stroke: Length(10_000), // 100 mm
+        }
+    }
+}
+
+/// Everything the gateway is set up with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct GatewayConfig {
+    /// The gateway's own Modbus unit id (axis units are axis + 1).
+    pub unit: u8,
+    /// The bus master's configuration; its `axes` are the axes the PLC can address.
+    pub bus: Config,
+    /// Per-axis units and travel.
+    pub axes: [AxisConfig; 16],
+    /// PLC silence that trips the fail-safe; zero turns it off.
+    pub watchdog: Duration,
+    /// Firmware version reported in VERSION: (major, minor, patch).
+    pub version: (u8, u8, u16),
+}
+
+impl GatewayConfig {
+    /// A gateway for `axes` with defaults everywhere else.
+    pub fn new(axes: AxisSet) -> GatewayConfig {
+        GatewayConfig {
+            unit: DEFAULT_GATEWAY_UNIT,
+            bus: Config {
+                axes,
+                ..Config::default()
+            },
+            axes: [AxisConfig::default(); 16],
+            watchdog: Duration::from_millis(u64::from(DEFAULT_WATCHDOG_MS)),
+            version: (0, 1, 0),
+        }
+    }
+
+    /// The axis addressed by a Modbus unit id, if the PLC may address it.
+    pub fn axis_of_unit(&self, unit: u8) -> Option<Axis> {
+        unit.checked_sub(1)
+            .and_then(Axis::new)
+            .filter(|&a| self.bus.axes.contains(a))
+    }
+}

@@ -1,0 +1,238 @@
+//! The Modbus register map, as data: every address the gateway answers, with its unit, range,
+//! access and meaning. README's register table is generated from [`MAP`], so the document and
+//! the code cannot drift apart.
+//!
+//! Each axis is its own Modbus unit, id = axis + 1 (as IAI's SIO-through mode does), laid out
+//! like IAI's PCON Modbus registers where the RC protocol can supply them. The gateway itself
+//! is one more unit ([`GatewayConfig::unit`](super::GatewayConfig::unit), 63 by default, like
+//! IAI's RGW-SIO) for its configuration, diagnostics, synchronized start and command channel.
+
+/// Which unit an entry belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Unit {
+    /// Every axis unit (id = axis + 1).
+    Axis,
+    /// The gateway unit.
+    Gateway,
+}
+
+/// Which Modbus table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Table {
+    /// Coils: FC01 read, FC05/FC0F write.
+    Coil,
+    /// Registers readable with FC03 and FC04 (read-only).
+    Status,
+    /// Holding registers: FC03 read, FC06/FC10 write.
+    Holding,
+}
+
+/// How completely the gateway supplies an IAI register.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Support {
+    /// As on a PCON.
+    Full,
+    /// Supplied in part; the text says how.
+    Partial(&'static str),
+    /// The gateway's own register (no PCON equivalent).
+    Gateway,
+}
+
+/// One entry of the map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Entry {
+    /// Unit.
+    pub unit: Unit,
+    /// Table.
+    pub table: Table,
+    /// First address.
+    pub address: u16,
+    /// Number of registers or coils.
+    pub count: u16,
+    /// Name (IAI's where it has one).
+    pub name: &'static str,
+    /// Unit of measure.
+    pub units: &'static str,
+    /// Allowed values.
+    pub range: &'static str,
+    /// Whether it can be written.
+    pub writable: bool,
+    /// What it means.
+    pub meaning: &'static str,
+    /// How completely it is supplied.
+    pub support: Support,
+}
+
+// ---------------------------------------------------------------- axis units
+
+/// PNOW: present position, int32 in 0.01 mm, high word first.
+pub const PNOW: u16 = 0x9000;
+/// ALMC: the alarm code while the axis is in alarm, else 0.
+pub const ALMC: u16 = 0x9002;
+/// DIPM: the controller's PIO inputs, in PCON pattern-0 bit positions.
+pub const DIPM: u16 = 0x9003;
+/// DOPM: the controller's PIO outputs, in PCON pattern-0 bit positions.
+pub const DOPM: u16 = 0x9004;
+/// DSS1: device status 1.
+pub const DSS1: u16 = 0x9005;
+/// DSS2: device status 2 (no RC equivalent: always 0).
+pub const DSS2: u16 = 0x9006;
+/// DSSE: expanded device status.
+pub const DSSE: u16 = 0x9007;
+/// Gateway extension: command status of the last command (0 idle, 1 taken, 2 done, 3 failed).
+pub const CMST: u16 = 0x9F00;
+/// Gateway extension: why the last command failed ([`super::Reason`]).
+pub const CMER: u16 = 0x9F01;
+/// Gateway extension: link to the axis (0 unknown, 1 online, 2 offline).
+pub const LINK: u16 = 0x9F02;
+/// Gateway extension: commands taken so far (wrapping), to see that a new one was taken.
+pub const CMCT: u16 = 0x9F03;
+/// DRG1: device control register 1.
+pub const DRG1: u16 = 0x0D00;
+/// POSR: position number for CSTR.
+pub const POSR: u16 = 0x0D03;
+/// Direct numeric move: PCMD(2) INP(2) VCMD(2) ACMD PPOW CTLF; writing it starts the move.
+pub const DIRECT: u16 = 0x9900;
+/// Registers of a direct move: 7 (up to ACMD) to 9 (with PPOW and CTLF).
+pub const DIRECT_MIN: u16 = 7;
+/// See [`DIRECT_MIN`].
+pub const DIRECT_MAX: u16 = 9;
+/// Coil SON: servo on (level).
+pub const COIL_SON: u16 = 0x0403;
+/// Coil ALRS: alarm reset (rising edge).
+pub const COIL_ALRS: u16 = 0x0407;
+/// Coil STP: pause (level; the RC cannot resume, see README).
+pub const COIL_STP: u16 = 0x040A;
+/// Coil HOME: home (rising edge).
+pub const COIL_HOME: u16 = 0x040B;
+/// Coil STOP: decelerating stop (each write of ON; reads 0).
+pub const COIL_STOP: u16 = 0x042C;
+
+/// DRG1 bits (PCON): servo on.
+pub const DRG1_SON: u16 = 1 << 12;
+/// DRG1: alarm reset (rising edge).
+pub const DRG1_ALRS: u16 = 1 << 8;
+/// DRG1: pause (level).
+pub const DRG1_STP: u16 = 1 << 5;
+/// DRG1: home (rising edge).
+pub const DRG1_HOME: u16 = 1 << 4;
+/// DRG1: start: move to POSR (rising edge).
+pub const DRG1_CSTR: u16 = 1 << 3;
+/// DRG1: emergency stop (level): treated like STP.
+pub const DRG1_EMG: u16 = 1 << 15;
+/// Bits the gateway accepts in DRG1; others (SFTY, BKRL, ...) are refused with exception 03.
+pub const DRG1_SUPPORTED: u16 = DRG1_SON | DRG1_ALRS | DRG1_STP | DRG1_HOME | DRG1_CSTR | DRG1_EMG;
+
+// ---------------------------------------------------------------- gateway unit
+
+/// Firmware version: major << 8 | minor.
+pub const G_VERSION: u16 = 0x0000;
+/// Uptime in seconds, u32 high word first.
+pub const G_UPTIME: u16 = 0x0002;
+/// Fail-safe latch: bit 0 PLC watchdog tripped, bit 1 stop input; write 0 to clear.
+pub const G_FAILSAFE: u16 = 0x0004;
+/// Fail-safe trips so far.
+pub const G_FAILSAFE_COUNT: u16 = 0x0005;
+/// PLC watchdog time in ms (0 = off).
+pub const G_WATCHDOG: u16 = 0x0006;
+/// Synchronized start: axis mask (bit n = axis n).
+pub const G_SYNC_MASK: u16 = 0x000B;
+/// Synchronized start: write 1 to move every axis of the mask to its POSR together.
+pub const G_SYNC_START: u16 = 0x000C;
+/// Synchronized start status (0 idle, 1 running, 2 done, 3 failed).
+pub const G_SYNC_STATUS: u16 = 0x000D;
+/// Per-axis configuration: 8 registers per axis from here.
+pub const G_AXIS_CONFIG: u16 = 0x0100;
+/// Registers per axis in the configuration block.
+pub const G_AXIS_CONFIG_LEN: u16 = 8;
+/// Command channel request (5 registers), ROBONET-style handshake.
+pub const G_REQUEST: u16 = 0x0200;
+/// Command channel response (5 registers).
+pub const G_RESPONSE: u16 = 0x0210;
+/// Per-axis diagnostics: 16 registers per axis from here.
+pub const G_DIAG: u16 = 0x0400;
+/// Registers per axis in the diagnostics block.
+pub const G_DIAG_LEN: u16 = 16;
+/// Bus counters (4 x u32).
+pub const G_BUS: u16 = 0x0500;
+
+use Support::{Full, Gateway, Partial};
+use Table::{Coil, Holding, Status};
+
+// One row of the table: positional like the README columns, so the table reads as a table.
+#[allow(clippy::too_many_arguments)]
+const fn e(
+    unit: Unit,
+    table: Table,
+    address: u16,
+    count: u16,
+    name: &'static str,
+    units: &'static str,
+    range: &'static str,
+    writable: bool,
+    meaning: &'static str,
+    support: Support,
+) -> Entry {
+    Entry {
+        unit,
+        table,
+        address,
+        count,
+        name,
+        units,
+        range,
+        writable,
+        meaning,
+        support,
+    }
+}
+
+/// Every address the gateway answers. Anything else is exception 02.
+pub const MAP: &[Entry] = &[
+    e(Unit::Axis, Status, PNOW, 2, "PNOW", "0.01 mm", "int32", false,
+      "Present position (R4 PNOW, read while the axis moves), from home", Partial("refreshed once per status cycle while moving; exception 04 until first read")),
+    e(Unit::Axis, Status, ALMC, 1, "ALMC", "code", "0x00-0xFF", false,
+      "Alarm code (RC error 0x80-0xFF) while *ALM is off, else 0", Partial("RC codes, not PCON codes")),
+    e(Unit::Axis, Status, DIPM, 1, "DIPM", "bits", "", false,
+      "Controller inputs: b0-b3 PC1-PC8, b12 HOLD, b13 CSTR", Partial("the 6 inputs the RC reports")),
+    e(Unit::Axis, Status, DOPM, 1, "DOPM", "bits", "", false,
+      "Controller outputs: b0-b3 PM1-PM8, b6 MOVE, b7 ZONE1, b10 HEND, b11 PEND, b12 SV, b14 *ALM", Partial("no ZONE2/RMDS/EMGS/LOAD")),
+    e(Unit::Axis, Status, DSS1, 1, "DSS1", "bits", "", false,
+      "b13 PWR, b12 SV, b10 ALMH, b9 ALML (last command rejected), b5 STP, b4 HEND, b3 PEND", Partial("EMGS SFTY PSFL ABER BKRL CEND CLBS always 0")),
+    e(Unit::Axis, Status, DSS2, 1, "DSS2", "bits", "0", false,
+      "Always 0: the RC has no teaching, jog or load-cell functions", Partial("constant 0")),
+    e(Unit::Axis, Status, DSSE, 1, "DSSE", "bits", "", false,
+      "b5 MOVE, b11 GHMS (homing)", Partial("other bits 0")),
+    e(Unit::Axis, Status, CMST, 1, "CMST", "", "0-3", false,
+      "Last command: 0 idle, 1 taken, 2 done, 3 failed", Gateway),
+    e(Unit::Axis, Status, CMER, 1, "CMER", "code", "", false,
+      "Why the last command failed: high byte reason, low byte RC warning/alarm code", Gateway),
+    e(Unit::Axis, Status, LINK, 1, "LINK", "", "0-2", false,
+      "Link to the axis: 0 unknown, 1 online, 2 offline", Gateway),
+    e(Unit::Axis, Status, CMCT, 1, "CMCT", "count", "", false,
+      "Commands taken so far (wrapping)", Gateway),
+    e(Unit::Axis, Holding, DRG1, 1, "DRG1", "bits", "", true,
+      "b12 SON (level), b8 ALRS (edge), b5 STP (level: stop, no motion), b4 HOME (edge), b3 CSTR (edge: move to POSR), b15 EMG (level, as STP)", Partial("SFTY, BKRL and other bits refused (exception 03)")),
+    e(Unit::Axis, Holding, POSR, 1, "POSR", "position", "0-15", true,
+      "Position number CSTR moves to", Full),
+    e(Unit::Axis, Holding, DIRECT, 9, "PCMD INP VCMD ACMD PPOW CTLF", "0.01 mm, 0.01 mm, 0.01 mm/s, 0.01 G, %, bits", "PCMD 0..stroke", true,
+      "Direct numeric move, FC10 of 7 to 9 registers: writing it starts the move (CTLF b3 = incremental)", Partial("INP validated but the RC uses its execution-area band; PPOW and CTLF push bits refused (exception 03)")),
+    e(Unit::Axis, Coil, COIL_SON, 1, "SON", "", "", true, "Servo on (level; same as DRG1 b12)", Full),
+    e(Unit::Axis, Coil, COIL_ALRS, 1, "ALRS", "", "", true, "Alarm reset on the rising edge (servo turned off first, as the RC requires)", Full),
+    e(Unit::Axis, Coil, COIL_STP, 1, "STP", "", "", true, "Pause: stop, and no motion while on; the move does not resume when released", Partial("RC has no resume")),
+    e(Unit::Axis, Coil, COIL_HOME, 1, "HOME", "", "", true, "Home on the rising edge", Full),
+    e(Unit::Axis, Coil, COIL_STOP, 1, "STOP", "", "", true, "Decelerating stop on each write of ON; reads 0", Full),
+    e(Unit::Gateway, Status, G_VERSION, 2, "VERSION", "", "", false, "Firmware version: major<<8|minor, patch", Gateway),
+    e(Unit::Gateway, Status, G_UPTIME, 2, "UPTIME", "s", "uint32", false, "Time since start", Gateway),
+    e(Unit::Gateway, Holding, G_FAILSAFE, 1, "FAILSAFE", "bits", "write 0", true, "Latched fail-safe: b0 PLC watchdog, b1 stop input; write 0 to clear", Gateway),
+    e(Unit::Gateway, Status, G_FAILSAFE_COUNT, 1, "FSCOUNT", "count", "", false, "Fail-safe trips", Gateway),
+    e(Unit::Gateway, Holding, G_WATCHDOG, 1, "WATCHDOG", "ms", "0, 50-60000", true, "PLC silence that stops every moving axis (0 = off)", Gateway),
+    e(Unit::Gateway, Holding, G_SYNC_MASK, 1, "SYNCMASK", "bits", "", true, "Axes of the synchronized start (bit n = axis n)", Gateway),
+    e(Unit::Gateway, Holding, G_SYNC_START, 1, "SYNCSTART", "", "1", true, "Write 1: every axis of SYNCMASK moves to its POSR at the same instant (h, then one t)", Gateway),
+    e(Unit::Gateway, Status, G_SYNC_STATUS, 1, "SYNCSTAT", "", "0-3", false, "0 idle, 1 running, 2 done, 3 failed", Gateway),
+    e(Unit::Gateway, Holding, G_AXIS_CONFIG, 128, "AXISCFG", "", "", true, "Per axis n at 0x0100+8n: enabled, lead (0.01 mm), home (7 motor/8 far end), pulses/rev, stroke (2, 0.01 mm), complement (1/2)", Gateway),
+    e(Unit::Gateway, Holding, G_REQUEST, 5, "REQ", "", "", true, "Command channel request: code, axis, point, field, value (see README)", Gateway),
+    e(Unit::Gateway, Status, G_RESPONSE, 5, "RESP", "", "", false, "Command channel response: code (|0x8000 on error), error, value hi, value lo, V5 count", Gateway),
+    e(Unit::Gateway, Status, G_DIAG, 256, "DIAG", "count", "", false, "Per axis n at 0x0400+16n: frames sent, replies, time-outs, BCC errors, bad replies, retries, rejections (u32 each), link, last error", Gateway),
+    e(Unit::Gateway, Status, G_BUS, 8, "BUS", "count", "", false, "Unsolicited frames, events lost, queue full, establishments (u32 each)", Gateway),
+];

@@ -1,0 +1,400 @@
+//! The PLC side against simulated controllers, in virtual time: the register map, command
+//! edges and their status, validation (exceptions, and nothing reaches the bus), the fail-safe,
+//! the synchronized start and the command channel. Requests go through the same `DataModel`
+//! calls the Modbus slave makes.
+#![allow(clippy::inconsistent_digit_grouping)]
+
+use protocol::engine::{AxisSet, Instant};
+use protocol::line::Baud;
+use protocol::memory::PointField;
+use protocol::modbus::{BitTable, DataModel, Exception, RegisterTable};
+use protocol::plc::map::*;
+use protocol::plc::{AxisConfig, CommandState, Gateway, GatewayConfig, Reason};
+use protocol::units::{Lead, Length};
+use protocol::{Axis, HomeDirection, PositionNo, Request, Rtim};
+use rc_host::harness::Harness;
+use rc_host::sim::realtime::bus_at_line;
+use rc_host::sim::{BusConfig, ControllerConfig};
+
+const MS: u64 = 1000;
+const S: u64 = 1_000_000;
+
+fn axis(n: u8) -> Axis {
+    Axis::new(n).unwrap()
+}
+
+/// Axes 0..n at 115.2 kbit/s / RTIM 3 (no establishment), lead 8 mm like the simulator's
+/// actuator, 100 mm stroke; point 3 of every axis stored at 40 mm.
+fn gateway(n: u8) -> Harness<Gateway> {
+    let axes: Vec<Axis> = (0..n).map(axis).collect();
+    let mut bus = bus_at_line(BusConfig::default(), &axes, Baud::B115200, Rtim::MIN);
+    let mut config = GatewayConfig::new(AxisSet::first(n));
+    config.bus.establish = false;
+    let scale =
+        protocol::units::Scale::new(Lead::from_hundredths(800).unwrap(), HomeDirection::MotorEnd);
+    config.axes = [AxisConfig {
+        scale,
+        stroke: Length(100_00),
+    }; 16];
+    let pcmd = scale.position_to_wire(Length(40_00)).unwrap().to_wire();
+    for &a in &axes {
+        let mut controller = ControllerConfig {
+            stored_line: Some((Baud::B115200, Rtim::MIN)),
+            ..ControllerConfig::default()
+        };
+        let mut row = [0u32; 10];
+        row[0] = pcmd;
+        controller.points = vec![(PositionNo::new(3).unwrap(), row)];
+        bus.add_controller(a, controller);
+    }
+    let mut h = Harness::new(Gateway::new(config), bus);
+    h.run_until(300 * MS);
+    h
+}
+
+fn unit(a: u8) -> u8 {
+    a + 1
+}
+
+fn write(
+    h: &mut Harness<Gateway>,
+    unit: u8,
+    address: u16,
+    values: &[u16],
+) -> Result<(), Exception> {
+    h.engine.set_time(Instant(h.now));
+    h.engine.write_registers(unit, address, values)
+}
+
+fn read(h: &mut Harness<Gateway>, unit: u8, address: u16, n: usize) -> Result<Vec<u16>, Exception> {
+    h.engine.set_time(Instant(h.now));
+    let mut out = vec![0; n];
+    h.engine
+        .read_registers(unit, RegisterTable::Holding, address, &mut out)?;
+    Ok(out)
+}
+
+fn coil(h: &mut Harness<Gateway>, unit: u8, address: u16, on: bool) -> Result<(), Exception> {
+    h.engine.set_time(Instant(h.now));
+    h.engine.write_bits(unit, address, &[on])
+}
+
+/// Keep "polling" like a PLC (so the watchdog stays quiet) until the command of `a` settles.
+fn settle(h: &mut Harness<Gateway>, a: u8, timeout: u64) -> (CommandState, u16) {
+    let until = h.now + timeout;
+    while h.now < until {
+        h.run_until(h.now + 50 * MS);
+        let _ = read(h, unit(a), CMST, 1);
+        let state = h.engine.command_state(axis(a));
+        if matches!(state.0, CommandState::Done | CommandState::Failed) {
+            return state;
+        }
+    }
+    panic!(
+        "axis {a}: command did not settle: {:?}",
+        h.engine.command_state(axis(a))
+    );
+}
+
+fn pnow_mm100(h: &mut Harness<Gateway>, a: u8) -> i32 {
+    let r = read(h, unit(a), PNOW, 2).unwrap();
+    ((u32::from(r[0]) << 16) | u32::from(r[1])) as i32
+}
+
+fn home(h: &mut Harness<Gateway>, a: u8) {
+    write(h, unit(a), DRG1, &[DRG1_SON]).unwrap();
+    settle(h, a, S);
+    write(h, unit(a), DRG1, &[DRG1_SON | DRG1_HOME]).unwrap();
+    assert_eq!(settle(h, a, 10 * S), (CommandState::Done, 0));
+    write(h, unit(a), DRG1, &[DRG1_SON]).unwrap();
+}
+
+#[test]
+fn status_block_follows_the_axis() {
+    let mut h = gateway(1);
+    let block = read(&mut h, unit(0), PNOW, 8).unwrap();
+    let (dss1, dopm) = (block[5], block[4]);
+    assert_ne!(dss1 & (1 << 12), 0, "SV: servo on at power-up");
+    assert_ne!(dss1 & (1 << 13), 0, "PWR");
+    assert_eq!(dss1 & (1 << 4), 0, "HEND off before homing");
+    assert_ne!(dopm & (1 << 14), 0, "*ALM on: no alarm");
+    home(&mut h, 0);
+    let block = read(&mut h, unit(0), PNOW, 8).unwrap();
+    assert_ne!(block[5] & (1 << 4), 0, "HEND after homing");
+    assert_eq!(read(&mut h, unit(0), LINK, 1).unwrap(), [1]);
+    // FC04 reads the same status registers; DRG1 is a holding register only.
+    let mut out = [0u16; 1];
+    assert!(h
+        .engine
+        .read_registers(unit(0), RegisterTable::Input, DSS1, &mut out)
+        .is_ok());
+    assert_eq!(
+        h.engine
+            .read_registers(unit(0), RegisterTable::Input, DRG1, &mut out),
+        Err(Exception::IllegalDataAddress)
+    );
+}
+
+#[test]
+fn cstr_moves_to_posr_and_direct_move_goes_to_the_millimetre() {
+    let mut h = gateway(1);
+    home(&mut h, 0);
+    write(&mut h, unit(0), POSR, &[3]).unwrap();
+    write(&mut h, unit(0), DRG1, &[DRG1_SON | DRG1_CSTR]).unwrap();
+    assert_eq!(settle(&mut h, 0, 10 * S), (CommandState::Done, 0));
+    assert_eq!(pnow_mm100(&mut h, 0), 40_00, "point 3 is 40 mm");
+    let dopm = read(&mut h, unit(0), DOPM, 1).unwrap()[0];
+    assert_eq!(dopm & 0xF, 3, "PM shows the completed position");
+    // Direct numeric move: 62.50 mm at 50 mm/s, 0.3 G.
+    let [phi, plo] = [0u16, 62_50];
+    write(&mut h, unit(0), DIRECT, &[phi, plo, 0, 10, 0, 50_00, 30]).unwrap();
+    assert_eq!(settle(&mut h, 0, 10 * S), (CommandState::Done, 0));
+    assert_eq!(pnow_mm100(&mut h, 0), 62_50);
+    // Incremental: -12.5 mm.
+    let d = (-12_50i32) as u32;
+    write(
+        &mut h,
+        unit(0),
+        DIRECT,
+        &[(d >> 16) as u16, d as u16, 0, 10, 0, 50_00, 30, 0, 1 << 3],
+    )
+    .unwrap();
+    assert_eq!(settle(&mut h, 0, 10 * S), (CommandState::Done, 0));
+    assert_eq!(pnow_mm100(&mut h, 0), 50_00);
+    assert_eq!(
+        read(&mut h, unit(0), CMCT, 1).unwrap(),
+        [5],
+        "SON, HOME, CSTR, 2 direct moves"
+    );
+}
+
+#[test]
+fn invalid_requests_get_exceptions_and_never_reach_the_bus() {
+    let mut h = gateway(1);
+    home(&mut h, 0);
+    h.run_until(h.now + 100 * MS);
+    let sent_before = h.sent.len();
+    let motion = |h: &Harness<Gateway>| {
+        h.sent[sent_before..]
+            .iter()
+            .filter(|(_, r): &&(u64, Request)| {
+                r.command.moves()
+                    || matches!(
+                        r.command,
+                        protocol::Command::Servo(_)
+                            | protocol::Command::SetVelocityAcceleration { .. }
+                    )
+            })
+            .count()
+    };
+    let bad: [(u16, &[u16], Exception); 8] = [
+        (DRG1, &[DRG1_SON | 1 << 7], Exception::IllegalDataValue), // BKRL
+        (POSR, &[16], Exception::IllegalDataValue),
+        (
+            DIRECT,
+            &[0, 100_01, 0, 10, 0, 50_00, 30],
+            Exception::IllegalDataValue,
+        ), // past the stroke
+        (
+            DIRECT,
+            &[0, 10_00, 0, 10, 0, 0, 30],
+            Exception::IllegalDataValue,
+        ), // zero speed
+        (
+            DIRECT,
+            &[0, 10_00, 0, 10, 0, 50_00, 30, 50, 0],
+            Exception::IllegalDataValue,
+        ), // push
+        (DIRECT, &[0, 10_00, 0, 10], Exception::IllegalDataAddress), // too short
+        (PNOW, &[1], Exception::IllegalDataValue),                   // read-only
+        (0x1234, &[1], Exception::IllegalDataAddress),
+    ];
+    for (address, values, exception) in bad {
+        assert_eq!(
+            write(&mut h, unit(0), address, values),
+            Err(exception),
+            "{address:#06X} {values:?}"
+        );
+    }
+    assert_eq!(
+        coil(&mut h, unit(0), 0x0404, true),
+        Err(Exception::IllegalDataAddress)
+    );
+    assert_eq!(
+        write(&mut h, 63, G_WATCHDOG, &[10]),
+        Err(Exception::IllegalDataValue)
+    );
+    assert_eq!(
+        write(&mut h, 63, G_AXIS_CONFIG + 2, &[9]),
+        Err(Exception::IllegalDataValue)
+    );
+    // A request to a unit that is not served is ignored by the slave (serves() is false).
+    assert!(!h.engine.serves(unit(5)));
+    h.run_until(h.now + 200 * MS);
+    assert_eq!(
+        motion(&h),
+        0,
+        "no command from an invalid request reached the bus"
+    );
+    assert_eq!(
+        read(&mut h, unit(0), DRG1, 1).unwrap(),
+        [DRG1_SON],
+        "state untouched"
+    );
+}
+
+#[test]
+fn stp_stops_and_blocks_motion_and_the_stop_coil_stops() {
+    let mut h = gateway(1);
+    home(&mut h, 0);
+    write(&mut h, unit(0), DIRECT, &[0, 90_00, 0, 10, 0, 20_00, 30]).unwrap();
+    h.run_until(h.now + 300 * MS);
+    assert!(h.bus.controller(axis(0)).unwrap().moving());
+    coil(&mut h, unit(0), COIL_STP, true).unwrap();
+    h.run_until(h.now + 500 * MS);
+    assert!(!h.bus.controller(axis(0)).unwrap().moving(), "paused");
+    // While STP is on, nothing may start.
+    write(&mut h, unit(0), DRG1, &[DRG1_SON | DRG1_STP | DRG1_CSTR]).unwrap();
+    assert_eq!(
+        h.engine.command_state(axis(0)),
+        (CommandState::Failed, (Reason::Paused as u16) << 8)
+    );
+    let dss1 = read(&mut h, unit(0), DSS1, 1).unwrap()[0];
+    assert_ne!(dss1 & (1 << 5), 0, "STP shown in DSS1");
+    coil(&mut h, unit(0), COIL_STP, false).unwrap();
+    write(&mut h, unit(0), DIRECT, &[0, 90_00, 0, 10, 0, 20_00, 30]).unwrap();
+    h.run_until(h.now + 300 * MS);
+    assert!(h.bus.controller(axis(0)).unwrap().moving());
+    coil(&mut h, unit(0), COIL_STOP, true).unwrap();
+    h.run_until(h.now + 500 * MS);
+    assert!(!h.bus.controller(axis(0)).unwrap().moving(), "STOP coil");
+    let mut bits = [true; 1];
+    h.engine
+        .read_bits(unit(0), BitTable::Coils, COIL_STOP, &mut bits)
+        .unwrap();
+    assert_eq!(bits, [false], "STOP reads 0");
+}
+
+#[test]
+fn plc_silence_trips_the_watchdog_and_stops_every_axis() {
+    let mut h = gateway(2);
+    home(&mut h, 0);
+    home(&mut h, 1);
+    write(&mut h, 63, G_WATCHDOG, &[300]).unwrap();
+    for a in 0..2 {
+        write(&mut h, unit(a), DIRECT, &[0, 95_00, 0, 10, 0, 10_00, 30]).unwrap();
+    }
+    h.run_until(h.now + 200 * MS);
+    assert!(
+        h.bus.controller(axis(0)).unwrap().moving() && h.bus.controller(axis(1)).unwrap().moving()
+    );
+    // The PLC goes quiet: within 300 ms + a stop transaction both axes are stopped.
+    h.run_until(h.now + 600 * MS);
+    for a in 0..2 {
+        let c = h.bus.controller(axis(a)).unwrap();
+        assert!(!c.moving(), "axis {a} stopped");
+        assert!(c.position() > -9_500, "axis {a} stopped short of 95 mm");
+    }
+    assert_eq!(
+        read(&mut h, 63, G_FAILSAFE, 2).unwrap(),
+        [1, 1],
+        "latched, counted"
+    );
+    write(&mut h, 63, G_FAILSAFE, &[0]).unwrap();
+    assert_eq!(read(&mut h, 63, G_FAILSAFE, 1).unwrap(), [0]);
+    // The stop input latches bit 1.
+    h.engine.set_stop_input(Instant(h.now), true);
+    assert_eq!(h.engine.failsafe(), 2);
+}
+
+#[test]
+fn synchronized_start_of_two_axes() {
+    let mut h = gateway(3);
+    home(&mut h, 0);
+    home(&mut h, 2);
+    write(&mut h, unit(0), POSR, &[3]).unwrap();
+    write(&mut h, unit(2), POSR, &[3]).unwrap();
+    write(&mut h, 63, G_SYNC_MASK, &[0b101]).unwrap();
+    write(&mut h, 63, G_SYNC_START, &[1]).unwrap();
+    let until = h.now + 10 * S;
+    while h.now < until && read(&mut h, 63, G_SYNC_STATUS, 1).unwrap()[0] == 1 {
+        h.run_until(h.now + 20 * MS);
+    }
+    assert_eq!(read(&mut h, 63, G_SYNC_STATUS, 1).unwrap(), [2]);
+    let (c0, c2) = (
+        h.bus.controller(axis(0)).unwrap(),
+        h.bus.controller(axis(2)).unwrap(),
+    );
+    assert!(c0.last_move_start().is_some());
+    assert_eq!(c0.last_move_start(), c2.last_move_start());
+    h.run_until(h.now + 5 * S);
+    assert_eq!(pnow_mm100(&mut h, 2), 40_00);
+    assert_eq!(
+        write(&mut h, 63, G_SYNC_MASK, &[0b1000]),
+        Err(Exception::IllegalDataValue),
+        "axis 3 is not configured"
+    );
+}
+
+#[test]
+fn command_channel_writes_once_and_skips_unchanged_data() {
+    let mut h = gateway(1);
+    let stores = |h: &Harness<Gateway>| h.bus.controller(axis(0)).unwrap().stats().clone();
+    let v5_before = format!("{:?}", stores(&h));
+    let field = (PointField::Velocity.address().0 - 0x400) as u16;
+    let exchange = |h: &mut Harness<Gateway>, code: u16, value: u32| -> Vec<u16> {
+        write(
+            h,
+            63,
+            G_REQUEST,
+            &[code, 0, 5, field, (value >> 16) as u16, value as u16],
+        )
+        .unwrap();
+        let until = h.now + 5 * S;
+        let mut response = vec![0; 5];
+        while h.now < until {
+            h.run_until(h.now + 20 * MS);
+            response = read(h, 63, G_RESPONSE, 5).unwrap();
+            if response[0] != 0 {
+                break;
+            }
+        }
+        // Step 4: the PLC clears its request; step 5: the gateway clears the response.
+        write(h, 63, G_REQUEST, &[0]).unwrap();
+        assert_eq!(read(h, 63, G_RESPONSE, 1).unwrap(), [0]);
+        response
+    };
+    let first = exchange(&mut h, 2, 1234);
+    assert_eq!(first[0], 2, "{first:?}");
+    assert!(
+        first[4] >= 1 && first[4] != 0xFFFF,
+        "written with V5: {first:?}"
+    );
+    let again = exchange(&mut h, 2, 1234);
+    assert_eq!(again[4], 0xFFFF, "same value: no V5 spent");
+    let readback = exchange(&mut h, 1, 0);
+    assert_eq!((readback[0], readback[2], readback[3]), (1, 0, 1234));
+    assert_ne!(format!("{:?}", stores(&h)), v5_before);
+    // A request while the response is not cleared is refused.
+    write(&mut h, 63, G_REQUEST, &[1, 0, 5, field, 0, 0]).unwrap();
+    assert_eq!(
+        write(&mut h, 63, G_REQUEST, &[2, 0, 5, field, 0, 1]),
+        Err(Exception::ServerDeviceFailure)
+    );
+    // Invalid requests: axis not configured, point 16, unknown field.
+    write(&mut h, 63, G_REQUEST, &[0]).unwrap();
+    for bad in [
+        [1, 4, 0, 0, 0, 0],
+        [1, 0, 16, 0, 0, 0],
+        [1, 0, 0, 2, 0, 0],
+        [9, 0, 0, 0, 0, 0],
+    ] {
+        h.run_until(h.now + 200 * MS);
+        write(&mut h, 63, G_REQUEST, &[0]).unwrap();
+        assert_eq!(
+            write(&mut h, 63, G_REQUEST, &bad),
+            Err(Exception::IllegalDataValue),
+            "{bad:?}"
+        );
+    }
+}

@@ -1,0 +1,174 @@
+//! The PIO logic driven by scripted input sequences against the simulator, through the
+//! gateway, in virtual time: what a PLC wired to the 24 V inputs and outputs would see.
+#![allow(clippy::inconsistent_digit_grouping)]
+
+use protocol::engine::{AxisSet, Instant, Link};
+use protocol::line::Baud;
+use protocol::pio::{Config, Pio, PioInputs, PioOutputs};
+use protocol::plc::{AxisConfig, Gateway, GatewayConfig};
+use protocol::units::{Lead, Length, Scale};
+use protocol::{Axis, HomeDirection, PositionNo, Rtim};
+use rc_host::harness::Harness;
+use rc_host::sim::realtime::bus_at_line;
+use rc_host::sim::{BusConfig, ControllerConfig};
+
+const MS: u64 = 1000;
+
+struct Rig {
+    h: Harness<Gateway>,
+    pio: Pio,
+    inputs: PioInputs,
+    outputs: PioOutputs,
+}
+
+fn axis0() -> Axis {
+    Axis::new(0).unwrap()
+}
+
+fn rig() -> Rig {
+    let scale = Scale::new(Lead::from_hundredths(800).unwrap(), HomeDirection::MotorEnd);
+    let mut bus = bus_at_line(BusConfig::default(), &[], Baud::B115200, Rtim::MIN);
+    let mut row = [0u32; 10];
+    row[0] = scale.position_to_wire(Length(30_00)).unwrap().to_wire();
+    let controller = ControllerConfig {
+        stored_line: Some((Baud::B115200, Rtim::MIN)),
+        points: vec![(PositionNo::new(5).unwrap(), row)],
+        ..ControllerConfig::default()
+    };
+    bus.add_controller(axis0(), controller);
+    let mut config = GatewayConfig::new(AxisSet::first(1));
+    config.bus.establish = false;
+    config.watchdog = protocol::engine::Duration::ZERO; // wired I/O: no Modbus watchdog
+    config.axes[0] = AxisConfig {
+        scale,
+        stroke: Length(100_00),
+    };
+    Rig {
+        h: Harness::new(Gateway::new(config), bus),
+        pio: Pio::new(Config::default()),
+        // *STP is negative logic: ON means "run".
+        inputs: PioInputs::STP_N,
+        outputs: PioOutputs::SAFE,
+    }
+}
+
+impl Rig {
+    /// Run `ms` milliseconds, sampling the PIO every millisecond, as the firmware does.
+    fn run(&mut self, ms: u64) {
+        for _ in 0..ms {
+            let now = self.h.now + MS;
+            self.h.run_until(now);
+            let state = *self.h.engine.engine().axis(axis0());
+            let link = state.link == Link::Online;
+            let (outputs, job) = self.pio.sample(Instant(now), self.inputs, &state, link);
+            self.outputs = outputs;
+            self.h
+                .engine
+                .set_stop_input(Instant(now), !self.inputs.stp_n());
+            if let Some(kind) = job {
+                let _ = self.h.engine.command(axis0(), kind);
+            }
+        }
+    }
+
+    fn set(&mut self, input: PioInputs, on: bool) {
+        self.inputs = self.inputs.with(input, on);
+    }
+
+    /// Run until `done(outputs)` or `limit_ms`; the time it took.
+    fn until(&mut self, limit_ms: u64, done: impl Fn(PioOutputs) -> bool) -> u64 {
+        for t in 0..limit_ms {
+            if done(self.outputs) {
+                return t;
+            }
+            self.run(1);
+        }
+        panic!("outputs never reached the state: {:?}", self.outputs);
+    }
+}
+
+#[test]
+fn son_home_strobe_a_position_and_read_pm() {
+    let mut r = rig();
+    r.run(100);
+    assert!(
+        r.outputs.link() && r.outputs.alm_n(),
+        "link up, no alarm: {:?}",
+        r.outputs
+    );
+    r.set(PioInputs::SON, true);
+    r.until(500, |o| o.sv());
+    r.set(PioInputs::HOME, true);
+    r.run(20);
+    r.set(PioInputs::HOME, false);
+    r.until(5_000, |o| o.hend() && o.pend());
+    assert!(r.h.bus.controller(axis0()).unwrap().homed());
+    // Position 5, with the PC bits set only 2 ms before CSTR: the strobe waits for settling.
+    r.inputs = r.inputs.with_position(PositionNo::new(5).unwrap());
+    r.run(2);
+    r.set(PioInputs::CSTR, true);
+    r.run(30);
+    r.set(PioInputs::CSTR, false);
+    assert!(
+        !r.outputs.pend() || r.outputs.moving(),
+        "PEND drops while the move runs"
+    );
+    r.until(5_000, |o| o.pend() && o.pm() == 5);
+    let scale = r.h.engine.config().axes[0].scale;
+    let target = scale.position_to_wire(Length(30_00)).unwrap();
+    let c = r.h.bus.controller(axis0()).unwrap();
+    assert_eq!(c.position(), i64::from(target.0), "point 5 is 30 mm");
+}
+
+#[test]
+fn stop_input_stops_at_once_and_blocks_the_next_strobe() {
+    let mut r = rig();
+    r.set(PioInputs::SON, true);
+    r.run(100);
+    r.set(PioInputs::HOME, true);
+    r.run(20);
+    r.set(PioInputs::HOME, false);
+    r.until(5_000, |o| o.hend() && o.pend());
+    r.inputs = r.inputs.with_position(PositionNo::new(5).unwrap());
+    r.run(10);
+    r.set(PioInputs::CSTR, true);
+    r.run(60);
+    r.set(PioInputs::CSTR, false);
+    assert!(r.h.bus.controller(axis0()).unwrap().moving());
+    // *STP drops (input OFF): the stop goes out, the fail-safe latches.
+    r.set(PioInputs::STP_N, false);
+    r.run(200);
+    let c = r.h.bus.controller(axis0()).unwrap();
+    assert!(!c.moving(), "stopped");
+    assert!(c.position() > -3001, "short of the 30 mm target");
+    assert_eq!(r.h.engine.failsafe() & 2, 2, "stop input latched");
+    // A strobe while *STP is OFF starts nothing.
+    let before = c.position();
+    r.set(PioInputs::CSTR, true);
+    r.run(300);
+    r.set(PioInputs::CSTR, false);
+    assert_eq!(r.h.bus.controller(axis0()).unwrap().position(), before);
+    assert!(!r.h.bus.controller(axis0()).unwrap().moving());
+}
+
+#[test]
+fn alarm_shows_on_pm_and_res_clears_it() {
+    let mut r = rig();
+    r.set(PioInputs::SON, true);
+    r.run(100);
+    r.h.bus
+        .inject_alarm(axis0(), protocol::AlarmCode(0xD8))
+        .unwrap();
+    r.until(500, |o| !o.alm_n());
+    assert_eq!(r.outputs.pm(), 0x0B, "abbreviated code of D8 (deviation)");
+    r.set(PioInputs::RES, true);
+    r.run(20);
+    r.set(PioInputs::RES, false);
+    r.until(2_000, |o| o.alm_n());
+    assert_eq!(
+        r.h.bus.controller(axis0()).unwrap().alarm(),
+        protocol::AlarmCode::NONE
+    );
+    // SON is still on: the PIO turns the servo back on after the reset turned it off.
+    r.until(3_000, |o| o.sv());
+}
