@@ -1,12 +1,16 @@
 #!/usr/bin/env bash
-# The gateway's job without hardware, as far as it exists today: the codec at work on the vendor
-# documents' own examples, through the `rcframe` bus tool. (The simulated bus and the firmware
-# under QEMU join this demo as their issues land.)
+# The gateway's job without hardware: simulated Robo Cylinders on the bus, a scripted PLC writing
+# and reading the gateway's Modbus registers (virtual time, so it is exact and quick); then the
+# codec at work on the vendor documents' own examples through the `rcframe` bus tool.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 rustup toolchain install >/dev/null 2>&1 || rustup toolchain install
-cargo build --quiet --locked -p rc-host --bin rcframe
+cargo build --quiet --locked -p rc-host --bin rcframe --bin demo
 rcframe=target/debug/rcframe
+
+echo "== The gateway with simulated actuators and a scripted PLC"
+target/debug/demo
+echo
 
 show() { printf '\n$ rcframe %s\n' "$*"; "$rcframe" "$@"; }
 

@@ -621,6 +621,28 @@ fn non_requests_are_malformed_and_not_answered() {
         (5, 0)
     );
     assert_eq!(Request::parse(&[]), Err(PduError::NotARequest));
+    // A PDU longer than 253 bytes cannot come from a frame; parsed directly, it is refused.
+    let mut long = hex("08 00 00");
+    long.extend([0; 250]);
+    assert!(Request::parse(&long).is_ok());
+    long.push(0);
+    assert_eq!(
+        Request::parse(&long),
+        Err(PduError::Exception(Exception::IllegalDataValue))
+    );
+}
+
+#[test]
+fn exception_codes() {
+    for code in 1..=4 {
+        assert_eq!(Exception::from_code(code).unwrap().code(), code);
+    }
+    assert_eq!(Exception::from_code(0), None);
+    assert_eq!(Exception::from_code(5), None);
+    assert_eq!(
+        Exception::IllegalDataAddress.to_string(),
+        "Modbus exception 02: illegal data address"
+    );
 }
 
 // ------------------------------------------------------------------------------ framing

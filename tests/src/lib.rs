@@ -1,3 +1,4 @@
 //! Host-side tools and test harnesses for the Robo Cylinder gateway.
 pub mod harness;
+pub mod regmap;
 pub mod sim;

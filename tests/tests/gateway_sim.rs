@@ -398,3 +398,29 @@ fn command_channel_writes_once_and_skips_unchanged_data() {
         );
     }
 }
+
+#[test]
+fn a_broadcast_stop_coil_stops_every_axis() {
+    let mut h = gateway(3);
+    for a in 0..3 {
+        home(&mut h, a);
+        write(&mut h, unit(a), DIRECT, &[0, 90_00, 0, 10, 0, 20_00, 30]).unwrap();
+    }
+    h.run_until(h.now + 300 * MS);
+    assert!((0..3).all(|a| h.bus.controller(axis(a)).unwrap().moving()));
+    h.engine.set_time(Instant(h.now));
+    h.engine.write_bits(0, COIL_STOP, &[true]).unwrap();
+    h.run_until(h.now + 500 * MS);
+    assert!((0..3).all(|a| !h.bus.controller(axis(a)).unwrap().moving()));
+    // Only DRG1, POSR and coils can be broadcast; bad values are refused before any effect.
+    assert_eq!(
+        write(&mut h, 0, DIRECT, &[0, 1, 0, 10, 0, 20_00, 30]),
+        Err(Exception::IllegalDataAddress)
+    );
+    assert_eq!(
+        write(&mut h, 0, POSR, &[16]),
+        Err(Exception::IllegalDataValue)
+    );
+    write(&mut h, 0, POSR, &[3]).unwrap();
+    assert!((0..3).all(|a| read(&mut h, unit(a), POSR, 1).unwrap() == [3]));
+}

@@ -23,14 +23,17 @@ pub struct AxisConfig {
 }
 
 impl Default for AxisConfig {
-    /// 6 mm lead, motor-end homing, 800 pulses/rev, 100 mm stroke.
+    /// 6 mm lead, motor-end homing, 800 pulses/rev, 100 mm stroke, exact negation
+    /// ([`Complement::Twos`]): a controller reports 0 pulses at home, which the brief edition's
+    /// one's-complement rule would show the PLC as -0.01 mm; exact negation shows 0.00 mm.
+    /// (The two differ by one pulse; AXISCFG selects either per axis.)
     fn default() -> AxisConfig {
         AxisConfig {
             scale: Scale {
                 lead: Lead::of(crate::units::ActuatorType::SS, crate::units::SpeedType::M),
                 pulses_per_rev: crate::units::DEFAULT_PULSES_PER_REV,
                 home: HomeDirection::MotorEnd,
-                complement: Complement::Ones,
+                complement: Complement::Twos,
             },
             stroke: Length(10_000), // 100 mm
         }

@@ -82,6 +82,9 @@ struct PlcAxis {
     reason: u16,
     taken: u16,
     job: Option<JobId>,
+    /// The running command moves the axis: PEND and PM stay off until it is done, as a PCON
+    /// drops PEND when it accepts a start (the last status may predate the move).
+    moving: bool,
 }
 
 impl PlcAxis {
@@ -292,6 +295,7 @@ impl Gateway {
         match result {
             Ok(id) => {
                 plc.job = Some(id);
+                plc.moving = moves;
                 plc.state = CommandState::Taken;
                 plc.reason = 0;
                 plc.taken = plc.taken.wrapping_add(1);
@@ -320,6 +324,7 @@ impl Gateway {
     fn job_done(&mut self, id: JobId, axis: Axis, result: Result<JobOutput, JobError>) {
         if let Some(plc) = self.axes.get_mut(index(axis)).filter(|p| p.job == Some(id)) {
             plc.job = None;
+            plc.moving = false;
             match result {
                 Ok(_) => {
                     plc.state = CommandState::Done;
@@ -557,7 +562,8 @@ impl Gateway {
             .unwrap_or_default();
         match address {
             PNOW..=DSSE => {
-                let block = status_block(state, &config, plc.paused() || self.stop_input)
+                let starting = plc.moving && plc.state == CommandState::Taken;
+                let block = status_block(state, &config, plc.paused() || self.stop_input, starting)
                     .ok_or(Exception::ServerDeviceFailure)?;
                 block
                     .get(usize::from(address - PNOW))
@@ -1024,6 +1030,13 @@ impl DataModel for Gateway {
 
     fn write_bits(&mut self, unit: u8, address: u16, values: &[bool]) -> Result<(), Exception> {
         self.plc_activity();
+        if unit == crate::modbus::BROADCAST {
+            // Coils are checked by address only: the first axis refuses before any effect.
+            for axis in self.config.bus.axes.iter() {
+                self.axis_coils(axis, address, values)?;
+            }
+            return Ok(());
+        }
         let axis = self
             .config
             .axis_of_unit(unit)
@@ -1033,6 +1046,17 @@ impl DataModel for Gateway {
 
     fn write_registers(&mut self, unit: u8, address: u16, values: &[u16]) -> Result<(), Exception> {
         self.plc_activity();
+        if unit == crate::modbus::BROADCAST {
+            // Broadcast: DRG1 or POSR of every axis (checked by value only, so the first axis
+            // refuses before any effect). Not a direct move: travel differs between axes.
+            if address != DRG1 && address != POSR {
+                return Err(Exception::IllegalDataAddress);
+            }
+            for axis in self.config.bus.axes.iter() {
+                self.axis_write(axis, address, values)?;
+            }
+            return Ok(());
+        }
         if let Some(axis) = self.config.axis_of_unit(unit) {
             return self.axis_write(axis, address, values);
         }

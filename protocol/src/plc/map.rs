@@ -190,7 +190,7 @@ const fn e(
 /// Every address the gateway answers. Anything else is exception 02.
 pub const MAP: &[Entry] = &[
     e(Unit::Axis, Status, PNOW, 2, "PNOW", "0.01 mm", "int32", false,
-      "Present position (R4 PNOW, read while the axis moves), from home", Partial("refreshed once per status cycle while moving; exception 04 until first read")),
+      "Present position from home (R4 PNOW: read when the axis comes online, once per status cycle while it moves, and at the end of every move)", Partial("not continuous: exception 04 until the axis has answered")),
     e(Unit::Axis, Status, ALMC, 1, "ALMC", "code", "0x00-0xFF", false,
       "Alarm code (RC error 0x80-0xFF) while *ALM is off, else 0", Partial("RC codes, not PCON codes")),
     e(Unit::Axis, Status, DIPM, 1, "DIPM", "bits", "", false,
@@ -231,8 +231,8 @@ pub const MAP: &[Entry] = &[
     e(Unit::Gateway, Holding, G_SYNC_START, 1, "SYNCSTART", "", "1", true, "Write 1: every axis of SYNCMASK moves to its POSR at the same instant (h, then one t)", Gateway),
     e(Unit::Gateway, Status, G_SYNC_STATUS, 1, "SYNCSTAT", "", "0-3", false, "0 idle, 1 running, 2 done, 3 failed", Gateway),
     e(Unit::Gateway, Holding, G_AXIS_CONFIG, 128, "AXISCFG", "", "", true, "Per axis n at 0x0100+8n: enabled, lead (0.01 mm), home (7 motor/8 far end), pulses/rev, stroke (2, 0.01 mm), complement (1/2)", Gateway),
-    e(Unit::Gateway, Holding, G_REQUEST, 5, "REQ", "", "", true, "Command channel request: code, axis, point, field, value (see README)", Gateway),
-    e(Unit::Gateway, Status, G_RESPONSE, 5, "RESP", "", "", false, "Command channel response: code (|0x8000 on error), error, value hi, value lo, V5 count", Gateway),
+    e(Unit::Gateway, Holding, G_REQUEST, 6, "REQ", "", "", true, "Command channel request: code (1 read field, 2 write field), axis, point, field (offset from 0x400), value high, value low", Gateway),
+    e(Unit::Gateway, Status, G_RESPONSE, 5, "RESP", "", "", false, "Command channel response: code (|0x8000 on error), error (as CMER), value high, value low, V5 write count (0xFFFF: value already stored, nothing written)", Gateway),
     e(Unit::Gateway, Status, G_DIAG, 256, "DIAG", "count", "", false, "Per axis n at 0x0400+16n: frames sent, replies, time-outs, BCC errors, bad replies, retries, rejections (u32 each), link, last error", Gateway),
     e(Unit::Gateway, Status, G_BUS, 8, "BUS", "count", "", false, "Unsolicited frames, events lost, queue full, establishments (u32 each)", Gateway),
 ];

@@ -6,6 +6,7 @@
 //! happens, so an invalid request never reaches the RS485 bus (it gets a Modbus exception).
 //!
 //! - Command bits act on rising edges, as PIO strobes do; SON and STP are levels.
+//! - A broadcast (unit 0) writes DRG1, POSR or the coils of every axis, e.g. a STOP for all.
 //! - Every axis shows the fate of its last command in CMST/CMER (taken, done, failed + reason).
 //! - Fail-safe: if the PLC has been silent for longer than the watchdog time (default
 //!   [`DEFAULT_WATCHDOG_MS`]), or the stop input drops, every axis gets a stop before anything

@@ -40,11 +40,14 @@ fn bit(set: bool, mask: u16) -> u16 {
 }
 
 /// The registers 0x9000..=0x9007, or `None` while the axis has not reported its status yet
-/// (the gateway then answers exception 04 rather than invent values).
+/// (the gateway then answers exception 04 rather than invent values). While `starting` (a
+/// motion command is taken and not finished), PEND and PM are off whatever the last status
+/// said, as on a PCON, which drops PEND when it accepts a start.
 pub(crate) fn status_block(
     state: &AxisState,
     config: &AxisConfig,
     paused: bool,
+    starting: bool,
 ) -> Option<[u16; 8]> {
     let report: StatusReport = state.report?;
     let position = state
@@ -56,11 +59,17 @@ pub(crate) fn status_block(
     let almc = if alarm { u16::from(report.alarm.0) } else { 0 };
     let dipm =
         u16::from(inputs.pc()) | bit(inputs.hold(), port::HOLD) | bit(inputs.start(), port::CSTR);
-    let dopm = u16::from(outputs.pm()) & port::PM_MASK
+    let pend = outputs.pfin() && !starting;
+    let pm = if starting && !alarm {
+        0
+    } else {
+        u16::from(outputs.pm())
+    };
+    let dopm = pm & port::PM_MASK
         | bit(moving, port::MOVE)
         | bit(outputs.zone(), port::ZONE1)
         | bit(outputs.zfin(), port::HEND)
-        | bit(outputs.pfin(), port::PEND)
+        | bit(pend, port::PEND)
         | bit(status.servo(), port::SV)
         | bit(outputs.alm_n(), port::ALM_N);
     let rejected = matches!(state.last_error, Some(LinkError::Rejected(_)));
@@ -70,7 +79,7 @@ pub(crate) fn status_block(
         | bit(rejected, dss::ALML)
         | bit(paused || inputs.hold(), dss::STP)
         | bit(outputs.zfin(), dss::HEND)
-        | bit(outputs.pfin(), dss::PEND);
+        | bit(pend, dss::PEND);
     let dsse = bit(moving, dss::MOVE) | bit(moving && !outputs.zfin(), dss::GHMS);
     let [hi, lo] = split(position as u32);
     Some([hi, lo, almc, dipm, dopm, dss1, 0, dsse])
