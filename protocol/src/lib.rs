@@ -54,6 +54,7 @@
 )]
 
 pub mod alarm;
+mod bits;
 pub mod command;
 pub mod deframer;
 pub mod engine;

@@ -129,6 +129,7 @@
 //! there is no second vocabulary to map and keep in step, and tests compare exactly what the
 //! engine will run.
 
+use crate::bits::bit_flags;
 use crate::engine::{AxisState, Duration, Instant, JobKind, Link};
 use crate::{HomeDirection, PositionNo, StatusReport};
 
@@ -139,87 +140,10 @@ pub const STOP_REPEAT: Duration = Duration::from_millis(100);
 /// make the retry rule submit a job on every sample.
 pub const SERVO_RETRY_MIN: Duration = Duration::from_millis(100);
 
-macro_rules! pio_bits {
-    (
-        $(#[$meta:meta])*
-        $name:ident {
-            $( $(#[$fmeta:meta])* $bit:literal => $flag:ident, $method:ident, $label:literal; )*
-        }
-    ) => {
-        $(#[$meta])*
-        #[derive(Clone, Copy, PartialEq, Eq, Default, Hash)]
-        #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-        pub struct $name(u16);
-
-        impl $name {
-            $( $(#[$fmeta])* pub const $flag: $name = $name(1 << $bit); )*
-
-            /// Every signal OFF.
-            pub const NONE: $name = $name(0);
-
-            /// The bits that carry a signal.
-            pub const MASK: u16 = 0 $( | 1 << $bit )*;
-
-            /// Each signal with its name, bit 0 first.
-            pub const NAMED: &'static [($name, &'static str)] = &[ $( ($name::$flag, $label), )* ];
-
-            /// From a word, bit n = port n; bits outside [`MASK`](Self::MASK) are dropped.
-            pub const fn from_bits(bits: u16) -> $name {
-                $name(bits & $name::MASK)
-            }
-
-            /// The word, bit n = port n.
-            pub const fn bits(self) -> u16 {
-                self.0
-            }
-
-            /// Whether every bit of `other` is set.
-            pub const fn contains(self, other: $name) -> bool {
-                self.0 & other.0 == other.0
-            }
-
-            /// This value with the bits of `other` set or cleared.
-            #[must_use]
-            pub const fn with(self, other: $name, set: bool) -> $name {
-                if set { $name(self.0 | other.0) } else { $name(self.0 & !other.0) }
-            }
-
-            $(
-                $(#[$fmeta])*
-                pub const fn $method(self) -> bool {
-                    self.contains($name::$flag)
-                }
-            )*
-
-            /// The names of the signals that are ON, bit 0 first.
-            pub fn set_names(self) -> impl Iterator<Item = &'static str> {
-                $name::NAMED.iter().filter(move |(f, _)| self.contains(*f)).map(|(_, n)| *n)
-            }
-        }
-
-        impl core::ops::BitOr for $name {
-            type Output = $name;
-            fn bitor(self, rhs: $name) -> $name {
-                $name(self.0 | rhs.0)
-            }
-        }
-
-        impl core::fmt::Debug for $name {
-            fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-                write!(f, "{}(0x{:04X}", stringify!($name), self.0)?;
-                for name in self.set_names() {
-                    write!(f, " {name}")?;
-                }
-                write!(f, ")")
-            }
-        }
-    };
-}
-
-pio_bits! {
+bit_flags! {
     /// The PLC's signals to the gateway, bit n = PCON pattern 0 port INn (1 = ON, the voltage on
     /// the pin; *STP is negative logic, so its bit is 1 when the axis may run).
-    PioInputs {
+    PioInputs(u16, masked) {
         /// IN0: position number bit 0.
         0 => PC1, pc1, "PC1";
         /// IN1: position number bit 1.
@@ -245,10 +169,10 @@ pio_bits! {
     }
 }
 
-pio_bits! {
+bit_flags! {
     /// The gateway's signals to the PLC, bit n = PCON pattern 0 port OUTn (1 = ON; *ALM is
     /// negative logic, so its bit is 1 when there is no alarm).
-    PioOutputs {
+    PioOutputs(u16, masked) {
         /// OUT0: PM1, completed position number bit 0 (or abbreviated alarm code bit 0).
         0 => PM1, pm1, "PM1";
         /// OUT1: PM2.

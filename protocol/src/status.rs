@@ -1,83 +1,13 @@
 //! The four bytes of the direct response (complete edition §4-2): Status, Alarm, IN, OUT.
 
 use crate::alarm::AlarmCode;
-
-macro_rules! bit_flags {
-    (
-        $(#[$meta:meta])*
-        $name:ident {
-            $( $(#[$fmeta:meta])* $bit:literal => $flag:ident, $method:ident, $label:literal; )*
-        }
-    ) => {
-        $(#[$meta])*
-        #[derive(Clone, Copy, PartialEq, Eq, Default, Hash)]
-        #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-        pub struct $name(u8);
-
-        impl $name {
-            $( $(#[$fmeta])* pub const $flag: $name = $name(1 << $bit); )*
-
-            /// Each named bit with its name in the vendor document, bit 0 first.
-            pub const NAMED: &'static [($name, &'static str)] = &[ $( ($name::$flag, $label), )* ];
-
-            /// From the byte on the wire.
-            pub const fn from_bits(bits: u8) -> $name {
-                $name(bits)
-            }
-
-            /// The byte on the wire.
-            pub const fn bits(self) -> u8 {
-                self.0
-            }
-
-            /// Whether every bit of `other` is set.
-            pub const fn contains(self, other: $name) -> bool {
-                self.0 & other.0 == other.0
-            }
-
-            /// This value with the bits of `other` set or cleared.
-            #[must_use]
-            pub const fn with(self, other: $name, set: bool) -> $name {
-                if set { $name(self.0 | other.0) } else { $name(self.0 & !other.0) }
-            }
-
-            $(
-                $(#[$fmeta])*
-                pub const fn $method(self) -> bool {
-                    self.contains($name::$flag)
-                }
-            )*
-
-            /// The names of the bits that are set, bit 0 first.
-            pub fn set_names(self) -> impl Iterator<Item = &'static str> {
-                $name::NAMED.iter().filter(move |(f, _)| self.contains(*f)).map(|(_, n)| *n)
-            }
-        }
-
-        impl core::ops::BitOr for $name {
-            type Output = $name;
-            fn bitor(self, rhs: $name) -> $name {
-                $name(self.0 | rhs.0)
-            }
-        }
-
-        impl core::fmt::Debug for $name {
-            fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-                write!(f, "{}(0x{:02X}", stringify!($name), self.0)?;
-                for name in self.set_names() {
-                    write!(f, " {name}")?;
-                }
-                write!(f, ")")
-            }
-        }
-    };
-}
+use crate::bits::bit_flags;
 
 bit_flags! {
     /// The "Status" byte: the controller's internal state (complete edition §4-2).
     ///
     /// The brief edition marks bits 4-6 "not used"; the complete edition defines them.
-    Status {
+    Status(u8, raw) {
         /// Bit 0: control power is on (always 1 when the controller answers).
         0 => POWER, power, "power";
         /// Bit 1: servo is on.
@@ -99,7 +29,7 @@ bit_flags! {
 
 bit_flags! {
     /// The "IN" byte: the controller's PIO inputs (complete edition §4-2, 1 = ON).
-    Inputs {
+    Inputs(u8, raw) {
         /// Bit 0: position number bit 1 (PC1).
         0 => PC1, pc1, "PC1";
         /// Bit 1: position number bit 2 (PC2).
@@ -117,7 +47,7 @@ bit_flags! {
 
 bit_flags! {
     /// The "OUT" byte: the controller's PIO outputs (complete edition §4-2, 1 = ON).
-    Outputs {
+    Outputs(u8, raw) {
         /// Bit 0: PM1, completed position number bit 1 (or abbreviated alarm code bit 1).
         0 => PM1, pm1, "PM1";
         /// Bit 1: PM2.

@@ -144,6 +144,15 @@ pub struct Gateway {
     channel: Channel,
 }
 
+/// `word` with `bit` set or cleared.
+const fn with_bit(word: u16, bit: u16, on: bool) -> u16 {
+    if on {
+        word | bit
+    } else {
+        word & !bit
+    }
+}
+
 fn index(axis: Axis) -> usize {
     usize::from(axis.get())
 }
@@ -721,12 +730,7 @@ impl Gateway {
             match a {
                 COIL_STOP if on => self.command(axis, JobKind::Stop)?,
                 COIL_STP => {
-                    let drg1 = if on {
-                        plc.drg1 | DRG1_STP
-                    } else {
-                        plc.drg1 & !DRG1_STP
-                    };
-                    self.write_drg1(axis, drg1)?;
+                    self.write_drg1(axis, with_bit(plc.drg1, DRG1_STP, on))?;
                 }
                 _ => {}
             }
@@ -735,12 +739,7 @@ impl Gateway {
             let plc = self.axes.get(index(axis)).copied().unwrap_or_default();
             match a {
                 COIL_SON => {
-                    let drg1 = if on {
-                        plc.drg1 | DRG1_SON
-                    } else {
-                        plc.drg1 & !DRG1_SON
-                    };
-                    self.write_drg1(axis, drg1)?;
+                    self.write_drg1(axis, with_bit(plc.drg1, DRG1_SON, on))?;
                 }
                 COIL_ALRS => {
                     if on && !plc.coil_alrs {
