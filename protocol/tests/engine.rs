@@ -70,8 +70,19 @@ fn next_frame(engine: &mut Engine, now: &mut Instant) -> Request {
     panic!("no frame")
 }
 
+/// When a real controller's answer would be complete: the command and the answer on the wire,
+/// the axis' RTIM, and 1 ms of slack (an earlier frame cannot be the answer).
+fn answer_delay(engine: &Engine, axis: Axis) -> engine::Duration {
+    let frame = timing::frame_time(engine.line_baud());
+    let rtim = engine::Duration::from_millis(u64::from(engine.axis(axis).rtim.get()));
+    frame
+        .plus(frame)
+        .plus(rtim)
+        .plus(engine::Duration::from_millis(1))
+}
+
 fn reply(engine: &mut Engine, now: &mut Instant, reply: Reply) {
-    *now = *now + engine::Duration::from_millis(5);
+    *now = *now + answer_delay(engine, reply.axis());
     engine.receive(*now, &reply.emit().to_bytes());
 }
 
@@ -87,7 +98,7 @@ fn polls_every_configured_axis_round_robin_with_host_gap() {
     let mut address = 0;
     while seen.len() < 9 {
         let request = next_frame(&mut engine, &mut now);
-        let replied_at = now + engine::Duration::from_millis(5);
+        let replied_at = now + answer_delay(&engine, request.axis);
         reply(&mut engine, &mut now, answer(&request, &mut address));
         assert_eq!(
             engine.poll(now),

@@ -215,6 +215,9 @@ pub struct BusCounters {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Origin {
     Poll,
+    /// A job frame whose job a stop cancelled while it was on the wire: its answer only
+    /// updates the status; it is never resent and its loss says nothing about the axis.
+    Cancelled,
     Position,
     Probe,
     Job,
@@ -266,7 +269,7 @@ pub struct Engine {
     config: Config,
     axes: [AxisState; AXES],
     active: [Option<Active>; AXES],
-    stops: [Option<JobId>; AXES],
+    stops: [Option<(JobId, u8)>; AXES],
     queue: Deque<(JobId, Job), QUEUE_LEN>,
     events: Deque<Event, EVENT_LEN>,
     in_flight: Option<InFlight>,
@@ -409,10 +412,10 @@ impl Engine {
         if job.kind == JobKind::Stop {
             self.next_id = self.next_id.wrapping_add(1);
             self.cancel_jobs(job.axis);
-            if let Some(old) = self
+            if let Some((old, _)) = self
                 .stops
                 .get_mut(index(job.axis))
-                .and_then(|s| s.replace(id))
+                .and_then(|s| s.replace((id, 0)))
             {
                 // Two stops in a row: the first is superseded by the second.
                 self.emit(Event::JobDone {
@@ -455,11 +458,15 @@ impl Engine {
         if matches!(self.in_flight, Some(f) if f.origin == Origin::Job && f.request.axis == axis) {
             // The answer still completes the transaction; nothing routes it to a job.
             if let Some(f) = self.in_flight.as_mut() {
-                f.origin = Origin::Poll;
+                f.origin = Origin::Cancelled;
             }
         }
         if matches!(self.retry, Some(f) if f.origin == Origin::Job && f.request.axis == axis) {
             self.retry = None;
+        }
+        if matches!(self.pending, Some((r, Origin::Job, _)) if r.axis == axis) {
+            // A job frame parked for a baud change: its job is gone.
+            self.pending = None;
         }
     }
 
@@ -488,7 +495,8 @@ impl Engine {
                 c.bad_replies = c.bad_replies.wrapping_add(1);
             }
         }
-        if bad_bcc && now >= flight.earliest_reply {
+        let ours = self.deframer.rejected().get(2) == Some(&flight.request.axis.to_char());
+        if bad_bcc && ours && now >= flight.earliest_reply {
             // A whole frame ended: whoever sent it is done and the line is free.
             self.attempt_failed(now, flight, Failure::Corrupted);
         }
@@ -501,7 +509,9 @@ impl Engine {
         };
         let axis = flight.request.axis;
         let reply = match Reply::parse(frame) {
-            Ok(reply) if reply.answers(&flight.request).is_ok() => reply,
+            Ok(reply) if reply.answers(&flight.request).is_ok() && now >= flight.earliest_reply => {
+                reply
+            }
             _ => {
                 // Malformed, another axis, or another command: never accepted.
                 if let Some(state) = self.state(axis) {
@@ -542,7 +552,7 @@ impl Engine {
             state.position_at = Some(now);
         }
         match flight.origin {
-            Origin::Poll | Origin::Probe | Origin::Position => {}
+            Origin::Poll | Origin::Probe | Origin::Position | Origin::Cancelled => {}
             Origin::Stop(id) => {
                 let result = match (reply.rejection(), reply.report()) {
                     (Some(code), _) => Err(JobError::Rejected(code)),
@@ -553,7 +563,7 @@ impl Engine {
             }
             Origin::Job => self.job_reply(now, axis, &reply),
             Origin::Establish => self.establish_reply(axis, &flight.request, &reply),
-            Origin::Rejoin => self.rejoin_reply(axis, &flight.request),
+            Origin::Rejoin => self.rejoin_reply(axis, &flight.request, &reply),
         }
     }
 
@@ -744,15 +754,32 @@ impl Engine {
                 return output;
             }
         }
-        if let Some(output) = self.rejoin_line_action(now) {
-            return output;
-        }
-        let next = match self.pending.take() {
-            Some(next) => next,
-            None => match self.next_transaction(now) {
-                Some(next) => next,
-                None => return Output::Idle(self.next_deadline()),
-            },
+        // A stop goes before everything: before a frame parked for a baud change and before the
+        // broadcasts of a rejoin.
+        let next = match self.next_stop() {
+            Some(stop) => {
+                if let Some((request, origin, attempt)) = self.pending.take() {
+                    // Job frames are rebuilt from their job's cursor, polls come round again.
+                    match origin {
+                        Origin::Rejoin => self.abort_rejoin(),
+                        Origin::Stop(id) => self.requeue_stop(request.axis, id, attempt),
+                        _ => {}
+                    }
+                }
+                stop
+            }
+            None => {
+                if let Some(output) = self.rejoin_line_action(now) {
+                    return output;
+                }
+                match self.pending.take() {
+                    Some(next) => next,
+                    None => match self.next_transaction(now) {
+                        Some(next) => next,
+                        None => return Output::Idle(self.next_deadline()),
+                    },
+                }
+            }
         };
         // Each transaction at its rate: a rejoining axis at the power-up rate, the rest at ours.
         let baud = if next.1 == Origin::Rejoin {
@@ -782,7 +809,12 @@ impl Engine {
         let is_v5 = matches!(request.command, Command::StoreFromEdit(_));
         let deadline =
             now + timing::frame_time(baud).plus(timing::response_timeout(baud, state.rtim, is_v5));
-        let rtim = Duration::from_millis(u64::from(state.rtim.get()));
+        // §6-1 step 2: `p`'s own answer may already come after the new delay.
+        let fastest = match request.command {
+            Command::SetResponseDelay(new) => new.min(state.rtim),
+            _ => state.rtim,
+        };
+        let rtim = Duration::from_millis(u64::from(fastest.get()));
         let earliest_reply = now
             + timing::frame_time(baud)
                 .plus(rtim)
@@ -816,17 +848,44 @@ impl Engine {
         }
         let may_retry = flight.attempt < self.config.retries
             && flight.request.command.resendable()
-            && !matches!(flight.origin, Origin::Probe | Origin::Rejoin);
+            && !matches!(
+                flight.origin,
+                Origin::Probe | Origin::Rejoin | Origin::Cancelled
+            );
         if may_retry {
             let attempt = flight.attempt.saturating_add(1);
+            let is_w4 = matches!(flight.request.command, Command::WriteMemory { .. });
             if flight.origin == Origin::Job {
                 if let Some(active) = self.active.get_mut(index(axis)).and_then(Option::as_mut) {
                     active.attempt = attempt;
-                    if matches!(flight.request.command, Command::WriteMemory { .. }) {
-                        // §5 (1): the write address may have moved on; set it again first.
+                    if is_w4 {
+                        // §5 (1): the write address may have moved on; set it again first. A W4
+                        // whose T4 is not the op before it cannot be resent.
+                        let t4_before = active
+                            .cursor
+                            .checked_sub(1)
+                            .and_then(|c| program(&active.job, usize::from(c)))
+                            .is_some_and(|op| {
+                                matches!(op, Op::Send(step) if matches!(step.request.command, Command::SetWriteAddress { .. }))
+                            });
+                        if !t4_before {
+                            self.fail_job(axis, JobError::Timeout);
+                            return;
+                        }
                         active.cursor = active.cursor.saturating_sub(1);
                     }
                 }
+            } else if flight.origin == Origin::Establish && is_w4 {
+                // The same rule during establishment: back to the T4 of this W4.
+                if let Some(Phase::Configure { axis: a, step }) = self.phase {
+                    self.phase = Some(Phase::Configure {
+                        axis: a,
+                        step: step.saturating_sub(1),
+                    });
+                }
+            } else if let Origin::Stop(id) = flight.origin {
+                // Stops keep their own resend: the shared slot may hold another one.
+                self.requeue_stop(axis, id, attempt);
             } else {
                 self.retry = Some(InFlight { attempt, ..flight });
             }
@@ -837,6 +896,7 @@ impl Engine {
         }
         match flight.origin {
             Origin::Probe => self.probe_after(now, axis),
+            Origin::Cancelled => {}
             Origin::Poll | Origin::Position => {
                 self.set_link(now, axis, Link::Offline);
             }
@@ -867,14 +927,7 @@ impl Engine {
                 self.set_link(now, axis, Link::Offline);
                 self.establish_next_axis(axis);
             }
-            Origin::Rejoin => {
-                // Not at the power-up settings either: it is still the bus' RTIM we probe with.
-                self.rejoin = None;
-                let rtim = self.config.rtim;
-                if let Some(state) = self.state(axis) {
-                    state.rtim = rtim;
-                }
-            }
+            Origin::Rejoin => self.abort_rejoin(),
         }
     }
 
@@ -893,16 +946,38 @@ impl Engine {
         }
     }
 
+    /// Put a stop back in its slot, unless a newer stop for the axis supersedes it.
+    fn requeue_stop(&mut self, axis: Axis, id: JobId, attempt: u8) {
+        match self.stops.get_mut(index(axis)) {
+            Some(slot @ None) => *slot = Some((id, attempt)),
+            _ => self.emit(Event::JobDone {
+                id,
+                axis,
+                result: Err(JobError::Cancelled),
+            }),
+        }
+    }
+
+    /// The next stop (`d`) waiting to go, if any.
+    fn next_stop(&mut self) -> Option<(Request, Origin, u8)> {
+        Axis::all().find_map(|axis| {
+            self.stops
+                .get_mut(index(axis))
+                .and_then(Option::take)
+                .map(|(id, attempt)| {
+                    (
+                        Request::new(axis, Command::CancelMotion),
+                        Origin::Stop(id),
+                        attempt,
+                    )
+                })
+        })
+    }
+
     fn next_transaction(&mut self, now: Instant) -> Option<(Request, Origin, u8)> {
-        // 1. Stops, before anything else.
-        for axis in Axis::all() {
-            if let Some(id) = self.stops.get_mut(index(axis)).and_then(Option::take) {
-                return Some((
-                    Request::new(axis, Command::CancelMotion),
-                    Origin::Stop(id),
-                    0,
-                ));
-            }
+        // 1. Stops, before anything else (poll() has taken them already; this is for safety).
+        if let Some(stop) = self.next_stop() {
+            return Some(stop);
         }
         // 2. A resend.
         if let Some(retry) = self.retry.take() {
@@ -913,7 +988,8 @@ impl Engine {
         if let Some(next) = self.next_job_frame() {
             return Some(next);
         }
-        // 4. A rejoining axis' next step, every other turn with polling.
+        // 4. A rejoining axis' next step, every other turn with polling (and whenever polling
+        //    has nothing to send).
         self.rejoin_turn = !self.rejoin_turn;
         if self.rejoin_turn {
             if let Some(next) = self.next_rejoin_frame() {
@@ -921,7 +997,7 @@ impl Engine {
             }
         }
         // 5. Polling.
-        self.next_poll(now)
+        self.next_poll(now).or_else(|| self.next_rejoin_frame())
     }
 
     fn activate_jobs(&mut self, now: Instant) {
@@ -990,6 +1066,10 @@ impl Engine {
                 continue;
             }
             if state.link == Link::Offline {
+                if self.rejoin.is_some_and(|(a, _)| a == axis) {
+                    // Being reconfigured at the power-up rate: not there at ours.
+                    continue;
+                }
                 let due = self.probe_due.get(index(axis)).copied().unwrap_or(now);
                 if now < due {
                     continue;
@@ -1058,6 +1138,16 @@ impl Engine {
         true
     }
 
+    /// Give up the rejoin in progress: the axis is probed at the bus' settings again.
+    fn abort_rejoin(&mut self) {
+        if let Some((axis, _)) = self.rejoin.take() {
+            let rtim = self.config.rtim;
+            if let Some(state) = self.state(axis) {
+                state.rtim = rtim;
+            }
+        }
+    }
+
     /// Steps 0-4 are the frames of §6-1 steps 2-6 for the axis.
     fn next_rejoin_frame(&mut self) -> Option<(Request, Origin, u8)> {
         let (axis, step) = self.rejoin?;
@@ -1065,7 +1155,11 @@ impl Engine {
         Some((Request::new(axis, command), Origin::Rejoin, 0))
     }
 
-    fn rejoin_reply(&mut self, axis: Axis, request: &Request) {
+    fn rejoin_reply(&mut self, axis: Axis, request: &Request, reply: &Reply) {
+        if reply.rejection().is_some() {
+            self.abort_rejoin();
+            return;
+        }
         if let Command::SetResponseDelay(rtim) = request.command {
             if let Some(state) = self.state(axis) {
                 state.rtim = rtim;
@@ -1188,10 +1282,19 @@ impl Engine {
         }
     }
 
-    fn establish_reply(&mut self, axis: Axis, request: &Request, _reply: &Reply) {
+    fn establish_reply(&mut self, axis: Axis, request: &Request, reply: &Reply) {
         let Some(Phase::Configure { step, .. }) = self.phase else {
             return;
         };
+        if reply.rejection().is_some() {
+            // A refused step (e.g. `p` during motor initialisation, warning 74): the axis keeps
+            // its power-up settings; it will be offline at the new rate and rejoin later.
+            if let Some(state) = self.state(axis) {
+                state.rtim = RTIM_AFTER_BREAK;
+            }
+            self.establish_next_axis(axis);
+            return;
+        }
         if let Command::SetResponseDelay(rtim) = request.command {
             // §6-1 step 2: the new delay is in force from this reply on.
             if let Some(state) = self.state(axis) {
