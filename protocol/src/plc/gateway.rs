@@ -85,6 +85,8 @@ struct PlcAxis {
     /// The running command moves the axis: PEND and PM stay off until it is done, as a PCON
     /// drops PEND when it accepts a start (the last status may predate the move).
     moving: bool,
+    /// SON is held ON but the servo is off (an alarm reset turned it off): try again then.
+    son_retry: Instant,
 }
 
 impl PlcAxis {
@@ -103,10 +105,11 @@ impl PlcAxis {
 enum Channel {
     #[default]
     Idle,
-    /// Reading the point (both requests start so: a write compares first, to spare V5).
-    Reading(JobId),
-    /// Writing the field.
-    Writing(JobId),
+    /// Reading the point (both requests start so: a write compares first, to spare V5), for
+    /// this request.
+    Reading(JobId, [u16; REQ_LEN]),
+    /// Writing the field, for this request.
+    Writing(JobId, [u16; REQ_LEN]),
     /// Response posted; waiting for the PLC to clear the request.
     Answered,
 }
@@ -236,11 +239,34 @@ impl Gateway {
             }
         }
         self.handle_events();
+        self.hold_servo_on(now);
         let output = self.engine.poll(now);
         self.handle_events();
         match output {
             Output::Idle(until) => Output::Idle(self.watchdog_deadline().min(until).or(until)),
             other => other,
+        }
+    }
+
+    /// SON is a level, as on a PCON: while the PLC holds it ON, a servo that went off (the alarm
+    /// reset turns it off, a servo job failed) is turned on again, once a second at most, when
+    /// no command is running and the axis is not in alarm. SON OFF is only ever acted on as a
+    /// change: a controller's servo is on at power-up, and a PLC that never uses SON keeps it.
+    fn hold_servo_on(&mut self, now: Instant) {
+        for axis in self.config.bus.axes.iter() {
+            let Some(plc) = self.axes.get(index(axis)).copied() else {
+                continue;
+            };
+            let state = self.engine.axis(axis);
+            let servo_off = state.report.is_some_and(|r| {
+                !r.status.servo() && !r.outputs.alarm_active() && state.link == Link::Online
+            });
+            if plc.son() && servo_off && plc.job.is_none() && now >= plc.son_retry {
+                if let Some(p) = self.axes.get_mut(index(axis)) {
+                    p.son_retry = now + Duration::from_millis(1000);
+                }
+                let _ = self.command(axis, JobKind::Servo(true));
+            }
         }
     }
 
@@ -258,14 +284,17 @@ impl Gateway {
     fn trip(&mut self, cause: u16) {
         self.failsafe |= cause;
         self.failsafe_count = self.failsafe_count.wrapping_add(1);
+        // Every configured axis, offline ones too: one that dropped out for a moment during a
+        // move would carry on when it answers again. A dead one only costs a time-out.
         for axis in self.config.bus.axes.iter() {
-            if self.engine.axis(axis).link != Link::Offline {
-                // A stop jumps every queue; it cannot be refused for a configured axis.
-                let _ = self.engine.submit(Job {
-                    axis,
-                    kind: JobKind::Stop,
-                });
-            }
+            // A stop jumps every queue; it cannot be refused for a configured axis.
+            let _ = self.engine.submit(Job {
+                axis,
+                kind: JobKind::Stop,
+            });
+        }
+        if self.sync_status == 1 {
+            self.sync_failed();
         }
     }
 
@@ -290,6 +319,21 @@ impl Gateway {
                 | JobKind::MoveAbsolute(_)
                 | JobKind::MoveRelative(_)
         );
+        if kind == JobKind::Stop {
+            // A stop is an interrupt, not a command with an outcome of its own: CMST keeps showing
+            // the command it cancels (failed, reason 6).
+            let submitted = self
+                .engine
+                .submit(Job { axis, kind })
+                .map(|_| ())
+                .map_err(|_| Exception::ServerDeviceFailure);
+            // After the stop (which cancels the axis' queued jobs): give the synchronized start
+            // up and cancel what it buffered.
+            if self.sync_status == 1 && AxisSet(self.sync_mask).contains(axis) {
+                self.sync_failed();
+            }
+            return submitted;
+        }
         let blocked = moves && self.motion_blocked(axis);
         let result = if blocked {
             Err(Reason::Paused)
@@ -351,14 +395,20 @@ impl Gateway {
 
     // -------------------------------------------------------------- synchronized start
 
-    fn start_sync(&mut self) -> Result<(), Exception> {
-        let mask = AxisSet(self.sync_mask);
+    /// Whether a synchronized start of `mask` may begin now.
+    fn sync_check(&self, mask: AxisSet) -> Result<(), Exception> {
         if mask.0 == 0 || mask.iter().any(|a| self.motion_blocked(a)) {
             return Err(Exception::IllegalDataValue);
         }
         if self.sync_status == 1 {
             return Err(Exception::ServerDeviceFailure);
         }
+        Ok(())
+    }
+
+    fn start_sync(&mut self) -> Result<(), Exception> {
+        let mask = AxisSet(self.sync_mask);
+        self.sync_check(mask)?;
         self.sync_status = 1;
         self.sync_pending = AxisSet::default();
         self.sync_buffered = AxisSet::default();
@@ -392,7 +442,13 @@ impl Gateway {
     fn sync_done(&mut self, id: JobId, axis: Axis, result: &Result<JobOutput, JobError>) {
         if self.sync_start == Some(id) {
             self.sync_start = None;
-            self.sync_status = if result.is_ok() { 2 } else { 3 };
+            if result.is_ok() {
+                self.sync_status = 2;
+                self.sync_buffered = AxisSet::default();
+            } else {
+                // The `t` may not have reached every axis: cancel what may still be buffered.
+                self.sync_failed();
+            }
             return;
         }
         let Some(slot) = self
@@ -406,12 +462,22 @@ impl Gateway {
         self.sync_pending = AxisSet(self.sync_pending.0 & !(1 << axis.get()));
         if result.is_ok() {
             self.sync_buffered = self.sync_buffered.with(axis);
+            if self.sync_status != 1 {
+                // The start was given up while this `h` ran: cancel it at once.
+                self.sync_failed();
+                return;
+            }
         } else {
             self.sync_failed();
             return;
         }
         if self.sync_pending.0 == 0 && self.sync_status == 1 {
             let mask = AxisSet(self.sync_mask);
+            if mask.iter().any(|a| self.motion_blocked(a)) {
+                // STP, EMG or the stop input came on while the commands were buffered.
+                self.sync_failed();
+                return;
+            }
             let Some(lead) = mask.iter().next() else {
                 return;
             };
@@ -451,7 +517,7 @@ impl Gateway {
         if code == 0 {
             return Ok(None);
         }
-        if code == self.request[0] && self.channel != Channel::Idle {
+        if request == self.request && self.channel != Channel::Idle {
             // The same request written again while it runs or is answered: nothing new.
             return Ok(None);
         }
@@ -494,17 +560,28 @@ impl Gateway {
                 kind: JobKind::ReadPoint(point),
             })
             .map_err(|_| Exception::ServerDeviceFailure)?;
-        self.channel = Channel::Reading(id);
+        self.channel = Channel::Reading(id, self.request);
         Ok(())
     }
 
     fn channel_done(&mut self, id: JobId, result: Result<JobOutput, JobError>) {
-        let [code, axis, point, field, hi, lo] = self.request;
+        let request = match self.channel {
+            Channel::Reading(r, request) | Channel::Writing(r, request) if r == id => request,
+            _ => return,
+        };
+        if self.request != request {
+            // The PLC cleared (or changed) its request while it ran: drop the result, and never
+            // write on behalf of a request that is gone.
+            self.channel = Channel::Idle;
+            return;
+        }
+        let [code, axis, point, field, hi, lo] = request;
         let wanted = join(hi, lo);
+        let unexpected = (Reason::Unexpected as u16) << 8;
         match (self.channel, result) {
-            (Channel::Reading(r), Ok(JobOutput::Point(readback))) if r == id => {
+            (Channel::Reading(..), Ok(JobOutput::Point(readback))) => {
                 let Some(field) = channel_field(field) else {
-                    return self.answer_error(code, Reason::Unexpected as u16);
+                    return self.answer_error(code, unexpected);
                 };
                 let stored = readback.get(field);
                 if code == REQ_READ_FIELD || stored == wanted {
@@ -520,7 +597,7 @@ impl Gateway {
                     u8::try_from(axis).ok().and_then(Axis::new),
                     u8::try_from(point).ok().and_then(PositionNo::new),
                 ) else {
-                    return self.answer_error(code, Reason::Unexpected as u16);
+                    return self.answer_error(code, unexpected);
                 };
                 let job = Job {
                     axis,
@@ -531,21 +608,19 @@ impl Gateway {
                     },
                 };
                 match self.engine.submit(job) {
-                    Ok(w) => self.channel = Channel::Writing(w),
+                    Ok(w) => self.channel = Channel::Writing(w, request),
                     Err(_) => self.answer_error(code, (Reason::QueueFull as u16) << 8),
                 }
             }
-            (Channel::Writing(w), Ok(output)) if w == id => {
+            (Channel::Writing(..), Ok(output)) => {
                 let count = match output {
                     JobOutput::Value(v) => u16::try_from(v).unwrap_or(u16::MAX - 1),
                     _ => 0,
                 };
                 self.answer([code, 0, hi, lo, count]);
             }
-            (Channel::Reading(r) | Channel::Writing(r), Err(e)) if r == id => {
-                self.answer_error(code, Reason::of(e));
-            }
-            _ => {}
+            (_, Err(e)) => self.answer_error(code, Reason::of(e)),
+            _ => self.answer_error(code, unexpected),
         }
     }
 
@@ -596,6 +671,15 @@ impl Gateway {
     fn write_drg1(&mut self, axis: Axis, value: u16) -> Result<(), Exception> {
         let old = self.axes.get(index(axis)).copied().unwrap_or_default();
         let rising = |bit: u16| value & bit != 0 && old.drg1 & bit == 0;
+        // Every command this write causes must fit in the queue, or the write has no effect
+        // (exception 04) and the PLC can repeat it; a stop needs no room.
+        let needed = usize::from((value & DRG1_SON != 0) != old.son())
+            + usize::from(rising(DRG1_ALRS))
+            + usize::from(rising(DRG1_HOME))
+            + usize::from(rising(DRG1_CSTR));
+        if crate::engine::QUEUE_LEN.saturating_sub(self.engine.queued()) < needed {
+            return Err(Exception::ServerDeviceFailure);
+        }
         if let Some(plc) = self.axes.get_mut(index(axis)) {
             plc.drg1 = value;
         }
@@ -649,6 +733,16 @@ impl Gateway {
         let relative = ctlf & CTLF_INC != 0;
         let scale = config.scale;
         let target = if relative {
+            // The end of a relative move must be inside the travel too, from where it is now.
+            let state = self.engine.axis(axis);
+            let here = state
+                .position
+                .map(|p| scale.position_from_wire(p).0)
+                .ok_or(Exception::ServerDeviceFailure)?;
+            let end = here.saturating_add(pcmd);
+            if end < 0 || end > config.stroke.0 {
+                return Err(Exception::IllegalDataValue);
+            }
             scale.distance_to_wire(Length(pcmd))
         } else {
             if pcmd < 0 || pcmd > config.stroke.0 {
@@ -904,8 +998,9 @@ impl Gateway {
                     }
                     1 | 3 => value > 0,
                     2 => value == 7 || value == 8,
-                    // Any 32-bit stroke is accepted; direct moves are checked against it.
-                    4 | 5 => true,
+                    // The stroke's high word: strokes above i32::MAX (0.01 mm) make no sense.
+                    4 => value < 0x8000,
+                    5 => true,
                     6 => value == 1 || value == 2,
                     _ => false,
                 }
@@ -1066,6 +1161,17 @@ impl DataModel for Gateway {
                 .and_then(|i| address.checked_add(i))
                 .ok_or(Exception::IllegalDataAddress)?;
             self.gateway_check(a, value)?;
+        }
+        // A start in this write is checked with the mask the same write sets.
+        let at = |register: u16| {
+            register
+                .checked_sub(address)
+                .and_then(|i| values.get(usize::from(i)))
+                .copied()
+        };
+        if at(G_SYNC_START) == Some(1) {
+            let mask = at(G_SYNC_MASK).unwrap_or(self.sync_mask);
+            self.sync_check(AxisSet(mask))?;
         }
         let request_range = G_REQUEST..G_REQUEST + REQ_LEN as u16;
         let touches_request =

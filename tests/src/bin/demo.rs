@@ -4,6 +4,9 @@
 //! takes a moment.
 //!
 //! `cargo run -p rc-host --bin demo`
+//!
+//! Lengths are written in 0.01 mm (`75_50` is 75.50 mm), as the registers carry them.
+#![allow(clippy::inconsistent_digit_grouping)]
 
 use protocol::engine::{AxisSet, Instant};
 use protocol::line::Baud;
