@@ -25,14 +25,20 @@ cargo clippy -p rc-gateway --target thumbv7em-none-eabihf --locked -- -D warning
 step "protocol: no_std build (with defmt) for the firmware target"
 cargo clippy -p protocol --target thumbv7em-none-eabihf --features defmt --locked -- -D warnings
 
-step "tests: protocol (codec, vectors, properties) and host crate (rcframe)"
+step "tests: protocol (codec, engine, Modbus, PIO, properties) and host (simulator, gateway, soak)"
 cargo test --locked
+
+step "end-to-end: pymodbus -> rc-gateway-host (PTY) -> simulated actuators"
+scripts/e2e.sh
 
 step "firmware: release build"
 cargo fw --locked
 
 step "demo: README's run-without-hardware command"
 scripts/demo.sh > /dev/null
+
+step "benchmarks (virtual time): each figure next to its physical limit"
+scripts/bench.sh
 
 step "fuzz: every target for ${FUZZ_SECONDS:=30} s"
 FUZZ_SECONDS="$FUZZ_SECONDS" scripts/fuzz.sh

@@ -1,4 +1,5 @@
 //! Host-side tools and test harnesses for the Robo Cylinder gateway.
 pub mod harness;
+pub mod host;
 pub mod regmap;
 pub mod sim;

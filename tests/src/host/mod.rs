@@ -1,0 +1,763 @@
+//! The gateway on a PC: the firmware's engine and PLC logic ([`Gateway`], [`Slave`]) with std
+//! I/O, for end-to-end tests with a real Modbus master and for bench work with real adapters.
+//! The `rc-gateway-host` binary is a command line around [`Host`].
+//!
+//! # The loop
+//! One thread, driven by a monotonic clock (µs since the start). Each pass:
+//! 1. ends a break on the bus that has lasted [`BREAK_MS`];
+//! 2. reads what the PLC wrote (non-blocking) and stamps each byte with the time of the read
+//!    ([`Receiver::push`]); a frame whose t3.5 silence ended before those bytes is handled first;
+//! 3. hands a frame that ended with t3.5 of silence to the [`Slave`] (the gateway's time set
+//!    first) and queues its reply for the PLC;
+//! 4. hands the bus bytes received to the gateway (a simulated bus gives each byte's arrival
+//!    time, a real one the time of the read);
+//! 5. polls the gateway until it is idle: frames go to the bus, line actions (rate, break,
+//!    communication change) are carried out;
+//! 6. reads control lines from standard input, if enabled;
+//! 7. sleeps until the gateway's deadline, the end of the PLC's t3.5, the simulated bus' next
+//!    event (at most every [`BUS_EVENT_GRAIN_US`]), the end of a break or [`Options::max_sleep`],
+//!    or until a line becomes readable.
+//!
+//! # Timing limits
+//! Bytes are stamped when the loop reads them, not when they crossed the wire, so the Modbus
+//! t1.5 gap check is off unless asked for ([`Options::gap_check`]): a pseudo-terminal or a USB
+//! adapter delivers a frame in chunks whose spacing says nothing about the wire. t3.5 (end of
+//! frame) is that of [`Options::plc_baud`]; a USB adapter with a latency timer (FTDI: 16 ms by
+//! default) can split a frame with gaps longer than t3.5, so set it to 1 ms
+//! (`/sys/bus/usb-serial/devices/ttyUSB0/latency_timer`).
+
+mod control;
+pub mod log;
+pub mod port;
+
+pub use control::{Control, HELP};
+pub use log::Level;
+pub use port::{Parity, Port};
+
+use std::collections::BTreeMap;
+use std::io::{self, Write};
+use std::os::fd::{AsFd, BorrowedFd};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration as StdDuration, Instant as StdInstant};
+
+use protocol::engine::{AxisSet, Duration, Instant, Link, Output};
+use protocol::frame::COMM_CHANGE;
+use protocol::line::{Baud, LineAction, BREAK_MS};
+use protocol::modbus::{Handled, Receiver, ReplyBuffer, Slave};
+use protocol::plc::{AxisConfig, Gateway, GatewayConfig};
+use protocol::units::{Lead, Length, Scale};
+use protocol::{Axis, HomeDirection, PositionNo, Pulses, Request, Rtim};
+use serde_json::{json, Value};
+
+use crate::sim::memory::{Actuator, PointRow, POINT_LEN};
+use crate::sim::{Bus, BusConfig, ControllerConfig};
+use log::Log;
+use port::Input;
+
+/// A simulated bus' events closer together than this are handled in one pass (a reply's bytes
+/// arrive 87 µs apart at 115.2 kbit/s; the engine's time-outs are tens of ms).
+pub const BUS_EVENT_GRAIN_US: u64 = 250;
+
+/// Reads per pass of the loop, at most, on each line.
+const MAX_READS_PER_PASS: usize = 16;
+
+/// Gateway outputs handled per pass, at most.
+const MAX_OUTPUTS_PER_PASS: usize = 64;
+
+/// A Modbus burst longer than this is not kept for the log (the receiver drops it anyway).
+const MAX_LOGGED_BURST: usize = 300;
+
+/// Where the PLC is.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum PlcLine {
+    /// A new pseudo-terminal; the PLC (a Modbus master program) opens [`Host::plc_path`].
+    Pty,
+    /// A serial device (an RS485 or RS232 adapter wired to the PLC).
+    Device(PathBuf),
+}
+
+/// Where the actuators are.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum BusLine {
+    /// Simulated controllers at axes 0..`axes`, in this process, already at the line rate.
+    Sim {
+        /// How many axes.
+        axes: u8,
+        /// Point 1 = 20 mm and point 3 = 40 mm stored on every axis (where the stroke allows).
+        points: bool,
+    },
+    /// An RS485 adapter.
+    Device {
+        /// The device.
+        path: PathBuf,
+        /// The axes on the bus.
+        axes: AxisSet,
+        /// Run the communication establishment procedure (break, configuration at 9.6 kbit/s,
+        /// communication change) first.
+        establish: bool,
+        /// The adapter's receiver hears the gateway's own transmissions.
+        echo: bool,
+    },
+}
+
+/// How the host gateway is set up.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Options {
+    /// The PLC side.
+    pub plc: PlcLine,
+    /// The PLC line's rate (sets t3.5; a pseudo-terminal has no rate of its own).
+    pub plc_baud: u32,
+    /// The PLC line's parity (serial device only).
+    pub plc_parity: Parity,
+    /// Check Modbus t1.5 gaps (only with byte timestamps close to the wire's).
+    pub gap_check: bool,
+    /// The bus side.
+    pub bus: BusLine,
+    /// The RS485 line rate.
+    pub bus_baud: Baud,
+    /// The gateway's own Modbus unit.
+    pub unit: u8,
+    /// The PLC watchdog, ms (0 = off).
+    pub watchdog_ms: u16,
+    /// Screw lead of every axis.
+    pub lead: Lead,
+    /// Stroke of every axis.
+    pub stroke: Length,
+    /// Home end of every axis.
+    pub home: HomeDirection,
+    /// What to log on standard error.
+    pub log: Level,
+    /// Read control lines on standard input (see [`Control`]).
+    pub control: bool,
+    /// The longest sleep of the loop.
+    pub max_sleep: StdDuration,
+}
+
+impl Default for Options {
+    fn default() -> Options {
+        Options {
+            plc: PlcLine::Pty,
+            plc_baud: 115_200,
+            plc_parity: Parity::None,
+            gap_check: false,
+            bus: BusLine::Sim {
+                axes: 1,
+                points: false,
+            },
+            bus_baud: Baud::B115200,
+            unit: protocol::plc::DEFAULT_GATEWAY_UNIT,
+            watchdog_ms: protocol::plc::DEFAULT_WATCHDOG_MS,
+            lead: Lead::from_hundredths(800).unwrap_or(Lead::of(
+                protocol::units::ActuatorType::RM,
+                protocol::units::SpeedType::M,
+            )),
+            stroke: Length(10_000), // 100 mm
+            home: HomeDirection::MotorEnd,
+            log: Level::Off,
+            control: true,
+            max_sleep: StdDuration::from_millis(2),
+        }
+    }
+}
+
+/// Why a run ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ended {
+    /// The stop flag was raised (SIGINT, SIGTERM).
+    Stopped,
+    /// A `quit` control line.
+    Quit,
+    /// Standard input ended (with control lines enabled).
+    InputClosed,
+}
+
+enum BusSide {
+    Sim(Box<Bus>),
+    Device {
+        port: Port,
+        /// When the break in progress ends (µs).
+        break_until: Option<u64>,
+    },
+}
+
+/// The gateway between two lines; see the [module documentation](self).
+pub struct Host {
+    gateway: Gateway,
+    receiver: Receiver,
+    slave: Slave,
+    reply: ReplyBuffer,
+    plc: Port,
+    bus: BusSide,
+    /// Frames sent to each axis, by command mnemonic.
+    sent: Vec<BTreeMap<&'static str, u64>>,
+    log: Log,
+    /// The bytes of the Modbus burst in progress, for the log.
+    burst: Vec<u8>,
+    started: StdInstant,
+    last_bus_rx: u64,
+    /// Standard input's partial line, when control lines are read.
+    control: Option<Vec<u8>>,
+    max_sleep: StdDuration,
+}
+
+fn invalid(text: String) -> io::Error {
+    io::Error::new(io::ErrorKind::InvalidInput, text)
+}
+
+/// The gateway's configuration for `options`.
+pub fn gateway_config(options: &Options) -> io::Result<GatewayConfig> {
+    let (axes, establish, echo) = match &options.bus {
+        BusLine::Sim { axes, .. } => {
+            if !(1..=16).contains(axes) {
+                return Err(invalid(format!("{axes}: 1 to 16 simulated axes")));
+            }
+            (AxisSet::first(*axes), false, false)
+        }
+        BusLine::Device {
+            axes,
+            establish,
+            echo,
+            ..
+        } => (*axes, *establish, *echo),
+    };
+    if axes.0 == 0 {
+        return Err(invalid("no axis".into()));
+    }
+    let mut config = GatewayConfig::new(axes);
+    config.unit = options.unit;
+    config.bus.baud = options.bus_baud;
+    config.bus.rtim = Rtim::MIN;
+    config.bus.establish = establish;
+    config.bus.echo = echo;
+    if !(1..=247).contains(&options.unit) || config.axis_of_unit(options.unit).is_some() {
+        return Err(invalid(format!(
+            "unit {}: 1-247 and not an axis unit (axis n is unit n + 1)",
+            options.unit
+        )));
+    }
+    if options.watchdog_ms != 0 && !(50..=60_000).contains(&options.watchdog_ms) {
+        return Err(invalid(format!(
+            "watchdog {} ms: 0 (off) or 50-60000",
+            options.watchdog_ms
+        )));
+    }
+    config.watchdog = Duration::from_millis(u64::from(options.watchdog_ms));
+    if options.stroke.0 <= 0 {
+        return Err(invalid("the stroke must be positive".into()));
+    }
+    let scale = gateway_scale(options.lead, options.home);
+    config.axes = [AxisConfig {
+        scale,
+        stroke: options.stroke,
+    }; 16];
+    Ok(config)
+}
+
+/// The gateway's default conventions with this lead and home end.
+fn gateway_scale(lead: Lead, home: protocol::HomeDirection) -> Scale {
+    Scale {
+        lead,
+        home,
+        ..AxisConfig::default().scale
+    }
+}
+
+/// Simulated controllers for `options` (which must be [`BusLine::Sim`]): each at the line rate
+/// and RTIM 3 ms, with the lead, stroke and home end given.
+pub fn simulated_bus(options: &Options, axes: u8, points: bool) -> io::Result<Bus> {
+    let lead = options.lead;
+    let lead_type = (0..16u32)
+        .find(|&t| Lead::from_lead_type(t) == Some(lead))
+        .ok_or_else(|| {
+            invalid(format!(
+                "lead {}.{:02} mm: the simulator knows the REG1 lead types 2.5, 3, 4, 5, 6, 8, \
+                 10, 12, 16 and 20 mm",
+                lead.hundredths() / 100,
+                lead.hundredths() % 100
+            ))
+        })?;
+    let scale = gateway_scale(lead, options.home);
+    let stroke = u32::try_from(scale.pulses(options.stroke))
+        .map_err(|_| invalid("the stroke is out of range".into()))?;
+    let mut rows: Vec<(PositionNo, PointRow)> = Vec::new();
+    if points {
+        for (point, position) in [(1u8, 2_000), (3, 4_000)] {
+            if position > options.stroke.0 {
+                continue;
+            }
+            let (Some(point), Ok(pcmd)) = (
+                PositionNo::new(point),
+                scale.position_to_wire(Length(position)),
+            ) else {
+                continue;
+            };
+            let mut row = [0u32; POINT_LEN];
+            if let Some(slot) = row.first_mut() {
+                *slot = pcmd.to_wire();
+            }
+            rows.push((point, row));
+        }
+    }
+    let baud = options.bus_baud;
+    let mut bus = Bus::new(BusConfig {
+        host_baud: baud,
+        ..BusConfig::default()
+    });
+    let defaults = ControllerConfig::default();
+    for axis in (0..axes).filter_map(Axis::new) {
+        bus.add_controller(
+            axis,
+            ControllerConfig {
+                actuator: Actuator { stroke, lead_type },
+                start_from_motor_end: defaults.start_from_motor_end.min(stroke / 5),
+                home_direction: options.home,
+                stored_line: Some((baud, Rtim::MIN)),
+                points: rows.clone(),
+                ..defaults.clone()
+            },
+        );
+    }
+    Ok(bus)
+}
+
+impl Host {
+    /// Open both lines and build the gateway.
+    pub fn new(options: &Options) -> io::Result<Host> {
+        let config = gateway_config(options)?;
+        let gateway = Gateway::new(config);
+        let bus = match &options.bus {
+            BusLine::Sim { axes, points } => {
+                BusSide::Sim(Box::new(simulated_bus(options, *axes, *points)?))
+            }
+            BusLine::Device { path, .. } => {
+                let bps = gateway.engine().line_baud().bits_per_second();
+                port::termios_rate(options.bus_baud.bits_per_second()).ok_or_else(|| {
+                    invalid(format!(
+                        "{} bit/s: termios has no constant for this rate; use 9600, 19200, \
+                         38400, 57600 or 115200",
+                        options.bus_baud.bits_per_second()
+                    ))
+                })?;
+                BusSide::Device {
+                    port: Port::serial(path, bps, Parity::None)?,
+                    break_until: None,
+                }
+            }
+        };
+        let plc = match &options.plc {
+            PlcLine::Pty => Port::pty(options.plc_baud)?,
+            PlcLine::Device(path) => Port::serial(path, options.plc_baud, options.plc_parity)?,
+        };
+        let receiver = if options.gap_check {
+            Receiver::new(options.plc_baud)
+        } else {
+            Receiver::new(options.plc_baud).without_gap_check()
+        };
+        Ok(Host {
+            gateway,
+            receiver,
+            slave: Slave::new(),
+            reply: ReplyBuffer::new(),
+            plc,
+            bus,
+            sent: vec![BTreeMap::new(); 16],
+            log: Log::new(options.log),
+            burst: Vec::new(),
+            started: StdInstant::now(),
+            last_bus_rx: 0,
+            control: options.control.then(Vec::new),
+            max_sleep: options.max_sleep,
+        })
+    }
+
+    /// The PLC's device: the pseudo-terminal's `/dev/pts/N`, or the device opened.
+    pub fn plc_path(&self) -> &Path {
+        self.plc.path()
+    }
+
+    /// The gateway.
+    pub fn gateway(&self) -> &Gateway {
+        &self.gateway
+    }
+
+    /// The simulated bus, if the bus is simulated.
+    pub fn sim(&self) -> Option<&Bus> {
+        match &self.bus {
+            BusSide::Sim(bus) => Some(bus),
+            BusSide::Device { .. } => None,
+        }
+    }
+
+    /// µs since the start.
+    fn now(&self) -> u64 {
+        u64::try_from(self.started.elapsed().as_micros()).unwrap_or(u64::MAX)
+    }
+
+    /// Run until `stop` is raised (checked at least every [`Options::max_sleep`]), a `quit`
+    /// line, or the end of standard input (with control lines). Fails on an I/O error of a
+    /// line.
+    pub fn run(&mut self, stop: &AtomicBool) -> io::Result<Ended> {
+        let mut buf = [0u8; 4096];
+        self.log.note(self.now(), "started");
+        loop {
+            if stop.load(Ordering::Relaxed) {
+                return Ok(Ended::Stopped);
+            }
+            let now = self.now();
+            self.end_break(now)?;
+            self.read_plc(now, &mut buf)?;
+            self.serve_modbus(now)?;
+            self.read_bus(now, &mut buf)?;
+            let until = self.drive(now)?;
+            if let Some(ended) = self.read_control(now, &mut buf)? {
+                return Ok(ended);
+            }
+            self.plc.flush()?;
+            if let BusSide::Device { port, .. } = &mut self.bus {
+                port.flush()?;
+            }
+            self.sleep(until)?;
+        }
+    }
+
+    fn end_break(&mut self, now: u64) -> io::Result<()> {
+        if let BusSide::Device { port, break_until } = &mut self.bus {
+            if break_until.is_some_and(|t| now >= t) {
+                port.set_break(false)?;
+                *break_until = None;
+                self.log.note(now, "break ended");
+            }
+        }
+        Ok(())
+    }
+
+    fn read_plc(&mut self, now: u64, buf: &mut [u8]) -> io::Result<()> {
+        for _ in 0..MAX_READS_PER_PASS {
+            let n = match self.plc.read(buf)? {
+                Input::Bytes(n) => n,
+                Input::Nothing => break,
+            };
+            // A frame that ended (t3.5) before these bytes is handled before they start the
+            // next one.
+            self.serve_modbus(now)?;
+            let bytes = buf.get(..n).unwrap_or(&[]);
+            for &byte in bytes {
+                self.receiver.push(Instant(now), byte);
+            }
+            if self.burst.len() + bytes.len() <= MAX_LOGGED_BURST {
+                self.burst.extend_from_slice(bytes);
+            }
+        }
+        Ok(())
+    }
+
+    fn serve_modbus(&mut self, now: u64) -> io::Result<()> {
+        self.gateway.set_time(Instant(now));
+        while let Some(result) = self.slave.poll(
+            &mut self.receiver,
+            Instant(now),
+            &mut self.gateway,
+            &mut self.reply,
+        ) {
+            let outcome = match result {
+                Ok(Handled::Reply(len)) => {
+                    let bytes = self.reply.as_bytes().get(..len).unwrap_or(&[]);
+                    self.plc.send(bytes)?;
+                    "reply".to_string()
+                }
+                Ok(other) => format!("{other:?}"),
+                Err(error) => format!("{error:?}"),
+            };
+            self.log.modbus_request(now, &self.burst, &outcome);
+            if !self.reply.is_empty() {
+                self.log.modbus_reply(now, self.reply.as_bytes());
+            }
+            self.burst.clear();
+        }
+        Ok(())
+    }
+
+    fn read_bus(&mut self, now: u64, buf: &mut [u8]) -> io::Result<()> {
+        match &mut self.bus {
+            BusSide::Sim(bus) => {
+                for (at, byte) in bus.advance(now) {
+                    let at = at.max(self.last_bus_rx);
+                    self.last_bus_rx = at;
+                    self.log.bus_received(at, byte);
+                    self.gateway.receive(Instant(at), &[byte]);
+                }
+            }
+            BusSide::Device { port, .. } => {
+                for _ in 0..MAX_READS_PER_PASS {
+                    let n = match port.read(buf)? {
+                        Input::Bytes(n) => n,
+                        Input::Nothing => break,
+                    };
+                    let bytes = buf.get(..n).unwrap_or(&[]);
+                    for &byte in bytes {
+                        self.log.bus_received(now, byte);
+                    }
+                    self.gateway.receive(Instant(now), bytes);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Poll the gateway until it is idle; its deadline.
+    fn drive(&mut self, now: u64) -> io::Result<Option<u64>> {
+        for _ in 0..MAX_OUTPUTS_PER_PASS {
+            match self.gateway.poll(Instant(now)) {
+                Output::Transmit(frame) => {
+                    if let Ok(request) = Request::parse(&frame) {
+                        if let Some(counts) = self.sent.get_mut(usize::from(request.axis.get())) {
+                            *counts.entry(request.command.mnemonic()).or_default() += 1;
+                        }
+                    }
+                    self.log.bus_sent(now, &frame);
+                    let bytes = frame.to_bytes();
+                    match &mut self.bus {
+                        BusSide::Sim(bus) => {
+                            bus.host_send(now, &bytes);
+                        }
+                        BusSide::Device { port, .. } => port.send(&bytes)?,
+                    }
+                }
+                Output::Line(action) => self.line(now, action)?,
+                Output::Idle(until) => return Ok(until.map(|t| t.0)),
+            }
+        }
+        // More to do: come back at once.
+        Ok(Some(now))
+    }
+
+    fn line(&mut self, now: u64, action: LineAction) -> io::Result<()> {
+        self.log.note(now, &format!("line: {action:?}"));
+        let break_us = u64::from(BREAK_MS) * 1_000;
+        match (&mut self.bus, action) {
+            (BusSide::Sim(bus), LineAction::SetBaud(baud)) => bus.set_host_baud(baud),
+            (BusSide::Sim(bus), LineAction::Break) => {
+                bus.host_break(now, break_us);
+            }
+            (BusSide::Sim(bus), LineAction::CommChange) => {
+                bus.host_send(now, &COMM_CHANGE);
+            }
+            (BusSide::Device { port, .. }, LineAction::SetBaud(baud)) => {
+                port.set_rate(baud.bits_per_second())?;
+            }
+            (BusSide::Device { port, break_until }, LineAction::Break) => {
+                port.set_break(true)?;
+                *break_until = Some(now + break_us);
+            }
+            (BusSide::Device { port, .. }, LineAction::CommChange) => port.send(&COMM_CHANGE)?,
+        }
+        Ok(())
+    }
+
+    fn sleep(&self, until: Option<u64>) -> io::Result<()> {
+        let now = self.now();
+        let max_us = u64::try_from(self.max_sleep.as_micros()).unwrap_or(u64::MAX);
+        let mut wake = now.saturating_add(max_us);
+        if let Some(t) = until {
+            wake = wake.min(t);
+        }
+        if let Some(t) = self.receiver.next_deadline() {
+            wake = wake.min(t.0);
+        }
+        let mut fds: Vec<(BorrowedFd<'_>, bool)> = vec![(self.plc.fd(), self.plc.output_pending())];
+        match &self.bus {
+            BusSide::Sim(bus) => {
+                if let Some(t) = bus.next_event() {
+                    wake = wake.min(t.max(now + BUS_EVENT_GRAIN_US));
+                }
+            }
+            BusSide::Device { port, break_until } => {
+                if let Some(t) = break_until {
+                    wake = wake.min(*t);
+                }
+                fds.push((port.fd(), port.output_pending()));
+            }
+        }
+        if wake <= now {
+            return Ok(());
+        }
+        let stdin = io::stdin();
+        if self.control.is_some() {
+            fds.push((stdin.as_fd(), false));
+        }
+        port::wait(&fds, StdDuration::from_micros(wake - now))
+    }
+
+    fn read_control(&mut self, now: u64, buf: &mut [u8]) -> io::Result<Option<Ended>> {
+        let Some(mut pending) = self.control.take() else {
+            return Ok(None);
+        };
+        let result = self.read_control_lines(now, buf, &mut pending);
+        self.control = Some(pending);
+        result
+    }
+
+    fn read_control_lines(
+        &mut self,
+        now: u64,
+        buf: &mut [u8],
+        pending: &mut Vec<u8>,
+    ) -> io::Result<Option<Ended>> {
+        let stdin = io::stdin();
+        if !port::readable(stdin.as_fd())? {
+            return Ok(None);
+        }
+        // Readable: one read returns what is there without blocking (or 0 at the end).
+        let n = match nix::unistd::read(stdin.as_fd(), buf) {
+            Ok(n) => n,
+            Err(nix::errno::Errno::EINTR | nix::errno::Errno::EAGAIN) => return Ok(None),
+            Err(e) => return Err(e.into()),
+        };
+        if n == 0 {
+            self.log.note(now, "standard input closed");
+            return Ok(Some(Ended::InputClosed));
+        }
+        pending.extend_from_slice(buf.get(..n).unwrap_or(&[]));
+        while let Some(end) = pending.iter().position(|&b| b == b'\n') {
+            let line: Vec<u8> = pending.drain(..=end).collect();
+            let line = String::from_utf8_lossy(&line);
+            let Some(command) = control::parse(&line) else {
+                continue;
+            };
+            let (answer, ended) = match command {
+                Ok(command) => self.control(now, command),
+                Err(error) => (json!({"ok": false, "error": error}), None),
+            };
+            let mut out = io::stdout().lock();
+            writeln!(out, "{answer}")?;
+            out.flush()?;
+            if ended.is_some() {
+                return Ok(ended);
+            }
+        }
+        Ok(None)
+    }
+
+    /// Carry out a control command: its answer, and whether the run ends.
+    pub fn control(&mut self, now: u64, command: Control) -> (Value, Option<Ended>) {
+        match command {
+            Control::Alarm(axis, code) => match &mut self.bus {
+                BusSide::Sim(bus) => match bus.inject_alarm(axis, code) {
+                    Ok(()) => {
+                        self.log.note(
+                            now,
+                            &format!("alarm {:02X} injected on axis {}", code.0, axis.get()),
+                        );
+                        (json!({"ok": true, "cmd": "alarm"}), None)
+                    }
+                    Err(_) => (
+                        json!({"ok": false, "error": format!(
+                            "no simulated axis {}, or {:02X} is not an error code (80-FF)",
+                            axis.get(), code.0)}),
+                        None,
+                    ),
+                },
+                BusSide::Device { .. } => (
+                    json!({"ok": false, "error": "alarms can be injected on a simulated bus only"}),
+                    None,
+                ),
+            },
+            Control::Stats => (self.stats(now), None),
+            Control::StopInput(active) => {
+                self.gateway.set_stop_input(Instant(now), active);
+                (json!({"ok": true, "cmd": "stop-input"}), None)
+            }
+            Control::Quit => (json!({"ok": true, "cmd": "quit"}), Some(Ended::Quit)),
+            Control::Help => (json!({"ok": true, "help": HELP}), None),
+        }
+    }
+
+    /// What `stats` answers.
+    pub fn stats(&self, now: u64) -> Value {
+        let slave = self.slave.counters();
+        let receiver = self.receiver.counters();
+        let config = self.gateway.config();
+        let axes: Vec<Value> = config
+            .bus
+            .axes
+            .iter()
+            .map(|axis| {
+                let i = usize::from(axis.get());
+                let sent = self.sent.get(i).cloned().unwrap_or_default();
+                let commands: u64 = sent
+                    .iter()
+                    .filter(|(mnemonic, _)| !matches!(**mnemonic, "n" | "R4"))
+                    .map(|(_, count)| count)
+                    .sum();
+                let (state, reason) = self.gateway.command_state(axis);
+                let link = match self.gateway.engine().axis(axis).link {
+                    Link::Unknown => "unknown",
+                    Link::Online => "online",
+                    Link::Offline => "offline",
+                };
+                let mut entry = json!({
+                    "axis": i,
+                    "sent": sent,
+                    "commands": commands,
+                    "cmst": state as u16,
+                    "cmer": reason,
+                    "link": link,
+                });
+                let scale = config.axes.get(i).map(|c| c.scale);
+                if let (Some(c), Some(scale), Value::Object(map)) = (
+                    self.sim().and_then(|bus| bus.controller(axis)),
+                    scale,
+                    &mut entry,
+                ) {
+                    let position = c.position();
+                    let wire = Pulses(i32::try_from(position).unwrap_or(i32::MAX));
+                    map.insert("frames_received".into(), c.stats().frames_addressed.into());
+                    map.insert("moving".into(), c.moving().into());
+                    map.insert("homing".into(), c.homing().into());
+                    map.insert("homed".into(), c.homed().into());
+                    map.insert("servo".into(), c.servo().into());
+                    map.insert("alarm".into(), c.alarm().0.into());
+                    map.insert("position".into(), position.into());
+                    map.insert(
+                        "position_mm100".into(),
+                        scale.position_from_wire(wire).0.into(),
+                    );
+                    map.insert("last_move_start".into(), c.last_move_start().into());
+                    let nv = &c.memory().nv;
+                    let stores: u64 = nv.point_writes.iter().map(|&n| u64::from(n)).sum();
+                    map.insert(
+                        "nv_writes".into(),
+                        (stores + u64::from(nv.common_writes)).into(),
+                    );
+                }
+                entry
+            })
+            .collect();
+        json!({
+            "ok": true,
+            "cmd": "stats",
+            "time_us": now,
+            "failsafe": self.gateway.failsafe(),
+            "modbus": {
+                "frames": slave.frames,
+                "replies": slave.replies,
+                "crc_errors": slave.crc_errors,
+                "too_short": slave.too_short,
+                "too_long": slave.too_long,
+                "bad_gaps": slave.bad_gaps,
+                "ignored": slave.ignored,
+                "malformed": slave.malformed,
+                "broadcasts": slave.broadcasts,
+                "exceptions": [
+                    slave.illegal_function,
+                    slave.illegal_data_address,
+                    slave.illegal_data_value,
+                    slave.server_device_failure,
+                ],
+                "overruns": receiver.overruns,
+            },
+            "axes": axes,
+        })
+    }
+}
