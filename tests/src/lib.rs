@@ -1,5 +1,6 @@
 //! Host-side tools and test harnesses for the Robo Cylinder gateway.
 pub mod harness;
 pub mod host;
+pub mod pty;
 pub mod regmap;
 pub mod sim;

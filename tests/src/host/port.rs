@@ -10,7 +10,6 @@ use std::path::{Path, PathBuf};
 
 use nix::errno::Errno;
 use nix::fcntl::{fcntl, FcntlArg, OFlag};
-use nix::pty::{grantpt, posix_openpt, ptsname_r, unlockpt};
 use nix::sys::termios::{self, BaudRate, ControlFlags, InputFlags, SetArg};
 
 /// Parity of a serial line (8 data bits, 1 stop bit).
@@ -73,21 +72,7 @@ impl Port {
     /// A new pseudo-terminal pair in raw mode at `bps` (the rate is only recorded: a
     /// pseudo-terminal has no line rate). The client opens [`path`](Self::path).
     pub fn pty(bps: u32) -> io::Result<Port> {
-        let master = posix_openpt(OFlag::O_RDWR | OFlag::O_NOCTTY)?;
-        grantpt(&master)?;
-        unlockpt(&master)?;
-        let path = PathBuf::from(ptsname_r(&master)?);
-        let slave = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .custom_flags(nix::libc::O_NOCTTY)
-            .open(&path)?;
-        let mut attrs = termios::tcgetattr(&slave)?;
-        termios::cfmakeraw(&mut attrs);
-        if let Some(rate) = termios_rate(bps) {
-            termios::cfsetspeed(&mut attrs, rate)?;
-        }
-        termios::tcsetattr(&slave, SetArg::TCSANOW, &attrs)?;
+        let (master, slave, path) = crate::pty::open_raw(termios_rate(bps))?;
         let file = File::from(OwnedFd::from(master));
         set_nonblocking(&file)?;
         Ok(Port {

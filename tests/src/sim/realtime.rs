@@ -98,7 +98,6 @@ use std::fs::File;
 use std::io::{self, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::os::fd::{AsFd, BorrowedFd};
-use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -109,8 +108,8 @@ use nix::errno::Errno;
 use nix::fcntl::{fcntl, FcntlArg, OFlag};
 use nix::libc::tcflag_t;
 use nix::poll::{ppoll, PollFd, PollFlags};
-use nix::pty::{grantpt, posix_openpt, ptsname_r, unlockpt, PtyMaster};
-use nix::sys::termios::{self, BaudRate, ControlFlags, SetArg, Termios};
+use nix::pty::PtyMaster;
+use nix::sys::termios::{self, BaudRate, ControlFlags, Termios};
 use nix::sys::time::TimeSpec;
 use protocol::frame::{Frame, Packet};
 use protocol::line::Baud;
@@ -559,21 +558,7 @@ impl Pty {
     /// A new pair, the terminal in raw mode at `baud` (if termios has a constant for it; else
     /// its default speed, which is then not taken as the master's rate).
     pub fn open(baud: Baud) -> io::Result<Pty> {
-        let master = posix_openpt(OFlag::O_RDWR | OFlag::O_NOCTTY)?;
-        grantpt(&master)?;
-        unlockpt(&master)?;
-        let path = PathBuf::from(ptsname_r(&master)?);
-        let slave = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .custom_flags(nix::libc::O_NOCTTY)
-            .open(&path)?;
-        let mut attrs = termios::tcgetattr(&slave)?;
-        termios::cfmakeraw(&mut attrs);
-        if let Some(rate) = termios_rate(baud) {
-            termios::cfsetspeed(&mut attrs, rate)?;
-        }
-        termios::tcsetattr(&slave, SetArg::TCSANOW, &attrs)?;
+        let (master, slave, path) = crate::pty::open_raw(termios_rate(baud))?;
         let flags = OFlag::from_bits_retain(fcntl(&master, FcntlArg::F_GETFL)?);
         fcntl(&master, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK))?;
         let speed = raw_speed(&termios::tcgetattr(&slave)?);
