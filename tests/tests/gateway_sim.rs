@@ -579,3 +579,71 @@ fn g5_invalid_request_accepted_while_busy() {
     let bad = write(&mut h, 63, G_REQUEST, &[1, 9, 99, 77, 0, 0]);
     assert!(bad.is_err());
 }
+
+#[test]
+fn bus_settings_watchdog_action_and_link_counters() {
+    let mut h = gateway(1);
+    // Line settings: validated, taken on APPLY (which runs the establishment procedure).
+    assert_eq!(read(&mut h, 63, G_BUS_BAUD, 3).unwrap(), [1152, 3, 2]);
+    assert_eq!(
+        write(&mut h, 63, G_BUS_BAUD, &[1000]),
+        Err(Exception::IllegalDataValue)
+    );
+    assert_eq!(
+        write(&mut h, 63, G_BUS_RTIM, &[2]),
+        Err(Exception::IllegalDataValue)
+    );
+    assert_eq!(
+        write(&mut h, 63, G_RETRIES, &[4]),
+        Err(Exception::IllegalDataValue)
+    );
+    write(&mut h, 63, G_RETRIES, &[1]).unwrap();
+    assert_eq!(h.engine.engine().config().retries, 1);
+    write(&mut h, 63, G_BUS_BAUD, &[384, 10]).unwrap();
+    assert_eq!(
+        h.engine.engine().line_baud(),
+        Baud::B115200,
+        "not before APPLY"
+    );
+    write(&mut h, 63, G_APPLY, &[1]).unwrap();
+    assert!(h.engine.engine().establishing());
+    for _ in 0..40 {
+        h.run_until(h.now + 100 * MS);
+        let _ = read(&mut h, 63, G_VERSION, 1);
+    }
+    let c = h.bus.controller(axis(0)).unwrap();
+    assert_eq!((c.baud(), c.rtim_ms()), (Baud::B38400, 10));
+    assert_eq!(h.engine.engine().line_baud(), Baud::B38400);
+    assert_eq!(read(&mut h, unit(0), LINK, 1).unwrap(), [1]);
+    // Watchdog action "latch only": the event is latched, nothing is stopped.
+    write(&mut h, 63, G_WD_ACTION, &[1]).unwrap();
+    write(&mut h, 63, G_WATCHDOG, &[100]).unwrap();
+    let stops_before = h
+        .sent
+        .iter()
+        .filter(|(_, r)| r.command == protocol::Command::CancelMotion)
+        .count();
+    h.run_until(h.now + 500 * MS);
+    assert_eq!(read(&mut h, 63, G_FAILSAFE, 1).unwrap(), [1]);
+    let stops = h
+        .sent
+        .iter()
+        .filter(|(_, r)| r.command == protocol::Command::CancelMotion)
+        .count();
+    assert_eq!(stops, stops_before, "latch only: no stop sent");
+    assert_eq!(
+        write(&mut h, 63, G_PIO_AXIS, &[16]),
+        Err(Exception::IllegalDataValue)
+    );
+    write(&mut h, 63, G_PIO_AXIS, &[0]).unwrap();
+    assert_eq!(h.engine.config().pio_axis, Some(axis(0)));
+    // PLC-link counters come from the slave's owner.
+    let counters = protocol::modbus::SlaveCounters {
+        frames: 70_000,
+        crc_errors: 3,
+        ..Default::default()
+    };
+    h.engine.set_plc_counters(counters);
+    let frames_lo = (70_000u32 & 0xFFFF) as u16;
+    assert_eq!(read(&mut h, 63, G_PLC, 4).unwrap(), [1, frames_lo, 0, 3]);
+}

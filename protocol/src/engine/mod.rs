@@ -385,6 +385,20 @@ impl Engine {
         self.phase = Some(Phase::SlowBaud);
     }
 
+    /// Move the bus to another rate and RTIM: the establishment procedure runs with them
+    /// (a break first, so every axis takes them).
+    pub fn reconfigure(&mut self, baud: Baud, rtim: Rtim) {
+        self.config.baud = baud;
+        self.config.rtim = rtim;
+        self.config.establish = true;
+        self.establish();
+    }
+
+    /// Resends after a time-out, from now on (0-3).
+    pub fn set_retries(&mut self, retries: u8) {
+        self.config.retries = retries.min(3);
+    }
+
     /// The oldest unread event.
     pub fn next_event(&mut self) -> Option<Event> {
         self.events.pop_front()

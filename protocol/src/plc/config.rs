@@ -12,6 +12,17 @@ pub const DEFAULT_GATEWAY_UNIT: u8 = 63;
 /// get. Set 0 to turn it off (then nothing stops the axes when the PLC goes away).
 pub const DEFAULT_WATCHDOG_MS: u16 = 1000;
 
+/// What the PLC watchdog does when it trips.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum WatchdogAction {
+    /// Stop every axis (the default).
+    #[default]
+    StopAll,
+    /// Only latch the event in FAILSAFE (for machines where another system stops the axes).
+    LatchOnly,
+}
+
 /// One axis as the PLC side needs it: units and travel.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -52,6 +63,10 @@ pub struct GatewayConfig {
     pub axes: [AxisConfig; 16],
     /// PLC silence that trips the fail-safe; zero turns it off.
     pub watchdog: Duration,
+    /// What the watchdog does.
+    pub watchdog_action: WatchdogAction,
+    /// The axis the discrete I/O (PIO) drives, if any.
+    pub pio_axis: Option<Axis>,
     /// Firmware version reported in VERSION: (major, minor, patch).
     pub version: (u8, u8, u16),
 }
@@ -67,6 +82,8 @@ impl GatewayConfig {
             },
             axes: [AxisConfig::default(); 16],
             watchdog: Duration::from_millis(u64::from(DEFAULT_WATCHDOG_MS)),
+            watchdog_action: WatchdogAction::StopAll,
+            pio_axis: None,
             version: (0, 1, 0),
         }
     }

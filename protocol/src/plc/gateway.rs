@@ -1,15 +1,17 @@
 //! The gateway: the bus master plus everything the PLC reads and writes.
 
-use super::config::GatewayConfig;
+use super::config::{GatewayConfig, WatchdogAction};
 use super::map::*;
 use super::registers::{join, split, status_block};
 use crate::engine::{
     AxisSet, Duration, Engine, Event, Instant, Job, JobError, JobId, JobKind, JobOutput, Link,
     LinkError, Output, SubmitError,
 };
+use crate::line::Baud;
 use crate::memory::PointField;
-use crate::modbus::{BitTable, DataModel, Exception, RegisterTable};
+use crate::modbus::{BitTable, DataModel, Exception, RegisterTable, SlaveCounters};
 use crate::units::{Accel, Complement, Lead, Length, Speed};
+use crate::Rtim;
 use crate::{Axis, Buffered, Command, HomeDirection, PositionNo};
 
 /// The fate of an axis' last command, as CMST shows it.
@@ -145,6 +147,10 @@ pub struct Gateway {
     request: [u16; REQ_LEN],
     response: [u16; RESP_LEN],
     channel: Channel,
+    /// BUSBAUD and BUSRTIM as written, taken on APPLY.
+    bus_line: (Baud, Rtim),
+    /// The Modbus slave's counters, as its owner last reported them.
+    plc_counters: SlaveCounters,
 }
 
 /// `word` with `bit` set or cleared.
@@ -182,7 +188,15 @@ impl Gateway {
             request: [0; REQ_LEN],
             response: [0; RESP_LEN],
             channel: Channel::Idle,
+            bus_line: (config.bus.baud, config.bus.rtim),
+            plc_counters: SlaveCounters::default(),
         }
+    }
+
+    /// The Modbus slave's counters, for PLCLINK: the owner of the slave (firmware task, PC
+    /// gateway) reports them after each frame.
+    pub fn set_plc_counters(&mut self, counters: SlaveCounters) {
+        self.plc_counters = counters;
     }
 
     /// The bus master.
@@ -235,7 +249,13 @@ impl Gateway {
         if let Some(last) = self.last_plc {
             if limit > Duration::ZERO && !self.watchdog_tripped && now.since(last) > limit {
                 self.watchdog_tripped = true;
-                self.trip(1);
+                match self.config.watchdog_action {
+                    WatchdogAction::StopAll => self.trip(1),
+                    WatchdogAction::LatchOnly => {
+                        self.failsafe |= 1;
+                        self.failsafe_count = self.failsafe_count.wrapping_add(1);
+                    }
+                }
             }
         }
         self.handle_events();
@@ -885,6 +905,15 @@ impl Gateway {
             G_WATCHDOG => {
                 Ok(u16::try_from(self.config.watchdog.as_micros() / 1000).unwrap_or(u16::MAX))
             }
+            G_BUS_BAUD => Ok(u16::try_from(self.bus_line.0.bits_per_second() / 100).unwrap_or(0)),
+            G_BUS_RTIM => Ok(u16::from(self.bus_line.1.get())),
+            G_RETRIES => Ok(u16::from(self.engine.config().retries)),
+            G_APPLY => Ok(0),
+            G_WD_ACTION => Ok(match self.config.watchdog_action {
+                WatchdogAction::StopAll => 0,
+                WatchdogAction::LatchOnly => 1,
+            }),
+            G_PIO_AXIS => Ok(self.config.pio_axis.map_or(0xFFFF, |a| u16::from(a.get()))),
             G_SYNC_MASK => Ok(self.sync_mask),
             G_SYNC_START => Ok(0),
             G_SYNC_STATUS => Ok(self.sync_status),
@@ -909,6 +938,34 @@ impl Gateway {
                 let axis = Axis::new(u8::try_from(offset / G_DIAG_LEN).unwrap_or(0))
                     .ok_or(Exception::IllegalDataAddress)?;
                 Ok(self.diagnostics(axis, offset % G_DIAG_LEN))
+            }
+            a if (G_PLC..G_PLC + 14).contains(&a) => {
+                let c = self.plc_counters;
+                let exceptions = [
+                    Exception::IllegalFunction,
+                    Exception::IllegalDataAddress,
+                    Exception::IllegalDataValue,
+                    Exception::ServerDeviceFailure,
+                ]
+                .into_iter()
+                .fold(0u32, |n, e| n.wrapping_add(c.exceptions(e)));
+                let values = [
+                    c.frames,
+                    c.crc_errors,
+                    exceptions,
+                    c.replies,
+                    c.ignored,
+                    c.broadcasts,
+                    c.malformed,
+                ];
+                let word = values
+                    .get(usize::from((a - G_PLC) / 2))
+                    .copied()
+                    .unwrap_or(0);
+                Ok(split(word)
+                    .get(usize::from((a - G_PLC) % 2))
+                    .copied()
+                    .unwrap_or(0))
             }
             a if (G_BUS..G_BUS + 8).contains(&a) => {
                 let c = self.engine.bus_counters();
@@ -987,6 +1044,12 @@ impl Gateway {
         let valid = match address {
             G_FAILSAFE => value == 0,
             G_WATCHDOG => value == 0 || (50..=60_000).contains(&value),
+            G_BUS_BAUD => Baud::from_bits_per_second(u32::from(value) * 100).is_some(),
+            G_BUS_RTIM => u8::try_from(value).ok().and_then(Rtim::new).is_some(),
+            G_RETRIES => value <= 3,
+            G_APPLY => value <= 1,
+            G_WD_ACTION => value <= 1,
+            G_PIO_AXIS => value == 0xFFFF || value <= 15,
             G_SYNC_MASK => value & !self.config.bus.axes.0 == 0,
             G_SYNC_START => value <= 1,
             a if (G_AXIS_CONFIG..G_AXIS_CONFIG + 16 * G_AXIS_CONFIG_LEN).contains(&a) => {
@@ -1019,6 +1082,31 @@ impl Gateway {
         match address {
             G_FAILSAFE => self.failsafe = 0,
             G_WATCHDOG => self.config.watchdog = Duration::from_millis(u64::from(value)),
+            G_BUS_BAUD => {
+                if let Some(baud) = Baud::from_bits_per_second(u32::from(value) * 100) {
+                    self.bus_line.0 = baud;
+                }
+            }
+            G_BUS_RTIM => {
+                if let Some(rtim) = u8::try_from(value).ok().and_then(Rtim::new) {
+                    self.bus_line.1 = rtim;
+                }
+            }
+            G_RETRIES => self.engine.set_retries(u8::try_from(value).unwrap_or(3)),
+            G_APPLY if value == 1 => {
+                let (baud, rtim) = self.bus_line;
+                self.config.bus.baud = baud;
+                self.config.bus.rtim = rtim;
+                self.engine.reconfigure(baud, rtim);
+            }
+            G_WD_ACTION => {
+                self.config.watchdog_action = if value == 0 {
+                    WatchdogAction::StopAll
+                } else {
+                    WatchdogAction::LatchOnly
+                }
+            }
+            G_PIO_AXIS => self.config.pio_axis = u8::try_from(value).ok().and_then(Axis::new),
             G_SYNC_MASK => self.sync_mask = value,
             G_SYNC_START if value == 1 => self.start_sync()?,
             a if (G_AXIS_CONFIG..G_AXIS_CONFIG + 16 * G_AXIS_CONFIG_LEN).contains(&a) => {

@@ -135,6 +135,18 @@ pub const G_FAILSAFE: u16 = 0x0004;
 pub const G_FAILSAFE_COUNT: u16 = 0x0005;
 /// PLC watchdog time in ms (0 = off).
 pub const G_WATCHDOG: u16 = 0x0006;
+/// Bus line rate in 100 bit/s (96, 144, 192, 288, 384, 576, 768, 1152); taken on APPLY.
+pub const G_BUS_BAUD: u16 = 0x0007;
+/// Controllers' minimum response delay RTIM in ms (3-255); taken on APPLY.
+pub const G_BUS_RTIM: u16 = 0x0008;
+/// Resends after a time-out (0-3); in force at once.
+pub const G_RETRIES: u16 = 0x0009;
+/// Write 1: run the communication establishment with BUSBAUD and BUSRTIM (every axis).
+pub const G_APPLY: u16 = 0x000A;
+/// Watchdog action: 0 stop every axis, 1 latch only.
+pub const G_WD_ACTION: u16 = 0x000E;
+/// The axis the discrete I/O drives (0-15; 0xFFFF none).
+pub const G_PIO_AXIS: u16 = 0x000F;
 /// Synchronized start: axis mask (bit n = axis n).
 pub const G_SYNC_MASK: u16 = 0x000B;
 /// Synchronized start: write 1 to move every axis of the mask to its POSR together.
@@ -155,6 +167,8 @@ pub const G_DIAG: u16 = 0x0400;
 pub const G_DIAG_LEN: u16 = 16;
 /// Bus counters (4 x u32).
 pub const G_BUS: u16 = 0x0500;
+/// PLC-link (Modbus) counters (7 x u32).
+pub const G_PLC: u16 = 0x0510;
 
 use Support::{Full, Gateway, Partial};
 use Table::{Coil, Holding, Status};
@@ -227,6 +241,12 @@ pub const MAP: &[Entry] = &[
     e(Unit::Gateway, Holding, G_FAILSAFE, 1, "FAILSAFE", "bits", "write 0", true, "Latched fail-safe: b0 PLC watchdog, b1 stop input; write 0 to clear", Gateway),
     e(Unit::Gateway, Status, G_FAILSAFE_COUNT, 1, "FSCOUNT", "count", "", false, "Fail-safe trips", Gateway),
     e(Unit::Gateway, Holding, G_WATCHDOG, 1, "WATCHDOG", "ms", "0, 50-60000", true, "PLC silence that stops every moving axis (0 = off)", Gateway),
+    e(Unit::Gateway, Holding, G_BUS_BAUD, 1, "BUSBAUD", "100 bit/s", "96 144 192 288 384 576 768 1152", true, "RS485 line rate, taken on APPLY", Gateway),
+    e(Unit::Gateway, Holding, G_BUS_RTIM, 1, "BUSRTIM", "ms", "3-255", true, "Controllers' minimum response delay, taken on APPLY", Gateway),
+    e(Unit::Gateway, Holding, G_RETRIES, 1, "RETRIES", "", "0-3", true, "Resends after a time-out (complete edition §5 Nrt), in force at once", Gateway),
+    e(Unit::Gateway, Holding, G_APPLY, 1, "APPLY", "", "1", true, "Write 1: break and communication establishment with BUSBAUD/BUSRTIM (all axes stop answering for about 1 s per axis)", Gateway),
+    e(Unit::Gateway, Holding, G_WD_ACTION, 1, "WDACTION", "", "0-1", true, "Watchdog action: 0 stop every axis, 1 latch only", Gateway),
+    e(Unit::Gateway, Holding, G_PIO_AXIS, 1, "PIOAXIS", "axis", "0-15, 0xFFFF", true, "The axis the discrete I/O drives (0xFFFF: none)", Gateway),
     e(Unit::Gateway, Holding, G_SYNC_MASK, 1, "SYNCMASK", "bits", "", true, "Axes of the synchronized start (bit n = axis n)", Gateway),
     e(Unit::Gateway, Holding, G_SYNC_START, 1, "SYNCSTART", "", "1", true, "Write 1: every axis of SYNCMASK moves to its POSR at the same instant (h, then one t)", Gateway),
     e(Unit::Gateway, Status, G_SYNC_STATUS, 1, "SYNCSTAT", "", "0-3", false, "0 idle, 1 running, 2 done, 3 failed", Gateway),
@@ -235,4 +255,5 @@ pub const MAP: &[Entry] = &[
     e(Unit::Gateway, Status, G_RESPONSE, 5, "RESP", "", "", false, "Command channel response: code (|0x8000 on error), error (as CMER), value high, value low, V5 write count (0xFFFF: value already stored, nothing written)", Gateway),
     e(Unit::Gateway, Status, G_DIAG, 256, "DIAG", "count", "", false, "Per axis n at 0x0400+16n: frames sent, replies, time-outs, BCC errors, bad replies, retries, rejections (u32 each), link, last error", Gateway),
     e(Unit::Gateway, Status, G_BUS, 8, "BUS", "count", "", false, "Unsolicited frames, events lost, queue full, establishments (u32 each)", Gateway),
+    e(Unit::Gateway, Status, G_PLC, 14, "PLCLINK", "count", "", false, "Modbus frames, CRC errors, exceptions, replies, other units, broadcasts, malformed (u32 each)", Gateway),
 ];

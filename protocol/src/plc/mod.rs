@@ -17,5 +17,7 @@ mod gateway;
 pub mod map;
 mod registers;
 
-pub use config::{AxisConfig, GatewayConfig, DEFAULT_GATEWAY_UNIT, DEFAULT_WATCHDOG_MS};
+pub use config::{
+    AxisConfig, GatewayConfig, WatchdogAction, DEFAULT_GATEWAY_UNIT, DEFAULT_WATCHDOG_MS,
+};
 pub use gateway::{CommandState, Gateway, Reason};

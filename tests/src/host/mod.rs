@@ -469,6 +469,7 @@ impl Host {
                 Ok(other) => format!("{other:?}"),
                 Err(error) => format!("{error:?}"),
             };
+            self.gateway.set_plc_counters(self.slave.counters());
             self.log.modbus_request(now, &self.burst, &outcome);
             if !self.reply.is_empty() {
                 self.log.modbus_reply(now, self.reply.as_bytes());
