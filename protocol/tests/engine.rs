@@ -452,58 +452,12 @@ fn r2_command_w4_resent_without_t4() {
     );
 }
 
-/// R3: during establishment, a lost W4 answer: the W4 is resent without its T4.
-#[test]
-fn r3_establish_w4_resent_without_t4() {
-    let mut engine = Engine::new(Config {
-        establish: true,
-        ..config(1)
-    });
-    let mut now = Instant(0);
-    let mut address = 0u32;
-    let mut sent = vec![];
-    let mut dropped = false;
-    for _ in 0..200 {
-        match engine.poll(now) {
-            Output::Transmit(frame) => {
-                let r = Request::parse(&frame).unwrap();
-                if !engine.establishing() {
-                    break;
-                }
-                sent.push(r.command.code());
-                if matches!(r.command, Command::WriteMemory { .. }) && !dropped {
-                    dropped = true;
-                    address += 1; // executed, answer lost
-                    continue;
-                }
-                let rep = answer(&r, &mut address);
-                reply(&mut engine, &mut now, rep);
-            }
-            Output::Line(_) => {}
-            Output::Idle(Some(t)) => now = t.max(now),
-            Output::Idle(None) => panic!("idle"),
-        }
-    }
-    println!("{sent:?}");
-    assert_eq!(
-        &sent[..4],
-        &[
-            Code::SetResponseDelay,
-            Code::SetWriteAddress,
-            Code::WriteMemory,
-            Code::SetWriteAddress
-        ],
-        "W4 resent directly: {sent:?}"
-    );
-}
-
-/// R4: establishment: the T4 is rejected, yet the W4 follows (writes at the old address).
-#[test]
-fn r4_establish_continues_after_rejection() {
-    let mut engine = Engine::new(Config {
-        establish: true,
-        ..config(1)
-    });
+/// Run the establishment procedure, answering each frame through `answer_with` (`None`: the
+/// answer is lost); the commands sent, until polling starts.
+fn establish_with(
+    engine: &mut Engine,
+    mut answer_with: impl FnMut(&Request, &mut u32) -> Option<Reply>,
+) -> Vec<Command> {
     let mut now = Instant(0);
     let mut address = 0u32;
     let mut sent = vec![];
@@ -515,31 +469,69 @@ fn r4_establish_continues_after_rejection() {
                     break;
                 }
                 sent.push(r.command);
-                let rep = if matches!(
-                    r.command,
-                    Command::SetWriteAddress { .. } | Command::SetResponseDelay(_)
-                ) {
-                    Reply::Status {
-                        axis: r.axis,
-                        code: r.command.code(),
-                        report: StatusReport {
-                            status: Status::REJECTED | Status::POWER,
-                            alarm: AlarmCode(0x74),
-                            inputs: Inputs::default(),
-                            outputs: Outputs::default(),
-                        },
-                    }
-                } else {
-                    answer(&r, &mut address)
-                };
-                reply(&mut engine, &mut now, rep);
+                if let Some(rep) = answer_with(&r, &mut address) {
+                    reply(engine, &mut now, rep);
+                }
             }
             Output::Line(_) => {}
             Output::Idle(Some(t)) => now = t.max(now),
             Output::Idle(None) => panic!("idle"),
         }
     }
-    println!("{sent:?} rtim={:?}", engine.axis(axis(0)).rtim);
+    sent
+}
+
+/// R3: during establishment, a lost W4 answer: the W4 was resent without its T4.
+#[test]
+fn r3_establish_w4_resent_without_t4() {
+    let mut engine = Engine::new(Config {
+        establish: true,
+        ..config(1)
+    });
+    let mut dropped = false;
+    let sent = establish_with(&mut engine, |r, address| {
+        if matches!(r.command, Command::WriteMemory { .. }) && !dropped {
+            dropped = true;
+            *address += 1; // executed, answer lost
+            return None;
+        }
+        Some(answer(r, address))
+    });
+    let codes: Vec<Code> = sent.iter().map(Command::code).collect();
+    assert_eq!(
+        &codes[..4],
+        &[
+            Code::SetResponseDelay,
+            Code::SetWriteAddress,
+            Code::WriteMemory,
+            Code::SetWriteAddress
+        ],
+        "W4 resent directly: {codes:?}"
+    );
+}
+
+/// R4: establishment: the T4 was rejected, yet the W4 followed (writing at the old address).
+#[test]
+fn r4_establish_continues_after_rejection() {
+    let mut engine = Engine::new(Config {
+        establish: true,
+        ..config(1)
+    });
+    let sent = establish_with(&mut engine, |r, address| {
+        Some(match r.command {
+            Command::SetWriteAddress { .. } | Command::SetResponseDelay(_) => Reply::Status {
+                axis: r.axis,
+                code: r.command.code(),
+                report: StatusReport {
+                    status: Status::REJECTED | Status::POWER,
+                    alarm: AlarmCode(0x74),
+                    inputs: Inputs::default(),
+                    outputs: Outputs::default(),
+                },
+            },
+            _ => answer(r, address),
+        })
+    });
     assert!(
         !sent
             .iter()

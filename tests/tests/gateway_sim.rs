@@ -111,6 +111,28 @@ fn home(h: &mut Harness<Gateway>, a: u8) {
     write(h, unit(a), DRG1, &[DRG1_SON]).unwrap();
 }
 
+/// One command-channel exchange (ROBONET's five steps): write the request, wait for the
+/// response, clear the request, and check that the gateway cleared the response.
+fn exchange(h: &mut Harness<Gateway>, request: [u16; 6]) -> Vec<u16> {
+    write(h, 63, G_REQUEST, &request).unwrap();
+    let until = h.now + 5 * S;
+    let mut response = vec![0; 5];
+    while h.now < until {
+        h.run_until(h.now + 20 * MS);
+        response = read(h, 63, G_RESPONSE, 5).unwrap();
+        if response[0] != 0 {
+            break;
+        }
+    }
+    write(h, 63, G_REQUEST, &[0]).unwrap();
+    assert_eq!(
+        read(h, 63, G_RESPONSE, 1).unwrap(),
+        [0],
+        "step 5: response cleared"
+    );
+    response
+}
+
 #[test]
 fn status_block_follows_the_axis() {
     let mut h = gateway(1);
@@ -344,37 +366,16 @@ fn command_channel_writes_once_and_skips_unchanged_data() {
     let stores = |h: &Harness<Gateway>| h.bus.controller(axis(0)).unwrap().stats().clone();
     let v5_before = format!("{:?}", stores(&h));
     let field = (PointField::Velocity.address().0 - 0x400) as u16;
-    let exchange = |h: &mut Harness<Gateway>, code: u16, value: u32| -> Vec<u16> {
-        write(
-            h,
-            63,
-            G_REQUEST,
-            &[code, 0, 5, field, (value >> 16) as u16, value as u16],
-        )
-        .unwrap();
-        let until = h.now + 5 * S;
-        let mut response = vec![0; 5];
-        while h.now < until {
-            h.run_until(h.now + 20 * MS);
-            response = read(h, 63, G_RESPONSE, 5).unwrap();
-            if response[0] != 0 {
-                break;
-            }
-        }
-        // Step 4: the PLC clears its request; step 5: the gateway clears the response.
-        write(h, 63, G_REQUEST, &[0]).unwrap();
-        assert_eq!(read(h, 63, G_RESPONSE, 1).unwrap(), [0]);
-        response
-    };
-    let first = exchange(&mut h, 2, 1234);
+    let request = |code: u16, value: u32| [code, 0, 5, field, (value >> 16) as u16, value as u16];
+    let first = exchange(&mut h, request(2, 1234));
     assert_eq!(first[0], 2, "{first:?}");
     assert!(
         first[4] >= 1 && first[4] != 0xFFFF,
         "written with V5: {first:?}"
     );
-    let again = exchange(&mut h, 2, 1234);
+    let again = exchange(&mut h, request(2, 1234));
     assert_eq!(again[4], 0xFFFF, "same value: no V5 spent");
-    let readback = exchange(&mut h, 1, 0);
+    let readback = exchange(&mut h, request(1, 0));
     assert_eq!((readback[0], readback[2], readback[3]), (1, 0, 1234));
     assert_ne!(format!("{:?}", stores(&h)), v5_before);
     // A request while the response is not cleared is refused.
@@ -428,21 +429,6 @@ fn a_broadcast_stop_coil_stops_every_axis() {
 }
 
 // ---------------------------------------------------------------- regressions found by review (each failed before its fix)
-
-fn exchange(h: &mut Harness<Gateway>, req: [u16; 6]) -> Vec<u16> {
-    write(h, 63, G_REQUEST, &req).unwrap();
-    let until = h.now + 5 * S;
-    let mut response = vec![0; 5];
-    while h.now < until {
-        h.run_until(h.now + 20 * MS);
-        response = read(h, 63, G_RESPONSE, 5).unwrap();
-        if response[0] != 0 {
-            break;
-        }
-    }
-    write(h, 63, G_REQUEST, &[0]).unwrap();
-    response
-}
 
 /// G1: a READ request whose code the PLC clears while it runs becomes a WRITE of the value
 /// registers (here 0) into the point table, with V5.

@@ -958,26 +958,12 @@ impl Gateway {
                     c.broadcasts,
                     c.malformed,
                 ];
-                let word = values
-                    .get(usize::from((a - G_PLC) / 2))
-                    .copied()
-                    .unwrap_or(0);
-                Ok(split(word)
-                    .get(usize::from((a - G_PLC) % 2))
-                    .copied()
-                    .unwrap_or(0))
+                Ok(counter_register(&values, a - G_PLC))
             }
             a if (G_BUS..G_BUS + 8).contains(&a) => {
                 let c = self.engine.bus_counters();
                 let values = [c.unsolicited, c.events_lost, c.queue_full, c.establishments];
-                let word = values
-                    .get(usize::from((a - G_BUS) / 2))
-                    .copied()
-                    .unwrap_or(0);
-                Ok(split(word)
-                    .get(usize::from((a - G_BUS) % 2))
-                    .copied()
-                    .unwrap_or(0))
+                Ok(counter_register(&values, a - G_BUS))
             }
             _ => Err(Exception::IllegalDataAddress),
         }
@@ -1006,13 +992,7 @@ impl Gateway {
                 Some(LinkError::Timeout) => 0x0100,
                 Some(LinkError::Rejected(code)) => 0x0300 | u16::from(code.0),
             },
-            _ => {
-                let word = words.get(usize::from(offset / 2)).copied().unwrap_or(0);
-                split(word)
-                    .get(usize::from(offset % 2))
-                    .copied()
-                    .unwrap_or(0)
-            }
+            _ => counter_register(&words, offset),
         }
     }
 
@@ -1154,6 +1134,15 @@ impl Gateway {
         }
         Ok(())
     }
+}
+
+/// Register `offset` of a block of u32 counters, two registers each, high word first.
+fn counter_register(counters: &[u32], offset: u16) -> u16 {
+    let word = counters.get(usize::from(offset / 2)).copied().unwrap_or(0);
+    split(word)
+        .get(usize::from(offset % 2))
+        .copied()
+        .unwrap_or(0)
 }
 
 /// The point field a command channel request names: its offset from 0x400.
