@@ -280,7 +280,7 @@ def test_invalid_requests_get_exceptions_and_never_reach_the_bus(gateway):
         ("write 0x1234", lambda: gw.write(u, 0x1234, 1), ILLEGAL_DATA_ADDRESS),
         ("coil 0x0404", lambda: gw.coil(u, 0x0404, True), ILLEGAL_DATA_ADDRESS),
         ("FC04 DRG1", lambda: gw.read_input(u, DRG1), ILLEGAL_DATA_ADDRESS),
-        ("gateway 0x0007", lambda: gw.read(GATEWAY_UNIT, 0x0007), ILLEGAL_DATA_ADDRESS),
+        ("gateway 0x0050", lambda: gw.read(GATEWAY_UNIT, 0x0050), ILLEGAL_DATA_ADDRESS),
         ("direct 4 regs", lambda: gw.write(u, DIRECT, [0, 10_00, 0, 10]), ILLEGAL_DATA_ADDRESS),
         # Bad values: 03.
         ("POSR 16", lambda: gw.write(u, POSR, 16), ILLEGAL_DATA_VALUE),
