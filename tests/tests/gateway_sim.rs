@@ -633,3 +633,59 @@ fn bus_settings_watchdog_action_and_link_counters() {
     let frames_lo = (70_000u32 & 0xFFFF) as u16;
     assert_eq!(read(&mut h, 63, G_PLC, 4).unwrap(), [1, frames_lo, 0, 3]);
 }
+
+#[test]
+fn position_table_rows_read_on_demand_and_written_whole() {
+    let mut h = gateway(1);
+    let row = |n: u16| 0x1000 + 16 * n;
+    // Not read yet: exception 04 while the gateway fetches it, then the row.
+    assert_eq!(
+        read(&mut h, unit(0), row(3), 16),
+        Err(Exception::ServerDeviceFailure)
+    );
+    h.run_until(h.now + 200 * MS);
+    let r3 = read(&mut h, unit(0), row(3), 16).unwrap();
+    assert_eq!((r3[0], r3[1]), (0, 40_00), "PCMD 40.00 mm");
+    // Write row 5: 62.50 mm, band 0.10 mm, 80 mm/s, 0.3 G (DCMD = ACMD).
+    let mut values = [0u16; 16];
+    values[1] = 62_50;
+    values[3] = 10;
+    values[5] = 80_00;
+    values[10] = 30;
+    values[11] = 30;
+    write(&mut h, unit(0), row(5), &values).unwrap();
+    assert_eq!(settle(&mut h, 0, 5 * S), (CommandState::Done, 0));
+    let r5 = read(&mut h, unit(0), row(5), 16).unwrap();
+    assert_eq!(
+        (r5[1], r5[3], r5[5], r5[10], r5[11]),
+        (62_50, 10, 80_00, 30, 30),
+        "{r5:?}"
+    );
+    // The same row again: nothing is written (no command taken, no V5).
+    let taken = read(&mut h, unit(0), CMCT, 1).unwrap();
+    write(&mut h, unit(0), row(5), &values).unwrap();
+    assert_eq!(read(&mut h, unit(0), CMCT, 1).unwrap(), taken);
+    // CSTR to point 5 goes there.
+    home(&mut h, 0);
+    write(&mut h, unit(0), POSR, &[5]).unwrap();
+    write(&mut h, unit(0), DRG1, &[DRG1_SON | DRG1_CSTR]).unwrap();
+    assert_eq!(settle(&mut h, 0, 10 * S), (CommandState::Done, 0));
+    assert_eq!(pnow_mm100(&mut h, 0), 62_50);
+    // Refused: part of a row, an unsupported field, beyond the stroke.
+    assert_eq!(
+        write(&mut h, unit(0), row(5) + 2, &[0, 10]),
+        Err(Exception::IllegalDataAddress)
+    );
+    let mut zoned = values;
+    zoned[7] = 1;
+    assert_eq!(
+        write(&mut h, unit(0), row(6), &zoned),
+        Err(Exception::IllegalDataValue)
+    );
+    let mut far = values;
+    far[0] = 1;
+    assert_eq!(
+        write(&mut h, unit(0), row(6), &far),
+        Err(Exception::IllegalDataValue)
+    );
+}

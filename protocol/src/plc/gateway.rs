@@ -7,6 +7,7 @@ use crate::engine::{
     AxisSet, Duration, Engine, Event, Instant, Job, JobError, JobId, JobKind, JobOutput, Link,
     LinkError, Output, SubmitError,
 };
+use crate::jobs::PointReadback;
 use crate::line::Baud;
 use crate::memory::PointField;
 use crate::modbus::{BitTable, DataModel, Exception, RegisterTable, SlaveCounters};
@@ -151,6 +152,12 @@ pub struct Gateway {
     bus_line: (Baud, Rtim),
     /// The Modbus slave's counters, as its owner last reported them.
     plc_counters: SlaveCounters,
+    /// Point-table rows as last read from (or verified on) each axis, for 0x1000.
+    points: [[Option<PointReadback>; 16]; 16],
+    /// A row being fetched for 0x1000, per axis (one at a time).
+    point_reads: [Option<(JobId, PositionNo)>; 16],
+    /// A row being written through 0x1000, per axis.
+    point_writes: [Option<(JobId, PositionNo)>; 16],
 }
 
 /// `word` with `bit` set or cleared.
@@ -190,6 +197,9 @@ impl Gateway {
             channel: Channel::Idle,
             bus_line: (config.bus.baud, config.bus.rtim),
             plc_counters: SlaveCounters::default(),
+            points: [[None; 16]; 16],
+            point_reads: [None; 16],
+            point_writes: [None; 16],
         }
     }
 
@@ -388,8 +398,16 @@ impl Gateway {
 
     fn handle_events(&mut self) {
         while let Some(event) = self.engine.next_event() {
-            if let Event::JobDone { id, axis, result } = event {
-                self.job_done(id, axis, result);
+            match event {
+                Event::JobDone { id, axis, result } => self.job_done(id, axis, result),
+                // A controller that comes (back) online may have been replaced or edited:
+                // its point table is read afresh.
+                Event::Online(axis) => {
+                    if let Some(rows) = self.points.get_mut(index(axis)) {
+                        *rows = [None; 16];
+                    }
+                }
+                _ => {}
             }
         }
     }
@@ -410,7 +428,120 @@ impl Gateway {
             }
         }
         self.sync_done(id, axis, &result);
+        self.table_done(id, axis, &result);
         self.channel_done(id, result);
+    }
+
+    // -------------------------------------------------------------- position table (0x1000)
+
+    fn cache_row(&mut self, axis: Axis, point: PositionNo, row: Option<PointReadback>) {
+        if let Some(slot) = self
+            .points
+            .get_mut(index(axis))
+            .and_then(|rows| rows.get_mut(usize::from(point.get())))
+        {
+            *slot = row;
+        }
+    }
+
+    fn cached_row(&self, axis: Axis, row: u16) -> Option<PointReadback> {
+        self.points
+            .get(index(axis))
+            .and_then(|rows| rows.get(usize::from(row)))
+            .copied()
+            .flatten()
+    }
+
+    fn table_done(&mut self, id: JobId, axis: Axis, result: &Result<JobOutput, JobError>) {
+        let i = index(axis);
+        for tracked in [&mut self.point_reads, &mut self.point_writes] {
+            let Some(slot) = tracked.get_mut(i) else {
+                continue;
+            };
+            if let Some((job, point)) = *slot {
+                if job == id {
+                    *slot = None;
+                    let row = match result {
+                        Ok(JobOutput::Point(readback)) => Some(*readback),
+                        _ => None,
+                    };
+                    if let Some(rows) = self.points.get_mut(i) {
+                        if let Some(cell) = rows.get_mut(usize::from(point.get())) {
+                            *cell = row;
+                        }
+                    }
+                    return;
+                }
+            }
+        }
+    }
+
+    /// Rows of `axis` that a read of `count` registers at `address` needs and that are not
+    /// cached: fetch the first (one read per axis at a time). Whether all are there.
+    fn table_rows_ready(&mut self, axis: Axis, address: u16, count: usize) -> bool {
+        let missing = (0..count)
+            .filter_map(|i| address.checked_add(u16::try_from(i).ok()?))
+            .filter_map(super::table::locate)
+            .map(|(row, _)| row)
+            .find(|&row| self.cached_row(axis, row).is_none());
+        let Some(row) = missing else {
+            return true;
+        };
+        let busy = self
+            .point_reads
+            .get(index(axis))
+            .is_some_and(Option::is_some);
+        let point = u8::try_from(row).ok().and_then(PositionNo::new);
+        if let (false, Some(point)) = (busy, point) {
+            if let Ok(id) = self.engine.submit(Job {
+                axis,
+                kind: JobKind::ReadPoint(point),
+            }) {
+                if let Some(slot) = self.point_reads.get_mut(index(axis)) {
+                    *slot = Some((id, point));
+                }
+            }
+        }
+        false
+    }
+
+    /// A whole row written at 0x1000 + 16 n: stored with read-back verify, unless the
+    /// controller already holds exactly that (V5 is never spent on unchanged data).
+    fn table_write(&mut self, axis: Axis, address: u16, values: &[u16]) -> Result<(), Exception> {
+        let Some((row, 0)) = super::table::locate(address) else {
+            return Err(Exception::IllegalDataAddress);
+        };
+        if !(15..=16).contains(&values.len()) {
+            return Err(Exception::IllegalDataAddress);
+        }
+        let config = self
+            .config
+            .axes
+            .get(index(axis))
+            .copied()
+            .unwrap_or_default();
+        let data = super::table::point(values, &config)?;
+        let point = u8::try_from(row)
+            .ok()
+            .and_then(PositionNo::new)
+            .ok_or(Exception::IllegalDataAddress)?;
+        if self.cached_row(axis, row).is_some_and(|r| r.matches(&data)) {
+            return Ok(());
+        }
+        self.command(
+            axis,
+            JobKind::WritePoint {
+                point,
+                data,
+                verify: true,
+            },
+        )?;
+        let job = self.axes.get(index(axis)).and_then(|p| p.job);
+        if let (Some(id), Some(slot)) = (job, self.point_writes.get_mut(index(axis))) {
+            *slot = Some((id, point));
+        }
+        self.cache_row(axis, point, None);
+        Ok(())
     }
 
     // -------------------------------------------------------------- synchronized start
@@ -600,6 +731,12 @@ impl Gateway {
         let unexpected = (Reason::Unexpected as u16) << 8;
         match (self.channel, result) {
             (Channel::Reading(..), Ok(JobOutput::Point(readback))) => {
+                if let (Some(a), Some(p)) = (
+                    u8::try_from(axis).ok().and_then(Axis::new),
+                    u8::try_from(point).ok().and_then(PositionNo::new),
+                ) {
+                    self.cache_row(a, p, Some(readback));
+                }
                 let Some(field) = channel_field(field) else {
                     return self.answer_error(code, unexpected);
                 };
@@ -633,6 +770,12 @@ impl Gateway {
                 }
             }
             (Channel::Writing(..), Ok(output)) => {
+                if let (Some(a), Some(p)) = (
+                    u8::try_from(axis).ok().and_then(Axis::new),
+                    u8::try_from(point).ok().and_then(PositionNo::new),
+                ) {
+                    self.cache_row(a, p, None);
+                }
                 let count = match output {
                     JobOutput::Value(v) => u16::try_from(v).unwrap_or(u16::MAX - 1),
                     _ => 0,
@@ -684,7 +827,18 @@ impl Gateway {
             CMCT => Ok(plc.taken),
             DRG1 if table == RegisterTable::Holding => Ok(plc.drg1),
             POSR if table == RegisterTable::Holding => Ok(plc.posr),
-            _ => Err(Exception::IllegalDataAddress),
+            a => match (super::table::locate(a), table) {
+                (Some((row, offset)), RegisterTable::Holding) => {
+                    let readback = self
+                        .cached_row(axis, row)
+                        .ok_or(Exception::ServerDeviceFailure)?;
+                    super::table::registers(&readback, &config)
+                        .get(usize::from(offset))
+                        .copied()
+                        .ok_or(Exception::IllegalDataAddress)
+                }
+                _ => Err(Exception::IllegalDataAddress),
+            },
         }
     }
 
@@ -819,6 +973,7 @@ impl Gateway {
                 self.command(axis, kind)
             }
             (DRG1..=POSR, _) | (PNOW..=CMCT, _) => Err(Exception::IllegalDataValue),
+            (a, _) if super::table::locate(a).is_some() => self.table_write(axis, a, values),
             _ => Err(Exception::IllegalDataAddress),
         }
     }
@@ -1186,6 +1341,19 @@ impl DataModel for Gateway {
     ) -> Result<(), Exception> {
         self.plc_activity();
         let axis = self.config.axis_of_unit(unit);
+        if let Some(axis) = axis {
+            let table =
+                super::table::BASE..super::table::BASE + super::table::ROWS * super::table::ROW_LEN;
+            let touches = (0..out.len()).any(|i| {
+                address
+                    .checked_add(u16::try_from(i).unwrap_or(u16::MAX))
+                    .is_some_and(|a| table.contains(&a))
+            });
+            if touches && !self.table_rows_ready(axis, address, out.len()) {
+                // Not read from the controller yet: it is being fetched; ask again shortly.
+                return Err(Exception::ServerDeviceFailure);
+            }
+        }
         for (i, slot) in out.iter_mut().enumerate() {
             let a = u16::try_from(i)
                 .ok()

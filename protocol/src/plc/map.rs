@@ -231,6 +231,8 @@ pub const MAP: &[Entry] = &[
       "Position number CSTR moves to", Full),
     e(Unit::Axis, Holding, DIRECT, 9, "PCMD INP VCMD ACMD PPOW CTLF", "0.01 mm, 0.01 mm, 0.01 mm/s, 0.01 G, %, bits", "PCMD 0..stroke", true,
       "Direct numeric move, FC10 of 7 to 9 registers: writing it starts the move (CTLF b3 = incremental)", Partial("INP validated but the RC uses its execution-area band; PPOW and CTLF push bits refused (exception 03)")),
+    e(Unit::Axis, Holding, 0x1000, 256, "POSITION TABLE", "0.01 mm, 0.01 mm/s, 0.01 G", "rows 0-15", true,
+      "Row n at 0x1000+16n: PCMD(2) INP(2) VCMD(2) ZNMP(2) ZNLP(2) ACMD DCMD PPOW LPOW CTLF -; a whole row per write (FC10 of 15 or 16 registers), stored with read-back verify, not written when unchanged", Partial("a row not read yet answers 04 while it is fetched (about 70 ms); DCMD = ACMD; zones, PPOW, LPOW, CTLF read 0 and must be written 0")),
     e(Unit::Axis, Coil, COIL_SON, 1, "SON", "", "", true, "Servo on (level; same as DRG1 b12)", Full),
     e(Unit::Axis, Coil, COIL_ALRS, 1, "ALRS", "", "", true, "Alarm reset on the rising edge (servo turned off first, as the RC requires)", Full),
     e(Unit::Axis, Coil, COIL_STP, 1, "STP", "", "", true, "Pause: stop, and no motion while on; the move does not resume when released", Partial("RC has no resume")),

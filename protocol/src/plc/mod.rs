@@ -16,6 +16,7 @@ mod config;
 mod gateway;
 pub mod map;
 mod registers;
+pub mod table;
 
 pub use config::{
     AxisConfig, GatewayConfig, WatchdogAction, DEFAULT_GATEWAY_UNIT, DEFAULT_WATCHDOG_MS,
