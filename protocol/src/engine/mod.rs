@@ -380,9 +380,21 @@ impl Engine {
         self.phase.is_some()
     }
 
-    /// Run the communication establishment procedure (again).
+    /// Run the communication establishment procedure (again). A resend left over from a
+    /// procedure in progress is dropped: it belongs to the old one.
     pub fn establish(&mut self) {
+        if matches!(self.retry, Some(f) if f.origin == Origin::Establish) {
+            self.retry = None;
+        }
         self.phase = Some(Phase::SlowBaud);
+    }
+
+    /// Whether `axis` has a job running or waiting, or a stop waiting.
+    pub fn busy(&self, axis: Axis) -> bool {
+        let i = index(axis);
+        self.active.get(i).is_some_and(Option::is_some)
+            || self.stops.get(i).is_some_and(Option::is_some)
+            || self.queue.iter().any(|(_, job)| job.axis == axis)
     }
 
     /// Move the bus to another rate and RTIM: the establishment procedure runs with them

@@ -154,8 +154,11 @@ pub struct Gateway {
     plc_counters: SlaveCounters,
     /// Point-table rows as last read from (or verified on) each axis, for 0x1000.
     points: [[Option<PointReadback>; 16]; 16],
-    /// A row being fetched for 0x1000, per axis (one at a time).
-    point_reads: [Option<(JobId, PositionNo)>; 16],
+    /// A row being fetched for 0x1000, per axis (one at a time), with the row's generation.
+    point_reads: [Option<(JobId, PositionNo, u8)>; 16],
+    /// Per row: bumped whenever a write to it is submitted, so that a read that started
+    /// before the write cannot put the old row back in the cache.
+    row_gen: [[u8; 16]; 16],
     /// A row being written through 0x1000, per axis.
     point_writes: [Option<(JobId, PositionNo)>; 16],
 }
@@ -199,6 +202,7 @@ impl Gateway {
             plc_counters: SlaveCounters::default(),
             points: [[None; 16]; 16],
             point_reads: [None; 16],
+            row_gen: [[0; 16]; 16],
             point_writes: [None; 16],
         }
     }
@@ -279,8 +283,8 @@ impl Gateway {
     }
 
     /// SON is a level, as on a PCON: while the PLC holds it ON, a servo that went off (the alarm
-    /// reset turns it off, a servo job failed) is turned on again, once a second at most, when
-    /// no command is running and the axis is not in alarm. SON OFF is only ever acted on as a
+    /// reset turns it off, a servo job failed) is turned on again, every 2 s at most, when
+    /// nothing runs on the axis, it is not in alarm and the fail-safe is not latched. SON OFF is only ever acted on as a
     /// change: a controller's servo is on at power-up, and a PLC that never uses SON keeps it.
     fn hold_servo_on(&mut self, now: Instant) {
         for axis in self.config.bus.axes.iter() {
@@ -291,11 +295,17 @@ impl Gateway {
             let servo_off = state.report.is_some_and(|r| {
                 !r.status.servo() && !r.outputs.alarm_active() && state.link == Link::Online
             });
-            if plc.son() && servo_off && plc.job.is_none() && now >= plc.son_retry {
+            let failsafe = self.failsafe != 0 || self.watchdog_tripped;
+            let idle = plc.job.is_none() && !self.engine.busy(axis);
+            if plc.son() && servo_off && idle && !failsafe && now >= plc.son_retry {
                 if let Some(p) = self.axes.get_mut(index(axis)) {
-                    p.son_retry = now + Duration::from_millis(1000);
+                    p.son_retry = now + Duration::from_millis(2000);
                 }
-                let _ = self.command(axis, JobKind::Servo(true));
+                // Not a PLC command: CMST and CMCT keep showing the PLC's own.
+                let _ = self.engine.submit(Job {
+                    axis,
+                    kind: JobKind::Servo(true),
+                });
             }
         }
     }
@@ -452,26 +462,51 @@ impl Gateway {
             .flatten()
     }
 
+    fn row_generation(&self, axis: Axis, point: PositionNo) -> u8 {
+        self.row_gen
+            .get(index(axis))
+            .and_then(|g| g.get(usize::from(point.get())))
+            .copied()
+            .unwrap_or(0)
+    }
+
+    /// A write to the row is on its way: forget the cached row, and any read in flight.
+    fn row_written(&mut self, axis: Axis, point: PositionNo) {
+        if let Some(g) = self
+            .row_gen
+            .get_mut(index(axis))
+            .and_then(|g| g.get_mut(usize::from(point.get())))
+        {
+            *g = g.wrapping_add(1);
+        }
+        self.cache_row(axis, point, None);
+    }
+
     fn table_done(&mut self, id: JobId, axis: Axis, result: &Result<JobOutput, JobError>) {
         let i = index(axis);
-        for tracked in [&mut self.point_reads, &mut self.point_writes] {
-            let Some(slot) = tracked.get_mut(i) else {
-                continue;
-            };
-            if let Some((job, point)) = *slot {
-                if job == id {
+        let row = match result {
+            Ok(JobOutput::Point(readback)) => Some(*readback),
+            _ => None,
+        };
+        if let Some((job, point, generation)) = self.point_reads.get(i).copied().flatten() {
+            if job == id {
+                if let Some(slot) = self.point_reads.get_mut(i) {
                     *slot = None;
-                    let row = match result {
-                        Ok(JobOutput::Point(readback)) => Some(*readback),
-                        _ => None,
-                    };
-                    if let Some(rows) = self.points.get_mut(i) {
-                        if let Some(cell) = rows.get_mut(usize::from(point.get())) {
-                            *cell = row;
-                        }
-                    }
-                    return;
                 }
+                // Only if no write to the row was submitted since the read started.
+                if generation == self.row_generation(axis, point) {
+                    self.cache_row(axis, point, row);
+                }
+                return;
+            }
+        }
+        if let Some((job, point)) = self.point_writes.get(i).copied().flatten() {
+            if job == id {
+                if let Some(slot) = self.point_writes.get_mut(i) {
+                    *slot = None;
+                }
+                // The verified read-back, or nothing if the write failed.
+                self.cache_row(axis, point, row);
             }
         }
     }
@@ -491,14 +526,18 @@ impl Gateway {
             .point_reads
             .get(index(axis))
             .is_some_and(Option::is_some);
+        // An axis that does not answer is not asked (its frames would take the bus from the
+        // live axes at job priority).
+        let online = self.engine.axis(axis).link == Link::Online;
         let point = u8::try_from(row).ok().and_then(PositionNo::new);
-        if let (false, Some(point)) = (busy, point) {
+        if let (false, true, Some(point)) = (busy, online, point) {
+            let generation = self.row_generation(axis, point);
             if let Ok(id) = self.engine.submit(Job {
                 axis,
                 kind: JobKind::ReadPoint(point),
             }) {
                 if let Some(slot) = self.point_reads.get_mut(index(axis)) {
-                    *slot = Some((id, point));
+                    *slot = Some((id, point, generation));
                 }
             }
         }
@@ -525,22 +564,40 @@ impl Gateway {
             .ok()
             .and_then(PositionNo::new)
             .ok_or(Exception::IllegalDataAddress)?;
-        if self.cached_row(axis, row).is_some_and(|r| r.matches(&data)) {
+        // Unchanged, as the PLC sees it (the controller's row in the PLC's units): no write, so
+        // no V5 (reading a row and writing it back must not wear the memory).
+        let mut wanted = [0u16; 16];
+        for (slot, &v) in wanted.iter_mut().zip(values) {
+            *slot = v;
+        }
+        if let Some(w) = wanted.get_mut(11) {
+            if *w == 0 {
+                *w = values.get(10).copied().unwrap_or(0);
+            }
+        }
+        let unchanged = self
+            .cached_row(axis, row)
+            .is_some_and(|r| super::table::registers(&r, &config) == wanted);
+        if unchanged {
             return Ok(());
         }
-        self.command(
-            axis,
-            JobKind::WritePoint {
-                point,
-                data,
-                verify: true,
-            },
-        )?;
-        let job = self.axes.get(index(axis)).and_then(|p| p.job);
-        if let (Some(id), Some(slot)) = (job, self.point_writes.get_mut(index(axis))) {
+        // Not a PLC command: CMST keeps showing the axis' last command. The PLC reads the row
+        // back to see it stored (verified on the controller).
+        let id = self
+            .engine
+            .submit(Job {
+                axis,
+                kind: JobKind::WritePoint {
+                    point,
+                    data,
+                    verify: true,
+                },
+            })
+            .map_err(|_| Exception::ServerDeviceFailure)?;
+        self.row_written(axis, point);
+        if let Some(slot) = self.point_writes.get_mut(index(axis)) {
             *slot = Some((id, point));
         }
-        self.cache_row(axis, point, None);
         Ok(())
     }
 
@@ -551,7 +608,11 @@ impl Gateway {
         if mask.0 == 0 || mask.iter().any(|a| self.motion_blocked(a)) {
             return Err(Exception::IllegalDataValue);
         }
-        if self.sync_status == 1 {
+        // Busy: running, an `h` of an earlier attempt still out (its completion must be
+        // cancelled, not taken for this attempt's), or no room for one `h` per axis.
+        let leftover = self.sync_jobs.iter().any(Option::is_some) || self.sync_start.is_some();
+        let room = crate::engine::QUEUE_LEN.saturating_sub(self.engine.queued());
+        if self.sync_status == 1 || leftover || mask.iter().count() > room {
             return Err(Exception::ServerDeviceFailure);
         }
         Ok(())
@@ -731,12 +792,6 @@ impl Gateway {
         let unexpected = (Reason::Unexpected as u16) << 8;
         match (self.channel, result) {
             (Channel::Reading(..), Ok(JobOutput::Point(readback))) => {
-                if let (Some(a), Some(p)) = (
-                    u8::try_from(axis).ok().and_then(Axis::new),
-                    u8::try_from(point).ok().and_then(PositionNo::new),
-                ) {
-                    self.cache_row(a, p, Some(readback));
-                }
                 let Some(field) = channel_field(field) else {
                     return self.answer_error(code, unexpected);
                 };
@@ -765,17 +820,14 @@ impl Gateway {
                     },
                 };
                 match self.engine.submit(job) {
-                    Ok(w) => self.channel = Channel::Writing(w, request),
+                    Ok(w) => {
+                        self.row_written(axis, point);
+                        self.channel = Channel::Writing(w, request);
+                    }
                     Err(_) => self.answer_error(code, (Reason::QueueFull as u16) << 8),
                 }
             }
             (Channel::Writing(..), Ok(output)) => {
-                if let (Some(a), Some(p)) = (
-                    u8::try_from(axis).ok().and_then(Axis::new),
-                    u8::try_from(point).ok().and_then(PositionNo::new),
-                ) {
-                    self.cache_row(a, p, None);
-                }
                 let count = match output {
                     JobOutput::Value(v) => u16::try_from(v).unwrap_or(u16::MAX - 1),
                     _ => 0,
@@ -907,8 +959,12 @@ impl Gateway {
         let relative = ctlf & CTLF_INC != 0;
         let scale = config.scale;
         let target = if relative {
-            // The end of a relative move must be inside the travel too, from where it is now.
+            // The end of a relative move must be inside the travel too, from where it is now:
+            // so only from rest, with nothing queued that would move it first.
             let state = self.engine.axis(axis);
+            if self.engine.busy(axis) || state.moving() {
+                return Err(Exception::ServerDeviceFailure);
+            }
             let here = state
                 .position
                 .map(|p| scale.position_from_wire(p).0)
@@ -1174,6 +1230,19 @@ impl Gateway {
         })
     }
 
+    /// Nothing moving, running or waiting, and no establishment under way: APPLY (a break and
+    /// the whole establishment, during which no stop could reach an axis) is only safe then.
+    fn bus_idle(&self) -> bool {
+        !self.engine.establishing()
+            && self.sync_status != 1
+            && self
+                .config
+                .bus
+                .axes
+                .iter()
+                .all(|a| !self.engine.busy(a) && !self.engine.axis(a).moving())
+    }
+
     /// Check one gateway register write without applying it.
     fn gateway_check(&self, address: u16, value: u16) -> Result<(), Exception> {
         let valid = match address {
@@ -1182,7 +1251,7 @@ impl Gateway {
             G_BUS_BAUD => Baud::from_bits_per_second(u32::from(value) * 100).is_some(),
             G_BUS_RTIM => u8::try_from(value).ok().and_then(Rtim::new).is_some(),
             G_RETRIES => value <= 3,
-            G_APPLY => value <= 1,
+            G_APPLY => value == 0 || (value == 1 && self.bus_idle()),
             G_WD_ACTION => value <= 1,
             G_PIO_AXIS => value == 0xFFFF || value <= 15,
             G_SYNC_MASK => value & !self.config.bus.axes.0 == 0,
@@ -1291,6 +1360,12 @@ impl Gateway {
     }
 }
 
+/// Whether `address` is an axis register readable from `table` (the position table aside).
+fn axis_address(address: u16, table: RegisterTable) -> bool {
+    matches!(address, PNOW..=DSSE | CMST..=CMCT)
+        || (table == RegisterTable::Holding && (address == DRG1 || address == POSR))
+}
+
 /// Register `offset` of a block of u32 counters, two registers each, high word first.
 fn counter_register(counters: &[u32], offset: u16) -> u16 {
     let word = counters.get(usize::from(offset / 2)).copied().unwrap_or(0);
@@ -1342,6 +1417,19 @@ impl DataModel for Gateway {
         self.plc_activity();
         let axis = self.config.axis_of_unit(unit);
         if let Some(axis) = axis {
+            // Every address must exist in this table before anything is fetched from the bus.
+            for i in 0..out.len() {
+                let a = u16::try_from(i)
+                    .ok()
+                    .and_then(|i| address.checked_add(i))
+                    .ok_or(Exception::IllegalDataAddress)?;
+                let in_table = super::table::locate(a).is_some();
+                if (in_table && table != RegisterTable::Holding)
+                    || (!in_table && !axis_address(a, table))
+                {
+                    return Err(Exception::IllegalDataAddress);
+                }
+            }
             let table =
                 super::table::BASE..super::table::BASE + super::table::ROWS * super::table::ROW_LEN;
             let touches = (0..out.len()).any(|i| {
