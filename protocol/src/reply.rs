@@ -7,7 +7,7 @@ use crate::error::{Error, Field};
 use crate::field::{Reader, Writer};
 use crate::frame::Frame;
 use crate::status::{Inputs, Outputs, Status, StatusReport};
-use crate::types::{Address, Axis, Pulses};
+use crate::types::{Axis, Pulses};
 
 /// The response identifier, first data character of every response.
 pub const RESPONSE_ID: u8 = b'U';
@@ -238,16 +238,4 @@ pub enum Mismatch {
         /// The command echoed.
         received: Code,
     },
-}
-
-/// The address of a T4 response (echo) or a W4 response (next address).
-pub fn reply_address(reply: &Reply) -> Option<Address> {
-    match *reply {
-        Reply::Memory {
-            code: MemoryCode::SetWriteAddress | MemoryCode::WriteMemory,
-            value,
-            ..
-        } => Some(Address(value)),
-        _ => None,
-    }
 }

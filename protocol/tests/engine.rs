@@ -611,16 +611,12 @@ fn r6_rejoin_pace_single_axis() {
     let mut address = 0u32;
     let mut established = false;
     let mut rejoin_times = vec![];
-    let mut log = vec![];
     for _ in 0..100_000 {
         match engine.poll(now) {
             Output::Transmit(frame) => {
                 let r = Request::parse(&frame).unwrap();
                 if !established && !engine.establishing() {
                     established = true;
-                }
-                if established {
-                    log.push((now.0 / 1000, engine.line_baud(), r.command.code()));
                 }
                 if engine.line_baud() == Baud::B9600 && established {
                     rejoin_times.push(now.0 / 1000);
@@ -643,7 +639,6 @@ fn r6_rejoin_pace_single_axis() {
         }
     }
     let gaps: Vec<u64> = rejoin_times.windows(2).map(|w| w[1] - w[0]).collect();
-    let _ = log;
     // The first gap is the `p`'s own answer (RTIM still 255 ms at 9.6 kbit/s); after it, each
     // rejoin frame follows its predecessor's answer (~38 ms), not the probe back-off.
     assert!(gaps[0] < 300, "{gaps:?}");

@@ -515,7 +515,7 @@ impl Gateway {
     /// cached: fetch the first (one read per axis at a time). Whether all are there.
     fn table_rows_ready(&mut self, axis: Axis, address: u16, count: usize) -> bool {
         let missing = (0..count)
-            .filter_map(|i| address.checked_add(u16::try_from(i).ok()?))
+            .filter_map(|i| nth(address, i))
             .filter_map(super::table::locate)
             .map(|(row, _)| row)
             .find(|&row| self.cached_row(axis, row).is_none());
@@ -1036,7 +1036,7 @@ impl Gateway {
 
     fn axis_coils(&mut self, axis: Axis, address: u16, values: &[bool]) -> Result<(), Exception> {
         let coils = [COIL_SON, COIL_ALRS, COIL_STP, COIL_HOME, COIL_STOP];
-        let addresses = (0..values.len()).map(|i| address.checked_add(u16::try_from(i).ok()?));
+        let addresses = (0..values.len()).map(|i| nth(address, i));
         for a in addresses.clone() {
             if !a.is_some_and(|a| coils.contains(&a)) {
                 return Err(Exception::IllegalDataAddress);
@@ -1360,6 +1360,11 @@ impl Gateway {
     }
 }
 
+/// The address of the `i`-th register or coil of a request starting at `address`, if there is one.
+fn nth(address: u16, i: usize) -> Option<u16> {
+    u16::try_from(i).ok().and_then(|i| address.checked_add(i))
+}
+
 /// Whether `address` is an axis register readable from `table` (the position table aside).
 fn axis_address(address: u16, table: RegisterTable) -> bool {
     matches!(address, PNOW..=DSSE | CMST..=CMCT)
@@ -1401,8 +1406,8 @@ impl DataModel for Gateway {
             return Err(Exception::IllegalDataAddress);
         }
         for (i, slot) in out.iter_mut().enumerate() {
-            let a = u16::try_from(i).ok().and_then(|i| address.checked_add(i));
-            *slot = self.axis_coil(axis, a.ok_or(Exception::IllegalDataAddress)?)?;
+            let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
+            *slot = self.axis_coil(axis, a)?;
         }
         Ok(())
     }
@@ -1419,10 +1424,7 @@ impl DataModel for Gateway {
         if let Some(axis) = axis {
             // Every address must exist in this table before anything is fetched from the bus.
             for i in 0..out.len() {
-                let a = u16::try_from(i)
-                    .ok()
-                    .and_then(|i| address.checked_add(i))
-                    .ok_or(Exception::IllegalDataAddress)?;
+                let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
                 let in_table = super::table::locate(a).is_some();
                 if (in_table && table != RegisterTable::Holding)
                     || (!in_table && !axis_address(a, table))
@@ -1432,21 +1434,15 @@ impl DataModel for Gateway {
             }
             let table =
                 super::table::BASE..super::table::BASE + super::table::ROWS * super::table::ROW_LEN;
-            let touches = (0..out.len()).any(|i| {
-                address
-                    .checked_add(u16::try_from(i).unwrap_or(u16::MAX))
-                    .is_some_and(|a| table.contains(&a))
-            });
+            let touches =
+                (0..out.len()).any(|i| nth(address, i).is_some_and(|a| table.contains(&a)));
             if touches && !self.table_rows_ready(axis, address, out.len()) {
                 // Not read from the controller yet: it is being fetched; ask again shortly.
                 return Err(Exception::ServerDeviceFailure);
             }
         }
         for (i, slot) in out.iter_mut().enumerate() {
-            let a = u16::try_from(i)
-                .ok()
-                .and_then(|i| address.checked_add(i))
-                .ok_or(Exception::IllegalDataAddress)?;
+            let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
             *slot = match axis {
                 Some(axis) => self.axis_read(axis, table, a)?,
                 None => self.gateway_read(a)?,
@@ -1489,10 +1485,7 @@ impl DataModel for Gateway {
         }
         // Gateway unit: check every register, then apply them in order.
         for (i, &value) in values.iter().enumerate() {
-            let a = u16::try_from(i)
-                .ok()
-                .and_then(|i| address.checked_add(i))
-                .ok_or(Exception::IllegalDataAddress)?;
+            let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
             self.gateway_check(a, value)?;
         }
         // A start in this write is checked with the mask the same write sets.
@@ -1508,10 +1501,12 @@ impl DataModel for Gateway {
         }
         let request_range = G_REQUEST..G_REQUEST + REQ_LEN as u16;
         let touches_request =
-            (0..values.len()).any(|i| request_range.contains(&address.saturating_add(i as u16)));
+            (0..values.len()).any(|i| nth(address, i).is_some_and(|a| request_range.contains(&a)));
         let mut request = self.request;
         for (i, &value) in values.iter().enumerate() {
-            let a = address.saturating_add(u16::try_from(i).unwrap_or(0));
+            let Some(a) = nth(address, i) else {
+                continue;
+            };
             if let Some(slot) = a
                 .checked_sub(G_REQUEST)
                 .and_then(|o| request.get_mut(usize::from(o)))
@@ -1525,7 +1520,9 @@ impl DataModel for Gateway {
             None
         };
         for (i, &value) in values.iter().enumerate() {
-            let a = address.saturating_add(u16::try_from(i).unwrap_or(0));
+            let Some(a) = nth(address, i) else {
+                continue;
+            };
             if a == G_SYNC_START {
                 continue;
             }
@@ -1534,9 +1531,7 @@ impl DataModel for Gateway {
         if touches_request {
             self.channel_request(start)?;
         }
-        if let Some(i) =
-            (0..values.len()).find(|&i| address.saturating_add(i as u16) == G_SYNC_START)
-        {
+        if let Some(i) = (0..values.len()).find(|&i| nth(address, i) == Some(G_SYNC_START)) {
             let value = values.get(i).copied().unwrap_or(0);
             self.gateway_apply(G_SYNC_START, value)?;
         }
