@@ -182,8 +182,13 @@ impl PointData {
     }
 }
 
+/// Frames of [`write_point`]: Q1, six T4 + W4 pairs, V5.
+pub const WRITE_POINT_LEN: usize = 14;
+/// Frames of [`read_point`]: Q1, then one R4 per [`PointField::ALL`] entry.
+pub const READ_POINT_LEN: usize = 1 + PointField::ALL.len();
+
 /// Write a whole new point: Q1, six T4 + W4 pairs, V5 (the 14 frames of brief edition §5-3 2).
-pub fn write_point(axis: Axis, point: PositionNo, data: &PointData) -> [Step; 14] {
+pub fn write_point(axis: Axis, point: PositionNo, data: &PointData) -> [Step; WRITE_POINT_LEN] {
     let [f0, f1, f2, f3, f4, f5] = data.fields();
     let pair =
         |(field, value): (PointField, u32)| [address(axis, field), write(axis, field, value)];
@@ -212,7 +217,7 @@ pub fn write_point(axis: Axis, point: PositionNo, data: &PointData) -> [Step; 14
 }
 
 /// Read a point back: Q1, then R4 of every documented field ([`PointField::ALL`]).
-pub fn read_point(axis: Axis, point: PositionNo) -> [Step; 10] {
+pub fn read_point(axis: Axis, point: PositionNo) -> [Step; READ_POINT_LEN] {
     let read = |field: PointField| {
         step(
             axis,

@@ -23,6 +23,8 @@
 //! | [`modbus`] | The gateway's other side: a Modbus RTU slave for the PLC ([`modbus::Slave`]) |
 //! | [`pio`] | The PLC's discrete I/O (PCON pattern 0 signals) for one axis, as jobs and outputs |
 //! | [`plc`] | What the PLC sees: the Modbus register map, commands, fail-safe |
+//! | [`node`] | The one object the firmware drives: the gateway behind its lines and pins |
+//! | [`time`], [`axes`] | Time passed in by the caller; per-axis sets and maps |
 //!
 //! ```
 //! use protocol::{Axis, Command, Frame, Reply, Request};
@@ -54,6 +56,7 @@
 )]
 
 pub mod alarm;
+pub mod axes;
 mod bits;
 pub mod command;
 pub mod deframer;
@@ -66,14 +69,17 @@ pub mod jobs;
 pub mod line;
 pub mod memory;
 pub mod modbus;
+pub mod node;
 pub mod pio;
 pub mod plc;
 pub mod reply;
 pub mod status;
+pub mod time;
 mod types;
 pub mod units;
 
 pub use alarm::AlarmCode;
+pub use axes::{AxisMap, AxisSet};
 pub use command::{Buffered, Code, Command, Request};
 pub use deframer::Deframer;
 pub use error::{Error, Field};

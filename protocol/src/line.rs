@@ -92,9 +92,11 @@ pub const HOST_GAP_MS: u32 = 1;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum LineAction {
-    /// Hold the line low (a break) for [`BREAK_MS`]: every axis returns to 9.6 kbit/s and
-    /// RTIM 255 ms.
-    Break,
+    /// Start holding the line low (a break): every axis returns to 9.6 kbit/s and RTIM 255 ms.
+    /// [`LineAction::BreakEnd`] follows [`BREAK_MS`] later.
+    BreakStart,
+    /// Release the line: the break is over.
+    BreakEnd,
     /// Send [`COMM_CHANGE`](crate::frame::COMM_CHANGE) (STX + 14 ENQ + ETX); nobody answers.
     CommChange,
     /// Switch the gateway's own UART to this rate.

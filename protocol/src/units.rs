@@ -25,14 +25,29 @@
 //! exactly. Incremental moves use "the equations for the opposite homing direction" for negative
 //! distances (brief edition §4-3 3).
 
+use core::num::{NonZeroU16, NonZeroU64};
+
 use crate::types::{Acceleration, HomeDirection, Pulses, Velocity};
 
 /// Encoder pulses per motor revolution unless configured otherwise (complete edition §8-2).
-pub const DEFAULT_PULSES_PER_REV: u16 = 800;
+pub const DEFAULT_PULSES_PER_REV: NonZeroU16 = match NonZeroU16::new(800) {
+    Some(n) => n,
+    None => NonZeroU16::MIN,
+};
 /// The velocity factor: 0.2 rpm units per (mm/s per mm of lead), 60 / 0.2.
 const VELOCITY_FACTOR: i64 = 300;
 /// The acceleration factor 5883.99, in hundredths: 60 x 9.80665 x 1000 / 1000 / 0.1 x 100.
 const ACCELERATION_FACTOR_X100: i64 = 588_399;
+/// [`VELOCITY_FACTOR`] as a divisor.
+const VELOCITY_DIVISOR: NonZeroU64 = match NonZeroU64::new(VELOCITY_FACTOR as u64) {
+    Some(d) => d,
+    None => NonZeroU64::MIN,
+};
+/// [`ACCELERATION_FACTOR_X100`] as a divisor.
+const ACCELERATION_DIVISOR: NonZeroU64 = match NonZeroU64::new(ACCELERATION_FACTOR_X100 as u64) {
+    Some(d) => d,
+    None => NonZeroU64::MIN,
+};
 /// Positions the controller accepts: C0000000H-3FFFFFFFH (complete edition §7-2-2 PCMD).
 const POSITION_LIMIT: i64 = 0x3FFF_FFFF;
 
@@ -61,10 +76,18 @@ pub enum UnitError {
     TooSmall,
 }
 
-/// Screw lead in 0.01 mm (never zero).
+/// Screw lead in 0.01 mm. Never zero, by its type: every conversion divides by it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Lead(u16);
+pub struct Lead(NonZeroU16);
+
+/// A lead of `hundredths` that is known not to be zero (the chart's constants).
+const fn lead(hundredths: u16) -> Lead {
+    match NonZeroU16::new(hundredths) {
+        Some(h) => Lead(h),
+        None => Lead(NonZeroU16::MIN),
+    }
+}
 
 /// Lead types of common parameter REG1, bits 0-3 (complete edition §7-2-1), in 0.01 mm.
 const LEAD_TYPES: [u16; 10] = [250, 300, 400, 500, 600, 800, 1000, 1200, 1600, 2000];
@@ -72,22 +95,26 @@ const LEAD_TYPES: [u16; 10] = [250, 300, 400, 500, 600, 800, 1000, 1200, 1600, 2
 impl Lead {
     /// A lead of `hundredths` x 0.01 mm, if not zero.
     pub const fn from_hundredths(hundredths: u16) -> Option<Lead> {
-        if hundredths == 0 {
-            None
-        } else {
-            Some(Lead(hundredths))
+        match NonZeroU16::new(hundredths) {
+            Some(h) => Some(Lead(h)),
+            None => None,
         }
     }
 
     /// The lead in 0.01 mm.
     pub const fn hundredths(self) -> u16 {
-        self.0
+        self.0.get()
+    }
+
+    /// The lead as a divisor.
+    fn divisor(self) -> NonZeroU64 {
+        NonZeroU64::from(self.0)
     }
 
     /// The lead of a REG1 lead-type code (bits 0-3; 0 = 2.5 mm ... 9 = 20 mm).
     pub fn from_lead_type(reg1: u32) -> Option<Lead> {
         let index = usize::try_from(reg1 & 0x0F).ok()?;
-        LEAD_TYPES.get(index).map(|&h| Lead(h))
+        LEAD_TYPES.get(index).map(|&h| lead(h))
     }
 
     /// The lead of an actuator model and speed type (brief edition §4-3 7, screw lead chart).
@@ -99,7 +126,7 @@ impl Lead {
             RS => [250, 500, 1000],
             RM => [400, 800, 1600],
         };
-        Lead(match speed {
+        lead(match speed {
             SpeedType::L => low,
             SpeedType::M => medium,
             SpeedType::H => high,
@@ -172,26 +199,38 @@ impl Complement {
 pub struct Scale {
     /// Screw lead.
     pub lead: Lead,
-    /// Encoder pulses per revolution (800 for the documented actuators).
-    pub pulses_per_rev: u16,
+    /// Encoder pulses per revolution (800 for the documented actuators); never zero.
+    pub pulses_per_rev: NonZeroU16,
     /// Home end, which sets the sign of coordinates.
     pub home: HomeDirection,
     /// How negative values are written.
     pub complement: Complement,
 }
 
-/// Integer division of `n` by a positive `d`, rounded to nearest, halves away from zero.
-/// Never overflows: it does not form `2 * n` (a public caller may pass any `i64`).
-const fn div_round(n: i64, d: i64) -> i64 {
-    let (quotient, remainder) = (n / d, n % d);
-    // |remainder| < d, and every divisor here is small (at most 588_399), so 2 * |remainder|
-    // cannot overflow.
-    if 2 * remainder.abs() < d {
-        quotient
-    } else if n >= 0 {
-        quotient + 1
+/// Integer division of `n` by `d`, truncated toward zero. `d` cannot be zero (the division is
+/// `u64 / NonZeroU64`, which has no zero check) and the quotient of a magnitude cannot
+/// overflow, so this has no panic path.
+fn div_trunc(n: i64, d: NonZeroU64) -> i64 {
+    let q = i64::try_from(n.unsigned_abs() / d).unwrap_or(i64::MAX);
+    if n < 0 {
+        -q
     } else {
-        quotient - 1
+        q
+    }
+}
+
+/// Integer division of `n` by `d`, rounded to nearest, halves away from zero. Never overflows:
+/// it works on magnitudes and never forms `2 * n` (a public caller may pass any `i64`).
+fn div_round(n: i64, d: NonZeroU64) -> i64 {
+    let m = n.unsigned_abs();
+    let (q, r) = (m / d, m % d);
+    // r < d, so d - r cannot underflow; rounding up when r >= d - r avoids forming 2 * r.
+    let q = q.saturating_add(u64::from(r >= d.get().saturating_sub(r)));
+    let q = i64::try_from(q).unwrap_or(i64::MAX);
+    if n < 0 {
+        -q
+    } else {
+        q
     }
 }
 
@@ -208,13 +247,19 @@ impl Scale {
 
     /// Magnitude conversion: pulses for a length, truncated toward zero.
     pub fn pulses(&self, length: Length) -> i64 {
-        i64::from(length.0) * i64::from(self.pulses_per_rev) / i64::from(self.lead.0)
+        div_trunc(
+            i64::from(length.0) * i64::from(self.pulses_per_rev.get()),
+            self.lead.divisor(),
+        )
     }
 
     /// Magnitude conversion back: the length of `pulses`, rounded to 0.01 mm.
     pub fn length(&self, pulses: i64) -> Length {
-        let ppr = i64::from(self.pulses_per_rev.max(1));
-        let value = div_round(pulses.saturating_mul(i64::from(self.lead.0)), ppr);
+        let ppr = NonZeroU64::from(self.pulses_per_rev);
+        let value = div_round(
+            pulses.saturating_mul(i64::from(self.lead.hundredths())),
+            ppr,
+        );
         Length(clamp_i32(value))
     }
 
@@ -287,7 +332,7 @@ impl Scale {
 
     /// The velocity units of a speed, truncated.
     pub fn velocity(&self, speed: Speed) -> Result<Velocity, UnitError> {
-        let units = i64::from(speed.0) * VELOCITY_FACTOR / i64::from(self.lead.0);
+        let units = div_trunc(i64::from(speed.0) * VELOCITY_FACTOR, self.lead.divisor());
         u16::try_from(units)
             .ok()
             .and_then(Velocity::new)
@@ -297,15 +342,18 @@ impl Scale {
     /// The speed of a velocity value, rounded to 0.01 mm/s.
     pub fn speed(&self, velocity: Velocity) -> Speed {
         let value = div_round(
-            i64::from(velocity.get()) * i64::from(self.lead.0),
-            VELOCITY_FACTOR,
+            i64::from(velocity.get()) * i64::from(self.lead.hundredths()),
+            VELOCITY_DIVISOR,
         );
         Speed(u32::try_from(value).unwrap_or(0))
     }
 
     /// The acceleration units of an acceleration in G, truncated.
     pub fn acceleration(&self, accel: Accel) -> Result<Acceleration, UnitError> {
-        let units = i64::from(accel.0) * ACCELERATION_FACTOR_X100 / (100 * i64::from(self.lead.0));
+        let units = div_trunc(
+            i64::from(accel.0) * ACCELERATION_FACTOR_X100 / 100,
+            self.lead.divisor(),
+        );
         if units == 0 {
             return Err(UnitError::TooSmall);
         }
@@ -318,15 +366,15 @@ impl Scale {
     /// The acceleration in 0.01 G of an acceleration value, rounded.
     pub fn accel(&self, acceleration: Acceleration) -> Accel {
         let value = div_round(
-            i64::from(acceleration.get()) * 100 * i64::from(self.lead.0),
-            ACCELERATION_FACTOR_X100,
+            i64::from(acceleration.get()) * 100 * i64::from(self.lead.hundredths()),
+            ACCELERATION_DIVISOR,
         );
         Accel(u32::try_from(value).unwrap_or(0))
     }
 
     /// The brief edition's push value (address 0x406): push % x lead in mm, truncated.
     pub fn push_data(&self, percent: u8) -> u32 {
-        u32::from(percent) * u32::from(self.lead.0) / 100
+        u32::from(percent) * u32::from(self.lead.hundredths()) / 100
     }
 }
 

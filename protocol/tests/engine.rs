@@ -4,6 +4,7 @@
 use protocol::engine::*;
 use protocol::line::Baud;
 use protocol::memory::PointField;
+use protocol::time::{Duration, Instant};
 use protocol::*;
 
 fn axis(n: u8) -> Axis {
@@ -72,13 +73,10 @@ fn next_frame(engine: &mut Engine, now: &mut Instant) -> Request {
 
 /// When a real controller's answer would be complete: the command and the answer on the wire,
 /// the axis' RTIM, and 1 ms of slack (an earlier frame cannot be the answer).
-fn answer_delay(engine: &Engine, axis: Axis) -> engine::Duration {
+fn answer_delay(engine: &Engine, axis: Axis) -> Duration {
     let frame = timing::frame_time(engine.line_baud());
-    let rtim = engine::Duration::from_millis(u64::from(engine.axis(axis).rtim.get()));
-    frame
-        .plus(frame)
-        .plus(rtim)
-        .plus(engine::Duration::from_millis(1))
+    let rtim = Duration::from_millis(u64::from(engine.axis(axis).rtim.get()));
+    frame.plus(frame).plus(rtim).plus(Duration::from_millis(1))
 }
 
 fn reply(engine: &mut Engine, now: &mut Instant, reply: Reply) {
@@ -266,8 +264,8 @@ fn stop_goes_before_another_axis_retry_and_cancels_queued_jobs() {
     // Axis 0's poll times out: a retry is pending when the stop for axis 1 arrives.
     let poll0 = next_frame(&mut engine, &mut now);
     assert_eq!(poll0.axis, axis(0));
-    let _ = engine.poll(now + engine::Duration::from_millis(100));
-    now = now + engine::Duration::from_millis(100);
+    let _ = engine.poll(now + Duration::from_millis(100));
+    now = now + Duration::from_millis(100);
     let stop = engine
         .submit(Job {
             axis: axis(1),
@@ -288,16 +286,30 @@ fn stop_goes_before_another_axis_retry_and_cancels_queued_jobs() {
 
 #[test]
 fn full_queue_is_reported_not_dropped() {
-    let mut engine = Engine::new(config(1));
-    let job = Job {
-        axis: axis(0),
+    // One axis' share first: a full share refuses, other axes still get room.
+    let mut engine = Engine::new(config(16));
+    let job = |a: u8| Job {
+        axis: axis(a),
         kind: JobKind::Servo(true),
     };
-    for _ in 0..QUEUE_LEN {
-        engine.submit(job).unwrap();
+    for _ in 0..WAITING_PER_AXIS {
+        engine.submit(job(0)).unwrap();
     }
-    assert_eq!(engine.submit(job), Err(SubmitError::QueueFull));
+    assert_eq!(engine.room(axis(0)), 0);
+    assert_eq!(engine.submit(job(0)), Err(SubmitError::QueueFull));
     assert_eq!(engine.bus_counters().queue_full, 1);
+    // Then the whole queue.
+    let mut a = 1;
+    while engine.queued() < QUEUE_LEN {
+        engine.submit(job(a)).unwrap();
+        if engine.room(axis(a)) == 0 {
+            a += 1;
+        }
+    }
+    assert_eq!(engine.room(axis(15)), 0);
+    assert_eq!(engine.submit(job(15)), Err(SubmitError::QueueFull));
+    assert_eq!(engine.bus_counters().queue_full, 2);
+    let mut engine = Engine::new(config(1));
     assert_eq!(
         engine.submit(Job {
             axis: axis(5),
@@ -366,7 +378,11 @@ fn establishment_follows_section_6_1() {
         ]
         .map(|c| format!("{a}:{c}"))
     };
-    let mut expected = vec!["SetBaud(B9600)".to_string(), "Break".to_string()];
+    let mut expected = vec![
+        "SetBaud(B9600)".to_string(),
+        "BreakStart".to_string(),
+        "BreakEnd".to_string(),
+    ];
     expected.extend(per_axis(0));
     expected.extend(per_axis(1));
     expected.extend(
@@ -568,8 +584,8 @@ fn r5_pending_job_frame_beats_stop() {
                             kind: JobKind::MoveAbsolute(Pulses(8000)),
                         })
                         .unwrap();
-                    let out = engine.poll(now + engine::Duration::from_millis(2));
-                    now = now + engine::Duration::from_millis(2);
+                    let out = engine.poll(now + Duration::from_millis(2));
+                    now = now + Duration::from_millis(2);
                     println!("after rejoin frame: {out:?}");
                     engine
                         .submit(Job {

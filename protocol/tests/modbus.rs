@@ -8,11 +8,11 @@
 
 use proptest::prelude::*;
 use proptest::sample::select;
-use protocol::engine::{Duration, Instant};
 use protocol::modbus::{
-    crc, t1_5, t3_5, Adu, BitTable, DataModel, Exception, FrameError, Handled, PduError, Receiver,
-    RegisterTable, ReplyBuffer, Request, Slave,
+    crc, t1_5, t3_5, Adu, BitTable, Bits, BitsMut, DataModel, Exception, FrameError, Handled,
+    PduError, Receiver, RegisterTable, ReplyBuffer, Request, Slave,
 };
+use protocol::time::{Duration, Instant};
 
 // ------------------------------------------------------------------------------ test model
 
@@ -75,14 +75,16 @@ impl DataModel for Memory {
         _: u8,
         table: BitTable,
         address: u16,
-        out: &mut [bool],
+        out: &mut BitsMut<'_>,
     ) -> Result<(), Exception> {
         let bits = match table {
             BitTable::Coils => &self.coils,
             BitTable::DiscreteInputs => &self.discrete,
         };
         let range = self.check(address, out.len(), bits.len())?;
-        out.copy_from_slice(&bits[range]);
+        for (i, &bit) in bits[range].iter().enumerate() {
+            out.set(i, bit);
+        }
         Ok(())
     }
 
@@ -102,9 +104,11 @@ impl DataModel for Memory {
         Ok(())
     }
 
-    fn write_bits(&mut self, _: u8, address: u16, values: &[bool]) -> Result<(), Exception> {
+    fn write_bits(&mut self, _: u8, address: u16, values: Bits<'_>) -> Result<(), Exception> {
         let range = self.check(address, values.len(), self.coils.len())?;
-        self.coils[range].copy_from_slice(values);
+        for (slot, bit) in self.coils[range].iter_mut().zip(values.iter()) {
+            *slot = bit;
+        }
         self.writes += 1;
         Ok(())
     }

@@ -5,8 +5,9 @@
 //! recognised, with *STP and SON ON and the axis ready (servo on, homed, in position at point 3).
 
 use proptest::prelude::*;
-use protocol::engine::{AxisState, Counters, Duration, Instant, JobKind, Link};
+use protocol::engine::{AxisState, Counters, JobKind, Link};
 use protocol::pio::{Config, Pio, PioInputs as In, PioOutputs as Out, STOP_REPEAT};
+use protocol::time::{Duration, Instant};
 use protocol::{
     AlarmCode, HomeDirection, Inputs, Outputs, PositionNo, Status, StatusReport, RTIM_AFTER_BREAK,
 };
@@ -33,7 +34,6 @@ fn report(status: u8, alarm: u8, out: u8) -> StatusReport {
 
 fn axis(report: StatusReport, at_us: u64) -> AxisState {
     AxisState {
-        enabled: true,
         link: Link::Online,
         report: Some(report),
         report_at: Some(Instant(at_us)),

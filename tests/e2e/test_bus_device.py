@@ -89,7 +89,7 @@ def test_establishment_then_motion_over_a_serial_line(bus_gateway):
     for axis in (0, 1):
         wait_for(lambda: gw.read(unit(axis), LINK)[0] == 1, 10.0, f"axis {axis} online")
     log = gw.log_path.read_text(errors="replace")
-    assert "line: Break" in log and "break ended" in log, "a break was sent"
+    assert "line: BreakStart" in log and "line: BreakEnd" in log, "a break was sent"
     assert "line: CommChange" in log
     assert "line: SetBaud(B115200)" in log
     stats = gw.stats()

@@ -5,12 +5,14 @@
 //! their exact arrival times, so time-outs, host gaps and cycle times are those the wire gives.
 
 use crate::sim::Bus;
-use protocol::engine::{Engine, Event, Instant, Output};
+use protocol::engine::{Engine, Event, Output};
 use protocol::frame::COMM_CHANGE;
 use protocol::line::Baud;
 use protocol::line::{LineAction, BREAK_MS};
+use protocol::time::Instant;
 
-/// What the harness drives: the engine itself, or something that owns one (the gateway).
+/// What the harness drives: the engine itself, or something that owns one. (The whole
+/// gateway has its own harness, [`NodeHarness`](crate::node_harness::NodeHarness).)
 pub trait BusMaster {
     /// What to do at `now`.
     fn poll(&mut self, now: Instant) -> Output;
@@ -76,10 +78,13 @@ impl<M: BusMaster> Harness<M> {
                 self.bus.host_send(self.now, &frame.to_bytes());
             }
             Output::Line(LineAction::SetBaud(baud)) => self.bus.set_host_baud(baud),
-            Output::Line(LineAction::Break) => {
+            Output::Line(LineAction::BreakStart) => {
+                // The engine ends the break BREAK_MS later; the simulated line takes the
+                // whole break at once.
                 self.bus
                     .host_break(self.now, u64::from(BREAK_MS).saturating_mul(1000));
             }
+            Output::Line(LineAction::BreakEnd) => {}
             Output::Line(LineAction::CommChange) => {
                 self.bus.host_send(self.now, &COMM_CHANGE);
             }
@@ -133,21 +138,5 @@ impl<M: BusMaster> Harness<M> {
             seen = self.events.len();
         }
         None
-    }
-}
-
-impl BusMaster for protocol::plc::Gateway {
-    fn poll(&mut self, now: Instant) -> Output {
-        protocol::plc::Gateway::poll(self, now)
-    }
-    fn receive(&mut self, now: Instant, bytes: &[u8]) {
-        protocol::plc::Gateway::receive(self, now, bytes);
-    }
-    fn next_event(&mut self) -> Option<Event> {
-        // The gateway consumes the engine's events itself (command status, sequencing).
-        None
-    }
-    fn line_baud(&self) -> Baud {
-        self.engine().line_baud()
     }
 }

@@ -1,6 +1,7 @@
 //! Host-side tools and test harnesses for the Robo Cylinder gateway.
 pub mod harness;
 pub mod host;
+pub mod node_harness;
 pub mod pty;
 pub mod regmap;
 pub mod sim;

@@ -163,12 +163,11 @@ fn rejected_move_before_homing_reports_the_warning() {
         2 * S,
     );
     assert_eq!(result, Err(JobError::Rejected(AlarmCode(0x71))));
+    let state = h.engine.axis(axis(0));
+    assert_eq!(state.counters.rejections, 1);
     assert_eq!(
-        h.engine
-            .axis(axis(0))
-            .counters
-            .rejections_of(AlarmCode(0x71)),
-        1
+        state.last_error,
+        Some(protocol::engine::LinkError::Rejected(AlarmCode(0x71)))
     );
 }
 

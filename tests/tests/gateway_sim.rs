@@ -1,18 +1,20 @@
 //! The PLC side against simulated controllers, in virtual time: the register map, command
 //! edges and their status, validation (exceptions, and nothing reaches the bus), the fail-safe,
-//! the synchronized start and the command channel. Requests go through the same `DataModel`
+//! the synchronized start and the command channel. Requests are Modbus RTU frames to the
 //! calls the Modbus slave makes.
 #![allow(clippy::inconsistent_digit_grouping)]
 
-use protocol::engine::{AxisSet, Instant};
 use protocol::line::Baud;
 use protocol::memory::PointField;
-use protocol::modbus::{BitTable, DataModel, Exception, RegisterTable};
+use protocol::modbus::Exception;
+use protocol::node::Node;
 use protocol::plc::map::*;
-use protocol::plc::{AxisConfig, CommandState, Gateway, GatewayConfig, Reason};
+use protocol::plc::{AxisConfig, CommandState, GatewayConfig, Reason};
+use protocol::time::Instant;
 use protocol::units::{Lead, Length};
 use protocol::{Axis, PositionNo, Request, Rtim};
-use rc_host::harness::Harness;
+use protocol::{AxisMap, AxisSet};
+use rc_host::node_harness::{Answer, NodeHarness};
 use rc_host::sim::realtime::bus_at_line;
 use rc_host::sim::{BusConfig, ControllerConfig};
 
@@ -25,20 +27,20 @@ fn axis(n: u8) -> Axis {
 
 /// Axes 0..n at 115.2 kbit/s / RTIM 3 (no establishment), lead 8 mm like the simulator's
 /// actuator, 100 mm stroke; point 3 of every axis stored at 40 mm.
-fn gateway(n: u8) -> Harness<Gateway> {
+fn gateway(n: u8) -> NodeHarness {
     gateway_with(n, 100_00, None, &[])
 }
 
 /// [`gateway`] with another stroke, another stored point 3 (wire values), and silent axes.
-fn gateway_with(n: u8, stroke: i32, row3: Option<[u32; 10]>, silent: &[u8]) -> Harness<Gateway> {
+fn gateway_with(n: u8, stroke: i32, row3: Option<[u32; 10]>, silent: &[u8]) -> NodeHarness {
     let axes: Vec<Axis> = (0..n).map(axis).collect();
     let mut bus = bus_at_line(BusConfig::default(), &axes, Baud::B115200, Rtim::MIN);
     let mut config = GatewayConfig::new(AxisSet::first(n));
     config.bus.establish = false;
-    config.axes = [AxisConfig {
+    config.axes = AxisMap::new(AxisConfig {
         scale: scale(),
         stroke: Length(stroke),
-    }; 16];
+    });
     let mut row = [0u32; 10];
     row[0] = scale().position_to_wire(Length(40_00)).unwrap().to_wire();
     for &a in &axes {
@@ -52,7 +54,7 @@ fn gateway_with(n: u8, stroke: i32, row3: Option<[u32; 10]>, silent: &[u8]) -> H
     for &a in silent {
         bus.set_silent(axis(a), true);
     }
-    let mut h = Harness::new(Gateway::new(config), bus);
+    let mut h = NodeHarness::new(Node::new(config), bus);
     h.run_until(300 * MS);
     h
 }
@@ -69,52 +71,41 @@ fn unit(a: u8) -> u8 {
     a + 1
 }
 
-fn write(
-    h: &mut Harness<Gateway>,
-    unit: u8,
-    address: u16,
-    values: &[u16],
-) -> Result<(), Exception> {
-    h.engine.set_time(Instant(h.now));
-    h.engine.write_registers(unit, address, values)
+fn write(h: &mut NodeHarness, unit: u8, address: u16, values: &[u16]) -> Result<(), Exception> {
+    h.write(unit, address, values)
 }
 
-fn read(h: &mut Harness<Gateway>, unit: u8, address: u16, n: usize) -> Result<Vec<u16>, Exception> {
-    h.engine.set_time(Instant(h.now));
-    let mut out = vec![0; n];
-    h.engine
-        .read_registers(unit, RegisterTable::Holding, address, &mut out)?;
-    Ok(out)
+fn read(h: &mut NodeHarness, unit: u8, address: u16, n: usize) -> Result<Vec<u16>, Exception> {
+    h.read(unit, address, n as u16)
 }
 
-fn coil(h: &mut Harness<Gateway>, unit: u8, address: u16, on: bool) -> Result<(), Exception> {
-    h.engine.set_time(Instant(h.now));
-    h.engine.write_bits(unit, address, &[on])
+fn coil(h: &mut NodeHarness, unit: u8, address: u16, on: bool) -> Result<(), Exception> {
+    h.write_coil(unit, address, on)
 }
 
 /// Keep "polling" like a PLC (so the watchdog stays quiet) until the command of `a` settles.
-fn settle(h: &mut Harness<Gateway>, a: u8, timeout: u64) -> (CommandState, u16) {
+fn settle(h: &mut NodeHarness, a: u8, timeout: u64) -> (CommandState, u16) {
     let until = h.now + timeout;
     while h.now < until {
         h.run_until(h.now + 50 * MS);
         let _ = read(h, unit(a), CMST, 1);
-        let state = h.engine.command_state(axis(a));
+        let state = h.node.gateway().command_state(axis(a));
         if matches!(state.0, CommandState::Done | CommandState::Failed) {
             return state;
         }
     }
     panic!(
         "axis {a}: command did not settle: {:?}",
-        h.engine.command_state(axis(a))
+        h.node.gateway().command_state(axis(a))
     );
 }
 
-fn pnow_mm100(h: &mut Harness<Gateway>, a: u8) -> i32 {
+fn pnow_mm100(h: &mut NodeHarness, a: u8) -> i32 {
     let r = read(h, unit(a), PNOW, 2).unwrap();
     ((u32::from(r[0]) << 16) | u32::from(r[1])) as i32
 }
 
-fn home(h: &mut Harness<Gateway>, a: u8) {
+fn home(h: &mut NodeHarness, a: u8) {
     write(h, unit(a), DRG1, &[DRG1_SON]).unwrap();
     settle(h, a, S);
     write(h, unit(a), DRG1, &[DRG1_SON | DRG1_HOME]).unwrap();
@@ -124,7 +115,7 @@ fn home(h: &mut Harness<Gateway>, a: u8) {
 
 /// One command-channel exchange (ROBONET's five steps): write the request, wait for the
 /// response, clear the request, and check that the gateway cleared the response.
-fn exchange(h: &mut Harness<Gateway>, request: [u16; 6]) -> Vec<u16> {
+fn exchange(h: &mut NodeHarness, request: [u16; 6]) -> Vec<u16> {
     write(h, 63, G_REQUEST, &request).unwrap();
     let until = h.now + 5 * S;
     let mut response = vec![0; 5];
@@ -158,14 +149,9 @@ fn status_block_follows_the_axis() {
     assert_ne!(block[5] & (1 << 4), 0, "HEND after homing");
     assert_eq!(read(&mut h, unit(0), LINK, 1).unwrap(), [1]);
     // FC04 reads the same status registers; DRG1 is a holding register only.
-    let mut out = [0u16; 1];
-    assert!(h
-        .engine
-        .read_registers(unit(0), RegisterTable::Input, DSS1, &mut out)
-        .is_ok());
+    assert!(h.read_registers(unit(0), DSS1, 1, true).is_ok());
     assert_eq!(
-        h.engine
-            .read_registers(unit(0), RegisterTable::Input, DRG1, &mut out),
+        h.read_registers(unit(0), DRG1, 1, true),
         Err(Exception::IllegalDataAddress)
     );
 }
@@ -209,7 +195,7 @@ fn invalid_requests_get_exceptions_and_never_reach_the_bus() {
     home(&mut h, 0);
     h.run_until(h.now + 100 * MS);
     let sent_before = h.sent.len();
-    let motion = |h: &Harness<Gateway>| {
+    let motion = |h: &NodeHarness| {
         h.sent[sent_before..]
             .iter()
             .filter(|(_, r): &&(u64, Request)| {
@@ -263,8 +249,11 @@ fn invalid_requests_get_exceptions_and_never_reach_the_bus() {
         write(&mut h, 63, G_AXIS_CONFIG + 2, &[9]),
         Err(Exception::IllegalDataValue)
     );
-    // A request to a unit that is not served is ignored by the slave (serves() is false).
-    assert!(!h.engine.serves(unit(5)));
+    // A request to a unit that is not served is ignored by the slave: no answer.
+    assert_eq!(
+        h.request(unit(5), &[0x03, 0x90, 0x00, 0x00, 0x01]),
+        Answer::Silence
+    );
     h.run_until(h.now + 200 * MS);
     assert_eq!(
         motion(&h),
@@ -291,7 +280,7 @@ fn stp_stops_and_blocks_motion_and_the_stop_coil_stops() {
     // While STP is on, nothing may start.
     write(&mut h, unit(0), DRG1, &[DRG1_SON | DRG1_STP | DRG1_CSTR]).unwrap();
     assert_eq!(
-        h.engine.command_state(axis(0)),
+        h.node.gateway().command_state(axis(0)),
         (CommandState::Failed, (Reason::Paused as u16) << 8)
     );
     let dss1 = read(&mut h, unit(0), DSS1, 1).unwrap()[0];
@@ -303,11 +292,11 @@ fn stp_stops_and_blocks_motion_and_the_stop_coil_stops() {
     coil(&mut h, unit(0), COIL_STOP, true).unwrap();
     h.run_until(h.now + 500 * MS);
     assert!(!h.bus.controller(axis(0)).unwrap().moving(), "STOP coil");
-    let mut bits = [true; 1];
-    h.engine
-        .read_bits(unit(0), BitTable::Coils, COIL_STOP, &mut bits)
-        .unwrap();
-    assert_eq!(bits, [false], "STOP reads 0");
+    assert_eq!(
+        h.read_coils(unit(0), COIL_STOP, 1).unwrap(),
+        [false],
+        "STOP reads 0"
+    );
 }
 
 #[test]
@@ -338,8 +327,8 @@ fn plc_silence_trips_the_watchdog_and_stops_every_axis() {
     write(&mut h, 63, G_FAILSAFE, &[0]).unwrap();
     assert_eq!(read(&mut h, 63, G_FAILSAFE, 1).unwrap(), [0]);
     // The stop input latches bit 1.
-    h.engine.set_stop_input(Instant(h.now), true);
-    assert_eq!(h.engine.failsafe(), 2);
+    h.node.set_stop_input(Instant(h.now), true);
+    assert_eq!(h.node.gateway().failsafe(), 2);
 }
 
 #[test]
@@ -374,7 +363,7 @@ fn synchronized_start_of_two_axes() {
 #[test]
 fn command_channel_writes_once_and_skips_unchanged_data() {
     let mut h = gateway(1);
-    let stores = |h: &Harness<Gateway>| h.bus.controller(axis(0)).unwrap().stats().clone();
+    let stores = |h: &NodeHarness| h.bus.controller(axis(0)).unwrap().stats().clone();
     let v5_before = format!("{:?}", stores(&h));
     let field = (PointField::Velocity.address().0 - 0x400) as u16;
     let request = |code: u16, value: u32| [code, 0, 5, field, (value >> 16) as u16, value as u16];
@@ -422,19 +411,22 @@ fn a_broadcast_stop_coil_stops_every_axis() {
     }
     h.run_until(h.now + 300 * MS);
     assert!((0..3).all(|a| h.bus.controller(axis(a)).unwrap().moving()));
-    h.engine.set_time(Instant(h.now));
-    h.engine.write_bits(0, COIL_STOP, &[true]).unwrap();
+    h.write_coil(0, COIL_STOP, true).unwrap();
     h.run_until(h.now + 500 * MS);
     assert!((0..3).all(|a| !h.bus.controller(axis(a)).unwrap().moving()));
-    // Only DRG1, POSR and coils can be broadcast; bad values are refused before any effect.
-    assert_eq!(
-        write(&mut h, 0, DIRECT, &[0, 1, 0, 10, 0, 20_00, 30]),
-        Err(Exception::IllegalDataAddress)
+    // Only DRG1, POSR and coils can be broadcast; bad values are refused before any effect
+    // (a broadcast is never answered: the refusals are counted).
+    let refused = h.node.plc_counters().broadcast_errors;
+    let sent = h.sent.len();
+    write(&mut h, 0, DIRECT, &[0, 1, 0, 10, 0, 20_00, 30]).unwrap();
+    write(&mut h, 0, POSR, &[16]).unwrap();
+    assert_eq!(h.node.plc_counters().broadcast_errors, refused + 2);
+    h.run_until(h.now + 100 * MS);
+    assert!(
+        h.sent[sent..].iter().all(|(_, r)| !r.command.moves()),
+        "no move from a refused broadcast"
     );
-    assert_eq!(
-        write(&mut h, 0, POSR, &[16]),
-        Err(Exception::IllegalDataValue)
-    );
+    assert!((0..3).all(|a| read(&mut h, unit(a), POSR, 1).unwrap() == [0]));
     write(&mut h, 0, POSR, &[3]).unwrap();
     assert!((0..3).all(|a| read(&mut h, unit(a), POSR, 1).unwrap() == [3]));
 }
@@ -595,22 +587,22 @@ fn bus_settings_watchdog_action_and_link_counters() {
         Err(Exception::IllegalDataValue)
     );
     write(&mut h, 63, G_RETRIES, &[1]).unwrap();
-    assert_eq!(h.engine.engine().config().retries, 1);
+    assert_eq!(h.node.gateway().engine().config().retries, 1);
     write(&mut h, 63, G_BUS_BAUD, &[384, 10]).unwrap();
     assert_eq!(
-        h.engine.engine().line_baud(),
+        h.node.gateway().engine().line_baud(),
         Baud::B115200,
         "not before APPLY"
     );
     write(&mut h, 63, G_APPLY, &[1]).unwrap();
-    assert!(h.engine.engine().establishing());
+    assert!(h.node.gateway().engine().establishing());
     for _ in 0..40 {
         h.run_until(h.now + 100 * MS);
         let _ = read(&mut h, 63, G_VERSION, 1);
     }
     let c = h.bus.controller(axis(0)).unwrap();
     assert_eq!((c.baud(), c.rtim_ms()), (Baud::B38400, 10));
-    assert_eq!(h.engine.engine().line_baud(), Baud::B38400);
+    assert_eq!(h.node.gateway().engine().line_baud(), Baud::B38400);
     assert_eq!(read(&mut h, unit(0), LINK, 1).unwrap(), [1]);
     // Watchdog action "latch only": the event is latched, nothing is stopped.
     write(&mut h, 63, G_WD_ACTION, &[1]).unwrap();
@@ -633,16 +625,17 @@ fn bus_settings_watchdog_action_and_link_counters() {
         Err(Exception::IllegalDataValue)
     );
     write(&mut h, 63, G_PIO_AXIS, &[0]).unwrap();
-    assert_eq!(h.engine.config().pio_axis, Some(axis(0)));
-    // PLC-link counters come from the slave's owner.
-    let counters = protocol::modbus::SlaveCounters {
-        frames: 70_000,
-        crc_errors: 3,
-        ..Default::default()
-    };
-    h.engine.set_plc_counters(counters);
-    let frames_lo = (70_000u32 & 0xFFFF) as u16;
-    assert_eq!(read(&mut h, 63, G_PLC, 4).unwrap(), [1, frames_lo, 0, 3]);
+    assert_eq!(h.node.gateway().config().pio_axis, Some(axis(0)));
+    // PLC-link counters are the node's own slave's: a frame with a bad CRC is counted, and the
+    // frames counted so far include this very read's predecessors.
+    h.node.plc_received(
+        Instant(h.now),
+        &[0x3F, 0x03, 0x00, 0x00, 0x00, 0x01, 0x00, 0x00],
+    );
+    h.run_until(h.now + 10 * MS);
+    let frames = h.node.plc_counters().frames;
+    let [hi, lo] = [(frames >> 16) as u16, frames as u16];
+    assert_eq!(read(&mut h, 63, G_PLC, 4).unwrap(), [hi, lo, 0, 1]);
 }
 
 #[test]
@@ -739,7 +732,7 @@ fn row_wire(pcmd: i32) -> [u32; 10] {
 }
 
 /// Point `p`'s stored position on the controller, pulses.
-fn stored_pos(h: &Harness<Gateway>, a: u8, p: usize) -> i32 {
+fn stored_pos(h: &NodeHarness, a: u8, p: usize) -> i32 {
     h.bus.controller(axis(a)).unwrap().memory().nv.points[p][0] as i32
 }
 
@@ -827,7 +820,7 @@ fn apply_is_refused_unless_the_bus_is_idle() {
     write(&mut h, 63, G_BUS_BAUD, &[384]).unwrap();
     write(&mut h, 63, G_APPLY, &[1]).unwrap();
     h.run_until(h.now + 300 * MS);
-    assert!(h.engine.engine().establishing());
+    assert!(h.node.gateway().engine().establishing());
     assert_eq!(
         write(&mut h, 63, G_APPLY, &[1]),
         Err(Exception::IllegalDataValue),
@@ -869,17 +862,12 @@ fn invalid_table_reads_never_reach_the_bus() {
     let mut h = gateway(1);
     h.run_until(h.now + 50 * MS);
     let before = h.sent.len();
-    let mut out = [0u16; 16];
-    h.engine.set_time(Instant(h.now));
     assert_eq!(
-        h.engine
-            .read_registers(unit(0), RegisterTable::Input, ROW3, &mut out),
+        h.read_registers(unit(0), ROW3, 16, true),
         Err(Exception::IllegalDataAddress)
     );
-    let mut two = [0u16; 2];
     assert_eq!(
-        h.engine
-            .read_registers(unit(0), RegisterTable::Holding, 0x0FFF, &mut two),
+        h.read(unit(0), 0x0FFF, 2),
         Err(Exception::IllegalDataAddress)
     );
     h.run_until(h.now + 200 * MS);

@@ -2,21 +2,21 @@
 //! gateway, in virtual time: what a PLC wired to the 24 V inputs and outputs would see.
 #![allow(clippy::inconsistent_digit_grouping)]
 
-use protocol::engine::{AxisSet, Instant, Link};
 use protocol::line::Baud;
-use protocol::pio::{Config, Pio, PioInputs, PioOutputs};
-use protocol::plc::{AxisConfig, Gateway, GatewayConfig};
+use protocol::node::Node;
+use protocol::pio::{PioInputs, PioOutputs};
+use protocol::plc::{AxisConfig, GatewayConfig};
+use protocol::time::{Duration, Instant};
 use protocol::units::{Lead, Length, Scale};
-use protocol::{Axis, HomeDirection, PositionNo, Rtim};
-use rc_host::harness::Harness;
+use protocol::{Axis, AxisSet, HomeDirection, PositionNo, Rtim};
+use rc_host::node_harness::NodeHarness;
 use rc_host::sim::realtime::bus_at_line;
 use rc_host::sim::{BusConfig, ControllerConfig};
 
 const MS: u64 = 1000;
 
 struct Rig {
-    h: Harness<Gateway>,
-    pio: Pio,
+    h: NodeHarness,
     inputs: PioInputs,
     outputs: PioOutputs,
 }
@@ -38,14 +38,14 @@ fn rig() -> Rig {
     bus.add_controller(axis0(), controller);
     let mut config = GatewayConfig::new(AxisSet::first(1));
     config.bus.establish = false;
-    config.watchdog = protocol::engine::Duration::ZERO; // wired I/O: no Modbus watchdog
-    config.axes[0] = AxisConfig {
+    config.watchdog = Duration::ZERO; // wired I/O: no Modbus watchdog
+    config.pio_axis = Some(axis0());
+    config.axes[axis0()] = AxisConfig {
         scale,
         stroke: Length(100_00),
     };
     Rig {
-        h: Harness::new(Gateway::new(config), bus),
-        pio: Pio::new(Config::default()),
+        h: NodeHarness::new(Node::new(config), bus),
         // *STP is negative logic: ON means "run".
         inputs: PioInputs::STP_N,
         outputs: PioOutputs::SAFE,
@@ -53,21 +53,16 @@ fn rig() -> Rig {
 }
 
 impl Rig {
-    /// Run `ms` milliseconds, sampling the PIO every millisecond, as the firmware does.
+    /// Run `ms` milliseconds: the node samples the inputs every millisecond, as the firmware
+    /// does. *STP is wired to the gateway's stop input too (one PLC output to both terminals).
     fn run(&mut self, ms: u64) {
         for _ in 0..ms {
-            let now = self.h.now + MS;
-            self.h.run_until(now);
-            let state = *self.h.engine.engine().axis(axis0());
-            let link = state.link == Link::Online;
-            let (outputs, job) = self.pio.sample(Instant(now), self.inputs, &state, link);
-            self.outputs = outputs;
+            self.h.inputs = Some(self.inputs);
             self.h
-                .engine
-                .set_stop_input(Instant(now), !self.inputs.stp_n());
-            if let Some(kind) = job {
-                let _ = self.h.engine.command(axis0(), kind);
-            }
+                .node
+                .set_stop_input(Instant(self.h.now), !self.inputs.stp_n());
+            self.h.run_for(MS);
+            self.outputs = self.h.outputs;
         }
     }
 
@@ -114,7 +109,7 @@ fn son_home_strobe_a_position_and_read_pm() {
         "PEND drops while the move runs"
     );
     r.until(5_000, |o| o.pend() && o.pm() == 5);
-    let scale = r.h.engine.config().axes[0].scale;
+    let scale = r.h.node.gateway().config().axes[axis0()].scale;
     let target = scale.position_to_wire(Length(30_00)).unwrap();
     let c = r.h.bus.controller(axis0()).unwrap();
     assert_eq!(c.position(), i64::from(target.0), "point 5 is 30 mm");
@@ -141,7 +136,7 @@ fn stop_input_stops_at_once_and_blocks_the_next_strobe() {
     let c = r.h.bus.controller(axis0()).unwrap();
     assert!(!c.moving(), "stopped");
     assert!(c.position() > -3001, "short of the 30 mm target");
-    assert_eq!(r.h.engine.failsafe() & 2, 2, "stop input latched");
+    assert_eq!(r.h.node.gateway().failsafe() & 2, 2, "stop input latched");
     // A strobe while *STP is OFF starts nothing.
     let before = c.position();
     r.set(PioInputs::CSTR, true);

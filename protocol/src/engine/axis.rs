@@ -1,7 +1,7 @@
 //! What the engine knows about each axis, and what it has counted.
 
-use super::time::Instant;
-use crate::{AlarmCode, Pulses, Rtim, StatusReport, RTIM_AFTER_BREAK};
+use crate::time::Instant;
+use crate::{AlarmCode, Pulses, Rtim, StatusReport};
 
 /// Whether the axis answers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -14,10 +14,6 @@ pub enum Link {
     /// Did not answer a poll and its retries; probed at a reduced rate.
     Offline,
 }
-
-/// How many distinct rejection codes an axis keeps separate counts for; further codes are
-/// counted in [`Counters::rejections`] only.
-pub const REJECTION_CODES: usize = 6;
 
 /// Counters of one axis (wrapping; they are diagnostics, read by difference).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -35,31 +31,21 @@ pub struct Counters {
     pub bad_replies: u32,
     /// Commands resent after a time-out.
     pub retries: u32,
-    /// Rejected commands (status bit 7 or memory Func-Num 8-F), all codes.
+    /// Rejected commands (status bit 7 or memory Func-Num 8-F); the last code is in
+    /// [`AxisState::last_error`].
     pub rejections: u32,
-    /// Rejections by warning code: the first [`REJECTION_CODES`] codes seen, with counts.
-    pub rejections_by_code: [(AlarmCode, u32); REJECTION_CODES],
 }
 
 impl Counters {
-    pub(crate) fn count_rejection(&mut self, code: AlarmCode) {
-        self.rejections = self.rejections.wrapping_add(1);
-        let slot = self
-            .rejections_by_code
-            .iter_mut()
-            .find(|(c, n)| *c == code || *n == 0);
-        if let Some(slot) = slot {
-            *slot = (code, slot.1.wrapping_add(1));
-        }
-    }
-
-    /// Rejections counted for `code` (0 if not among the kept codes).
-    pub fn rejections_of(&self, code: AlarmCode) -> u32 {
-        self.rejections_by_code
-            .iter()
-            .find(|(c, n)| *c == code && *n > 0)
-            .map_or(0, |(_, n)| *n)
-    }
+    const ZERO: Counters = Counters {
+        frames_sent: 0,
+        replies: 0,
+        timeouts: 0,
+        bcc_errors: 0,
+        bad_replies: 0,
+        retries: 0,
+        rejections: 0,
+    };
 }
 
 /// Why the last transaction with an axis failed.
@@ -76,8 +62,6 @@ pub enum LinkError {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct AxisState {
-    /// Whether it is configured (polled).
-    pub enabled: bool,
     /// Whether it answers.
     pub link: Link,
     /// The last status response (any direct-format reply updates it).
@@ -97,26 +81,17 @@ pub struct AxisState {
 }
 
 impl AxisState {
-    pub(crate) const fn new() -> AxisState {
+    /// An axis not heard from yet, believed to answer after `rtim`.
+    pub(crate) const fn new(rtim: Rtim) -> AxisState {
         AxisState {
-            enabled: false,
             link: Link::Unknown,
             report: None,
             report_at: None,
             position: None,
             position_at: None,
-            rtim: RTIM_AFTER_BREAK,
+            rtim,
             last_error: None,
-            counters: Counters {
-                frames_sent: 0,
-                replies: 0,
-                timeouts: 0,
-                bcc_errors: 0,
-                bad_replies: 0,
-                retries: 0,
-                rejections: 0,
-                rejections_by_code: [(AlarmCode(0), 0); REJECTION_CODES],
-            },
+            counters: Counters::ZERO,
         }
     }
 

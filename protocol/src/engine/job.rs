@@ -3,7 +3,8 @@
 //! A program is computed on demand from the job ([`program`]), so an active job is only its
 //! description and a cursor: nothing is stored per step, nothing is allocated.
 
-use crate::jobs::{self, Expect, PointData, PointReadback, Step};
+use crate::axes::AxisSet;
+use crate::jobs::{self, Expect, PointData, PointReadback, Step, READ_POINT_LEN, WRITE_POINT_LEN};
 use crate::memory::PointField;
 use crate::{
     Acceleration, AlarmCode, Axis, Command, HomeDirection, PositionNo, Pulses, Request, ResetKind,
@@ -77,11 +78,24 @@ pub enum JobKind {
     },
     /// Read a point back (Q1 + R4 of every field).
     ReadPoint(PositionNo),
+    /// Store a whole point only if the controller does not hold it already: read it back
+    /// first, and if any field differs, write it (14 frames) and read it back to verify. V5
+    /// wears the controller's non-volatile memory (about 100,000 writes per area), so it is never
+    /// spent on data that is already there, whatever the gateway remembers.
+    StorePoint {
+        /// Point.
+        point: PositionNo,
+        /// Data.
+        data: PointData,
+    },
+    /// Wait until the axis reports positioning complete (PFIN), then read its position: the end
+    /// of a move started otherwise (by a synchronized start's `t`).
+    AwaitInPosition,
     /// Synchronized start (complete edition §6-4): `t` to this job's axis, which every axis
     /// receives, then wait until each axis of the set reports its buffered bit clear. Buffer the
     /// commands first with [`JobKind::Command`]`(`[`Command::Buffer`]`)` on each axis. `t` is not
     /// resent on a time-out (§5 (3)); the polls tell which axes started.
-    StartBuffered(super::AxisSet),
+    StartBuffered(AxisSet),
 }
 
 /// A job for an axis.
@@ -104,8 +118,10 @@ pub enum JobOutput {
     Status(StatusReport),
     /// The 32-bit value of the last memory response (R4 data, V5 write count, ...).
     Value(u32),
-    /// A point read back.
+    /// A point read back (after a write: the verified read-back).
     Point(PointReadback),
+    /// [`JobKind::StorePoint`] found the point already stored: nothing was written.
+    Unchanged(PointReadback),
 }
 
 /// Why a job failed.
@@ -129,6 +145,9 @@ pub enum JobError {
     VerifyFailed,
     /// The awaited state did not come within the motion time-out.
     WaitTimeout,
+    /// The axis does not answer (offline, or not heard from since start): the job was not run,
+    /// or was given up when the axis went offline, so that it can never run late.
+    Offline,
 }
 
 /// A state the job waits for, judged on status responses received after its last command.
@@ -142,7 +161,7 @@ pub(crate) enum Condition {
     /// The servo bit equals this.
     Servo(bool),
     /// Every axis of the set reports no buffered command (judged by the engine across axes).
-    Unbuffered(super::AxisSet),
+    Unbuffered(AxisSet),
 }
 
 impl Condition {
@@ -246,6 +265,7 @@ pub(crate) fn program(job: &Job, index: usize) -> Option<Op> {
             read_position(axis),
         ]),
         JobKind::Jog(end) => one(&[send(axis, Command::MoveAbsolute(end))]),
+        JobKind::AwaitInPosition => one(&[Op::Await(Condition::InPosition), read_position(axis)]),
         JobKind::Stop => one(&[send(axis, Command::CancelMotion)]),
         JobKind::AlarmReset => one(&[
             send(axis, Command::Servo(false)),
@@ -289,15 +309,33 @@ pub(crate) fn program(job: &Job, index: usize) -> Option<Op> {
             .get(index)
             .copied()
             .map(Op::Send),
+        JobKind::StorePoint { point, data } => {
+            let read = jobs::read_point(axis, point);
+            let write = jobs::write_point(axis, point, &data);
+            match index.checked_sub(read.len()) {
+                None => read.get(index).copied(),
+                Some(i) => match i.checked_sub(write.len()) {
+                    None => write.get(i).copied(),
+                    Some(j) => read.get(j).copied(),
+                },
+            }
+            .map(Op::Send)
+        }
     }
 }
+
+/// Where a [`JobKind::StorePoint`] has read the stored point and decides whether to write.
+pub(crate) const STORE_COMPARED: usize = READ_POINT_LEN;
 
 /// Where in the program an R4 of a read-back lands in the [`PointReadback`]: the read-back
 /// program is Q1 then one R4 per [`PointField::ALL`] entry.
 pub(crate) fn readback_slot(job: &Job, index: usize) -> Option<usize> {
     let start = match job.kind {
         JobKind::ReadPoint(_) => 0,
-        JobKind::WritePoint { verify: true, .. } => 14,
+        JobKind::WritePoint { verify: true, .. } => WRITE_POINT_LEN,
+        // The comparing read first, then (after the write) the verifying read.
+        JobKind::StorePoint { .. } if index < READ_POINT_LEN => 0,
+        JobKind::StorePoint { .. } => READ_POINT_LEN + WRITE_POINT_LEN,
         _ => return None,
     };
     index
@@ -305,10 +343,13 @@ pub(crate) fn readback_slot(job: &Job, index: usize) -> Option<usize> {
         .filter(|&i| i < PointField::ALL.len())
 }
 
-/// The data a `WritePoint` job wrote, to compare with its read-back.
+/// The data a verified `WritePoint` or a `StorePoint` writes, to compare with its read-back.
 pub(crate) fn written(job: &Job) -> Option<PointData> {
     match job.kind {
-        JobKind::WritePoint { data, .. } => Some(data),
+        JobKind::WritePoint {
+            data, verify: true, ..
+        }
+        | JobKind::StorePoint { data, .. } => Some(data),
         _ => None,
     }
 }

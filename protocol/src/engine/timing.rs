@@ -1,8 +1,8 @@
 //! The bus timing rules of the complete edition §2 and §5, as formulas in one place.
 
-use super::time::Duration;
 use crate::frame::FRAME_LEN;
 use crate::line::Baud;
+use crate::time::Duration;
 use crate::Rtim;
 
 /// Bits on the wire per character: start, 8 data, stop (8N1, complete edition §1).

@@ -16,10 +16,11 @@
 //! Application Protocol §4.3) and the [`Exception`]s it may return.
 //!
 //! ```
-//! use protocol::engine::Instant;
 //! use protocol::modbus::{
-//!     BitTable, DataModel, Exception, Handled, Receiver, RegisterTable, ReplyBuffer, Slave,
+//!     BitTable, Bits, BitsMut, DataModel, Exception, Handled, Receiver, RegisterTable,
+//!     ReplyBuffer, Slave,
 //! };
+//! use protocol::time::Instant;
 //!
 //! /// Ten holding registers at unit 0x11.
 //! struct Registers([u16; 10]);
@@ -28,7 +29,7 @@
 //!     fn serves(&self, unit: u8) -> bool {
 //!         unit == 0x11
 //!     }
-//!     fn read_bits(&mut self, _: u8, _: BitTable, _: u16, _: &mut [bool]) -> Result<(), Exception> {
+//!     fn read_bits(&mut self, _: u8, _: BitTable, _: u16, _: &mut BitsMut) -> Result<(), Exception> {
 //!         Err(Exception::IllegalFunction)
 //!     }
 //!     fn read_registers(
@@ -39,7 +40,7 @@
 //!         out.copy_from_slice(source);
 //!         Ok(())
 //!     }
-//!     fn write_bits(&mut self, _: u8, _: u16, _: &[bool]) -> Result<(), Exception> {
+//!     fn write_bits(&mut self, _: u8, _: u16, _: Bits) -> Result<(), Exception> {
 //!         Err(Exception::IllegalFunction)
 //!     }
 //!     fn write_registers(&mut self, _: u8, address: u16, values: &[u16]) -> Result<(), Exception> {
@@ -59,7 +60,7 @@
 //! let mut now = Instant(0);
 //! for &byte in &[0x11, 0x03, 0x00, 0x02, 0x00, 0x01, 0x27, 0x5A] {
 //!     receiver.push(now, byte);
-//!     now = now + protocol::engine::Duration::from_micros(573);
+//!     now = now + protocol::time::Duration::from_micros(573);
 //! }
 //! assert!(slave.poll(&mut receiver, now, &mut model, &mut reply).is_none(), "t3.5 not over");
 //! let deadline = receiver.next_deadline().ok_or("a frame is pending")?;
@@ -70,12 +71,14 @@
 //! ```
 
 pub mod adu;
+pub mod bits;
 pub mod crc;
 pub mod pdu;
 pub mod rtu;
 pub mod slave;
 
 pub use adu::{Adu, FrameError, MAX_ADU_LEN, MAX_PDU_LEN};
+pub use bits::{Bits, BitsMut};
 pub use pdu::{PduError, Request};
 pub use rtu::{t1_5, t3_5, Receiver, ReceiverCounters};
 pub use slave::{Handled, ReplyBuffer, Slave, SlaveCounters};
@@ -98,13 +101,14 @@ pub const BROADCAST: u8 = 0;
 pub trait DataModel {
     /// Whether requests to this unit id are answered; others are ignored (no reply, counted).
     fn serves(&self, unit: u8) -> bool;
-    /// FC01 (coils) / FC02 (discrete inputs): fill `out` with `out.len()` bits from `address`.
+    /// FC01 (coils) / FC02 (discrete inputs): fill `out` with `out.len()` bits from `address`
+    /// (all 0 when called).
     fn read_bits(
         &mut self,
         unit: u8,
         table: BitTable,
         address: u16,
-        out: &mut [bool],
+        out: &mut BitsMut<'_>,
     ) -> Result<(), Exception>;
     /// FC03 (holding) / FC04 (input registers): fill `out` from `address`.
     fn read_registers(
@@ -115,7 +119,7 @@ pub trait DataModel {
         out: &mut [u16],
     ) -> Result<(), Exception>;
     /// FC05/FC0F: write coils. Validate everything before applying anything.
-    fn write_bits(&mut self, unit: u8, address: u16, values: &[bool]) -> Result<(), Exception>;
+    fn write_bits(&mut self, unit: u8, address: u16, values: Bits<'_>) -> Result<(), Exception>;
     /// FC06/FC10: write holding registers. Validate everything before applying anything.
     fn write_registers(&mut self, unit: u8, address: u16, values: &[u16]) -> Result<(), Exception>;
 }

@@ -22,7 +22,7 @@
 //! counted in [`ReceiverCounters::overruns`].
 
 use super::adu::{Adu, FrameError, MAX_ADU_LEN};
-use crate::engine::{Duration, Instant};
+use crate::time::{Duration, Instant};
 
 /// Bits per character in RTU mode (Serial Line §2.5.1).
 pub const BITS_PER_CHAR: u64 = 11;

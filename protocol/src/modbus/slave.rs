@@ -11,19 +11,20 @@
 //!   and an [`Exception`] code.
 //!
 //! Memory: the reply goes to a caller-provided [`ReplyBuffer`] (256 bytes, the longest ADU).
-//! The model reads into and writes from scratch arrays inside the [`Slave`], sized to the
-//! Modbus maxima: 2000 `bool`s (FC01/02 read at most 2000 bits, FC0F writes at most 1968) and 125
-//! `u16`s (FC03/04 read at most 125 registers, FC10 writes at most 123), 2250 bytes in all. A
-//! packed 250-byte bit buffer would be smaller, but [`DataModel`] takes `&[bool]`, and handing
-//! it a long write in chunks would break "validate everything before applying anything". Keeping
-//! the scratch in the `Slave` (typically a `static` or a task's state) rather than on the stack
-//! keeps [`Slave::handle`]'s stack frame small.
+//! The model reads into scratch arrays inside the [`Slave`], sized to the Modbus maxima: 250
+//! bytes of packed bits (FC01/02 read at most 2000) and 125 `u16`s (FC03/04 read at most 125
+//! registers, FC10 writes at most 123), 500 bytes in all; FC0F hands the model the request's own
+//! packed bits ([`Bits`]). A long write is handed over whole, never in chunks, so the model can
+//! validate everything before applying anything. Keeping the scratch in the `Slave` (typically a
+//! `static` or a task's state) rather than on the stack keeps [`Slave::handle`]'s stack frame
+//! small.
 
 use super::adu::{Adu, FrameError, Writer, MAX_ADU_LEN};
+use super::bits::{Bits, BitsMut};
 use super::pdu::{self, PduError, Request, MAX_READ_BITS, MAX_READ_REGISTERS};
 use super::rtu::Receiver;
 use super::{BitTable, DataModel, Exception, RegisterTable, BROADCAST};
-use crate::engine::Instant;
+use crate::time::Instant;
 
 /// What [`Slave::handle`] did with a frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -140,7 +141,7 @@ impl ReplyBuffer {
 /// The Modbus RTU slave; see the [module documentation](self).
 #[derive(Clone, Debug)]
 pub struct Slave {
-    bits: [bool; MAX_READ_BITS as usize],
+    bits: [u8; MAX_READ_BITS.div_ceil(8) as usize],
     registers: [u16; MAX_READ_REGISTERS as usize],
     counters: SlaveCounters,
 }
@@ -155,7 +156,7 @@ impl Slave {
     /// A slave with zeroed counters.
     pub const fn new() -> Slave {
         Slave {
-            bits: [false; MAX_READ_BITS as usize],
+            bits: [0; MAX_READ_BITS.div_ceil(8) as usize],
             registers: [0; MAX_READ_REGISTERS as usize],
             counters: SlaveCounters {
                 frames: 0,
@@ -278,12 +279,12 @@ impl Slave {
     ) -> Result<(), Exception> {
         match *request {
             Request::ReadCoils { address, quantity } => {
-                let out = self.bits_mut(quantity)?;
-                model.read_bits(unit, BitTable::Coils, address, out)
+                let mut out = self.bits_mut(quantity)?;
+                model.read_bits(unit, BitTable::Coils, address, &mut out)
             }
             Request::ReadDiscreteInputs { address, quantity } => {
-                let out = self.bits_mut(quantity)?;
-                model.read_bits(unit, BitTable::DiscreteInputs, address, out)
+                let mut out = self.bits_mut(quantity)?;
+                model.read_bits(unit, BitTable::DiscreteInputs, address, &mut out)
             }
             Request::ReadHoldingRegisters { address, quantity } => {
                 let out = self.registers_mut(quantity)?;
@@ -294,7 +295,9 @@ impl Slave {
                 model.read_registers(unit, RegisterTable::Input, address, out)
             }
             Request::WriteSingleCoil { address, value } => {
-                model.write_bits(unit, address, &[value])
+                let byte = [u8::from(value)];
+                let bits = Bits::new(&byte, 1).ok_or(Exception::ServerDeviceFailure)?;
+                model.write_bits(unit, address, bits)
             }
             Request::WriteSingleRegister { address, value } => {
                 model.write_registers(unit, address, &[value])
@@ -304,12 +307,8 @@ impl Slave {
                 quantity,
                 values,
             } => {
-                let bits = self.bits_mut(quantity)?;
-                for (index, bit) in bits.iter_mut().enumerate() {
-                    *bit = values
-                        .get(index / 8)
-                        .is_some_and(|byte| (byte >> (index % 8)) & 1 != 0);
-                }
+                let bits =
+                    Bits::new(values, usize::from(quantity)).ok_or(Exception::IllegalDataValue)?;
                 model.write_bits(unit, address, bits)
             }
             Request::WriteMultipleRegisters { address, values } => {
@@ -328,13 +327,8 @@ impl Slave {
     }
 
     /// The first `quantity` scratch bits, cleared.
-    fn bits_mut(&mut self, quantity: u16) -> Result<&mut [bool], Exception> {
-        let bits = self
-            .bits
-            .get_mut(..usize::from(quantity))
-            .ok_or(Exception::ServerDeviceFailure)?;
-        bits.fill(false);
-        Ok(bits)
+    fn bits_mut(&mut self, quantity: u16) -> Result<BitsMut<'_>, Exception> {
+        BitsMut::new(&mut self.bits, usize::from(quantity)).ok_or(Exception::ServerDeviceFailure)
     }
 
     /// The first `quantity` scratch registers, cleared.
@@ -354,15 +348,9 @@ impl Slave {
         w.byte(request.function())?;
         match *request {
             Request::ReadCoils { quantity, .. } | Request::ReadDiscreteInputs { quantity, .. } => {
-                let bits = self.bits.get(..usize::from(quantity))?;
-                w.byte(u8::try_from(bits.len().div_ceil(8)).ok()?)?;
-                for chunk in bits.chunks(8) {
-                    let byte = chunk
-                        .iter()
-                        .rev()
-                        .fold(0u8, |byte, &bit| (byte << 1) | u8::from(bit));
-                    w.byte(byte)?;
-                }
+                let bytes = self.bits.get(..usize::from(quantity).div_ceil(8))?;
+                w.byte(u8::try_from(bytes.len()).ok()?)?;
+                w.bytes(bytes)?;
             }
             Request::ReadHoldingRegisters { quantity, .. }
             | Request::ReadInputRegisters { quantity, .. } => {

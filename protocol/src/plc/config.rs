@@ -1,6 +1,8 @@
 //! What the gateway is set up with.
 
-use crate::engine::{AxisSet, Config, Duration};
+use crate::axes::{AxisMap, AxisSet};
+use crate::engine::Config;
+use crate::time::Duration;
 use crate::units::{Complement, Lead, Length, Scale};
 use crate::{Axis, HomeDirection};
 
@@ -33,22 +35,58 @@ pub struct AxisConfig {
     pub stroke: Length,
 }
 
-impl Default for AxisConfig {
+impl AxisConfig {
     /// 6 mm lead, motor-end homing, 800 pulses/rev, 100 mm stroke, exact negation
     /// ([`Complement::Twos`]): a controller reports 0 pulses at home, which the brief edition's
     /// one's-complement rule would show the PLC as -0.01 mm; exact negation shows 0.00 mm.
     /// (The two differ by one pulse; AXISCFG selects either per axis.)
+    pub const DEFAULT: AxisConfig = AxisConfig {
+        scale: Scale {
+            lead: Lead::of(crate::units::ActuatorType::SS, crate::units::SpeedType::M),
+            pulses_per_rev: crate::units::DEFAULT_PULSES_PER_REV,
+            home: HomeDirection::MotorEnd,
+            complement: Complement::Twos,
+        },
+        stroke: Length(10_000), // 100 mm
+    };
+}
+
+impl Default for AxisConfig {
     fn default() -> AxisConfig {
-        AxisConfig {
-            scale: Scale {
-                lead: Lead::of(crate::units::ActuatorType::SS, crate::units::SpeedType::M),
-                pulses_per_rev: crate::units::DEFAULT_PULSES_PER_REV,
-                home: HomeDirection::MotorEnd,
-                complement: Complement::Twos,
-            },
-            stroke: Length(10_000), // 100 mm
-        }
+        AxisConfig::DEFAULT
     }
+}
+
+/// Parity of the PLC line (8 data bits; one stop bit with parity, as Modbus RTU frames
+/// characters of 11 bits, Serial Line §2.5.1; the line's timing uses 11 bits either way).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Parity {
+    /// No parity.
+    #[default]
+    None,
+    /// Even parity (the Modbus default).
+    Even,
+    /// Odd parity.
+    Odd,
+}
+
+/// The PLC line's settings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PlcLine {
+    /// Bits per second (sets the Modbus t1.5/t3.5 timers).
+    pub baud: u32,
+    /// Parity.
+    pub parity: Parity,
+}
+
+impl PlcLine {
+    /// 115.2 kbit/s, no parity.
+    pub const DEFAULT: PlcLine = PlcLine {
+        baud: 115_200,
+        parity: Parity::None,
+    };
 }
 
 /// Everything the gateway is set up with.
@@ -57,10 +95,12 @@ impl Default for AxisConfig {
 pub struct GatewayConfig {
     /// The gateway's own Modbus unit id (axis units are axis + 1).
     pub unit: u8,
+    /// The PLC line.
+    pub plc: PlcLine,
     /// The bus master's configuration; its `axes` are the axes the PLC can address.
     pub bus: Config,
     /// Per-axis units and travel.
-    pub axes: [AxisConfig; 16],
+    pub axes: AxisMap<AxisConfig>,
     /// PLC silence that trips the fail-safe; zero turns it off.
     pub watchdog: Duration,
     /// What the watchdog does.
@@ -73,15 +113,16 @@ pub struct GatewayConfig {
 
 impl GatewayConfig {
     /// A gateway for `axes` with defaults everywhere else.
-    pub fn new(axes: AxisSet) -> GatewayConfig {
+    pub const fn new(axes: AxisSet) -> GatewayConfig {
         GatewayConfig {
             unit: DEFAULT_GATEWAY_UNIT,
+            plc: PlcLine::DEFAULT,
             bus: Config {
                 axes,
-                ..Config::default()
+                ..Config::DEFAULT
             },
-            axes: [AxisConfig::default(); 16],
-            watchdog: Duration::from_millis(u64::from(DEFAULT_WATCHDOG_MS)),
+            axes: AxisMap::new(AxisConfig::DEFAULT),
+            watchdog: Duration::from_millis(DEFAULT_WATCHDOG_MS as u64),
             watchdog_action: WatchdogAction::StopAll,
             pio_axis: None,
             version: (0, 1, 0),

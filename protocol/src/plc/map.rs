@@ -201,6 +201,16 @@ const fn e(
     }
 }
 
+/// The entry of `unit` that holds `address`, if any.
+pub fn find(unit: Unit, address: u16) -> Option<&'static Entry> {
+    MAP.iter().find(|e| {
+        e.unit == unit
+            && address
+                .checked_sub(e.address)
+                .is_some_and(|offset| offset < e.count)
+    })
+}
+
 /// Every address the gateway answers. Anything else is exception 02.
 pub const MAP: &[Entry] = &[
     e(Unit::Axis, Status, PNOW, 2, "PNOW", "0.01 mm", "int32", false,

@@ -1,9 +1,10 @@
 //! What the PLC sees: the Modbus register map of the gateway and the logic behind it.
 //!
-//! [`Gateway`] owns the bus-master [`Engine`](crate::engine::Engine) and implements the Modbus
-//! [`DataModel`](crate::modbus::DataModel): register reads are answered from the engine's picture
-//! of the axes, writes become engine jobs. A write is validated completely before anything
-//! happens, so an invalid request never reaches the RS485 bus (it gets a Modbus exception).
+//! [`Gateway`] owns the bus-master [`Engine`](crate::engine::Engine); seen through
+//! [`Gateway::registers`] it is the Modbus [`DataModel`](crate::modbus::DataModel): register
+//! reads are answered from the engine's picture of the axes, writes become engine jobs. A write
+//! is validated completely before anything happens, so an invalid request never reaches the
+//! RS485 bus (it gets a Modbus exception).
 //!
 //! - Command bits act on rising edges, as PIO strobes do; SON and STP are levels.
 //! - A broadcast (unit 0) writes DRG1, POSR or the coils of every axis, e.g. a STOP for all.
@@ -11,14 +12,34 @@
 //! - Fail-safe: if the PLC has been silent for longer than the watchdog time (default
 //!   [`DEFAULT_WATCHDOG_MS`]), or the stop input drops, every axis gets a stop before anything
 //!   else, and the event is latched in FAILSAFE until the PLC clears it.
+//!
+//! | Module | What it holds |
+//! |---|---|
+//! | `gateway` | [`Gateway`]: commands and their fate, events, the held SON |
+//! | `model` | [`Registers`]: which unit, which addresses exist |
+//! | `axis_unit`, `gateway_unit` | The registers of an axis unit and of the gateway unit |
+//! | `failsafe`, `sync`, `channel`, `points` | The parts with state of their own |
+//! | [`map`], `registers`, [`table`] | The register map as data; status words; table rows |
+//! | `config` | [`GatewayConfig`] |
 
+mod axis_unit;
+mod channel;
 mod config;
+mod failsafe;
 mod gateway;
+mod gateway_unit;
 pub mod map;
+mod model;
+mod points;
 mod registers;
+mod sync;
 pub mod table;
 
 pub use config::{
-    AxisConfig, GatewayConfig, WatchdogAction, DEFAULT_GATEWAY_UNIT, DEFAULT_WATCHDOG_MS,
+    AxisConfig, GatewayConfig, Parity, PlcLine, WatchdogAction, DEFAULT_GATEWAY_UNIT,
+    DEFAULT_WATCHDOG_MS,
 };
+pub use failsafe::{CAUSE_STOP_INPUT, CAUSE_WATCHDOG};
 pub use gateway::{CommandState, Gateway, Reason};
+pub use model::Registers;
+pub use points::CACHED_ROWS;

@@ -42,12 +42,15 @@ fn bit(set: bool, mask: u16) -> u16 {
 /// The registers 0x9000..=0x9007, or `None` while the axis has not reported its status yet
 /// (the gateway then answers exception 04 rather than invent values). While `starting` (a
 /// motion command is taken and not finished), PEND and PM are off whatever the last status
-/// said, as on a PCON, which drops PEND when it accepts a start.
+/// said, as on a PCON, which drops PEND when it accepts a start. GHMS shows `homing`: the
+/// gateway's homing command runs and the axis is not homed yet (the RC's status has no homing
+/// bit, and "servo on, not in position" is also the motor initialisation after servo-on).
 pub(crate) fn status_block(
     state: &AxisState,
     config: &AxisConfig,
     paused: bool,
     starting: bool,
+    homing: bool,
 ) -> Option<[u16; 8]> {
     let report: StatusReport = state.report?;
     let position = state
@@ -80,7 +83,7 @@ pub(crate) fn status_block(
         | bit(paused || inputs.hold(), dss::STP)
         | bit(outputs.zfin(), dss::HEND)
         | bit(pend, dss::PEND);
-    let dsse = bit(moving, dss::MOVE) | bit(moving && !outputs.zfin(), dss::GHMS);
+    let dsse = bit(moving, dss::MOVE) | bit(homing && !outputs.zfin(), dss::GHMS);
     let [hi, lo] = split(position as u32);
     Some([hi, lo, almc, dipm, dopm, dss1, 0, dsse])
 }

@@ -34,10 +34,11 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use protocol::engine::{
-    timing, AxisSet, Config, Duration, Engine, Event, Job, JobError, JobId, JobKind, JobOutput,
-    Link,
+    timing, Config, Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Link,
 };
 use protocol::line::Baud;
+use protocol::time::Duration;
+use protocol::AxisSet;
 use protocol::{Axis, Command, HomeDirection, Pulses, Request, Rtim};
 use rc_host::harness::Harness;
 use rc_host::sim::rng::Rng;

@@ -1,44 +1,37 @@
 //! The gateway's job without hardware: four simulated Robo Cylinders on the RS485 side, and a
-//! scripted PLC on the other, writing and reading the same registers a Modbus master would
-//! (through the gateway's Modbus data model). Virtual time: the figures are exact and the run
-//! takes a moment.
+//! scripted PLC on the other, sending Modbus RTU frames to the firmware's own `Node`. Virtual
+//! time: the figures are exact and the run takes a moment.
 //!
 //! `cargo run -p rc-host --bin demo`
 //!
 //! Lengths are written in 0.01 mm (`75_50` is 75.50 mm), as the registers carry them.
 #![allow(clippy::inconsistent_digit_grouping)]
 
-use protocol::engine::{AxisSet, Instant};
 use protocol::line::Baud;
-use protocol::modbus::{DataModel, Exception, RegisterTable};
+use protocol::modbus::Exception;
+use protocol::node::Node;
 use protocol::plc::map::*;
-use protocol::plc::{AxisConfig, Gateway, GatewayConfig};
+use protocol::plc::{AxisConfig, GatewayConfig};
 use protocol::units::{Lead, Length, Scale};
-use protocol::{Axis, PositionNo};
-use rc_host::harness::Harness;
+use protocol::{Axis, AxisMap, AxisSet, PositionNo};
+use rc_host::node_harness::NodeHarness;
 use rc_host::sim::{Bus, BusConfig, ControllerConfig};
 
 const MS: u64 = 1000;
 const AXES: u8 = 4;
 
-type Rig = Harness<Gateway>;
+type Rig = NodeHarness;
 
 fn write(h: &mut Rig, unit: u8, address: u16, values: &[u16]) -> Result<(), Exception> {
-    h.engine.set_time(Instant(h.now));
-    h.engine.write_registers(unit, address, values)
+    h.write(unit, address, values)
 }
 
-fn read(h: &mut Rig, unit: u8, address: u16, n: usize) -> Vec<u16> {
-    h.engine.set_time(Instant(h.now));
-    let mut out = vec![0; n];
-    match h
-        .engine
-        .read_registers(unit, RegisterTable::Holding, address, &mut out)
-    {
-        Ok(()) => out,
+fn read(h: &mut Rig, unit: u8, address: u16, n: u16) -> Vec<u16> {
+    match h.read(unit, address, n) {
+        Ok(out) => out,
         Err(e) => {
             println!("    (exception {:02X} reading 0x{address:04X})", e.code());
-            out
+            vec![0; usize::from(n)]
         }
     }
 }
@@ -93,17 +86,17 @@ fn main() {
         bus.add_controller(a, c);
     }
     let mut config = GatewayConfig::new(AxisSet::first(AXES));
-    config.axes = [AxisConfig {
+    config.axes = AxisMap::new(AxisConfig {
         scale,
         stroke: Length(100_00),
-    }; 16];
-    let mut h = Harness::new(Gateway::new(config), bus);
+    });
+    let mut h = NodeHarness::new(Node::new(config), bus);
 
     println!(
         "== {AXES} simulated controllers power up at 9.6 kbit/s, RTIM 255 ms (their defaults)"
     );
     h.run_until(3_000 * MS);
-    let baud = h.engine.engine().line_baud();
+    let baud = h.node.gateway().engine().line_baud();
     let link: Vec<u16> = axes
         .iter()
         .map(|a| read(&mut h, a.get() + 1, LINK, 1)[0])

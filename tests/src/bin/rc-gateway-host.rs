@@ -18,9 +18,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use clap::{ArgGroup, Parser, ValueEnum};
 use nix::sys::signal::{self, SigHandler, Signal};
-use protocol::engine::AxisSet;
 use protocol::line::Baud;
 use protocol::units::{Lead, Length};
+use protocol::AxisSet;
 use protocol::HomeDirection;
 use rc_host::host::{BusLine, Ended, Host, Level, Options, Parity, PlcLine};
 
@@ -59,7 +59,8 @@ EXIT
 
 TIMING
   Bytes are stamped when read, not when they crossed the wire: the Modbus t1.5 gap check is off
-  unless --gap-check, t3.5 is that of --plc-baud. A USB adapter's latency timer (FTDI: 16 ms)
+  (as in the firmware), t3.5 is that of --plc-baud, and a controller's answer is accepted as
+  soon as it arrives (no earliest-answer bound: a pseudo-terminal has no wire time). A USB adapter's latency timer (FTDI: 16 ms)
   can split a frame: set it to 1 ms.";
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -95,9 +96,6 @@ struct Cli {
     /// The PLC line's parity (serial device only).
     #[arg(long, value_enum, default_value_t = ParityArg::None)]
     plc_parity: ParityArg,
-    /// Check the Modbus t1.5 inter-character gap (only with accurate byte timestamps).
-    #[arg(long)]
-    gap_check: bool,
     /// Bus side: N simulated controllers, axes 0..N-1 (1-16).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=16))]
     sim: Option<u8>,
@@ -275,7 +273,6 @@ fn options(cli: &Cli) -> Result<Options, String> {
             ParityArg::Even => Parity::Even,
             ParityArg::Odd => Parity::Odd,
         },
-        gap_check: cli.gap_check,
         bus,
         bus_baud,
         unit: cli.unit,
@@ -340,6 +337,7 @@ fn run(options: &Options) -> std::io::Result<Ended> {
         out.flush()?;
     }
     let axes: Vec<String> = host
+        .node()
         .gateway()
         .config()
         .bus

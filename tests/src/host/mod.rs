@@ -1,30 +1,30 @@
-//! The gateway on a PC: the firmware's engine and PLC logic ([`Gateway`], [`Slave`]) with std
-//! I/O, for end-to-end tests with a real Modbus master and for bench work with real adapters.
-//! The `rc-gateway-host` binary is a command line around [`Host`].
+//! The gateway on a PC: the firmware's own [`Node`] (bus master, Modbus slave and register
+//! map) with std I/O, for end-to-end tests with a real Modbus master and for bench work with
+//! real adapters. The `rc-gateway-host` binary is a command line around [`Host`].
 //!
 //! # The loop
-//! One thread, driven by a monotonic clock (µs since the start). Each pass:
-//! 1. ends a break on the bus that has lasted [`BREAK_MS`];
-//! 2. reads what the PLC wrote (non-blocking) and stamps each byte with the time of the read
-//!    ([`Receiver::push`]); a frame whose t3.5 silence ended before those bytes is handled first;
-//! 3. hands a frame that ended with t3.5 of silence to the [`Slave`] (the gateway's time set
-//!    first) and queues its reply for the PLC;
-//! 4. hands the bus bytes received to the gateway (a simulated bus gives each byte's arrival
+//! One thread, driven by a monotonic clock (µs since the start), doing what the firmware's
+//! task does ([`protocol::node`]'s hardware contract). Each pass:
+//! 1. reads what the PLC wrote (non-blocking) and hands it to the node, stamped with the time
+//!    of the read; a frame whose t3.5 silence ended before those bytes is handled first;
+//! 2. hands the bus bytes received to the node (a simulated bus gives each byte's arrival
 //!    time, a real one the time of the read);
-//! 5. polls the gateway until it is idle: frames go to the bus, line actions (rate, break,
-//!    communication change) are carried out;
-//! 6. reads control lines from standard input, if enabled;
-//! 7. sleeps until the gateway's deadline, the end of the PLC's t3.5, the simulated bus' next
-//!    event (at most every [`BUS_EVENT_GRAIN_US`]), the end of a break or [`Options::max_sleep`],
-//!    or until a line becomes readable.
+//! 3. polls the node until it is idle: frames go to the bus, Modbus replies to the PLC, line
+//!    actions (rate, break start and end, communication change) are carried out;
+//! 4. reads control lines from standard input, if enabled;
+//! 5. sleeps until the node's [`poll_at`](Node::poll_at), the simulated bus' next event (at
+//!    most every [`BUS_EVENT_GRAIN_US`]) or [`Options::max_sleep`], or until a line becomes
+//!    readable.
 //!
 //! # Timing limits
-//! Bytes are stamped when the loop reads them, not when they crossed the wire, so the Modbus
-//! t1.5 gap check is off unless asked for ([`Options::gap_check`]): a pseudo-terminal or a USB
-//! adapter delivers a frame in chunks whose spacing says nothing about the wire. t3.5 (end of
-//! frame) is that of [`Options::plc_baud`]; a USB adapter with a latency timer (FTDI: 16 ms by
-//! default) can split a frame with gaps longer than t3.5, so set it to 1 ms
-//! (`/sys/bus/usb-serial/devices/ttyUSB0/latency_timer`).
+//! Bytes are stamped when the loop reads them, not when they crossed the wire. The node's
+//! Modbus receiver does not check the t1.5 gap (a pseudo-terminal or a USB adapter delivers a
+//! frame in chunks whose spacing says nothing about the wire); t3.5 (end of frame) is that of
+//! [`Options::plc_baud`]; a USB adapter with a latency timer (FTDI: 16 ms by default) can split
+//! a frame with gaps longer than t3.5, so set it to 1 ms
+//! (`/sys/bus/usb-serial/devices/ttyUSB0/latency_timer`). The bus engine's earliest-answer
+//! bound is off ([`Config::wire_timing`](protocol::engine::Config::wire_timing)): neither a
+//! pseudo-terminal nor a USB adapter gives byte times that obey the line rate.
 
 mod control;
 pub mod log;
@@ -41,12 +41,14 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration as StdDuration, Instant as StdInstant};
 
-use protocol::engine::{AxisSet, Duration, Instant, Link, Output};
+use protocol::engine::Link;
 use protocol::frame::COMM_CHANGE;
 use protocol::line::{Baud, LineAction, BREAK_MS};
-use protocol::modbus::{Handled, Receiver, ReplyBuffer, Slave};
-use protocol::plc::{AxisConfig, Gateway, GatewayConfig};
+use protocol::node::{Action, Node};
+use protocol::plc::{AxisConfig, GatewayConfig};
+use protocol::time::{Duration, Instant};
 use protocol::units::{Lead, Length, Scale};
+use protocol::AxisSet;
 use protocol::{Axis, HomeDirection, PositionNo, Pulses, Request, Rtim};
 use serde_json::{json, Value};
 
@@ -62,7 +64,7 @@ pub const BUS_EVENT_GRAIN_US: u64 = 250;
 /// Reads per pass of the loop, at most, on each line.
 const MAX_READS_PER_PASS: usize = 16;
 
-/// Gateway outputs handled per pass, at most.
+/// Node actions handled per pass, at most.
 const MAX_OUTPUTS_PER_PASS: usize = 64;
 
 /// A Modbus burst longer than this is not kept for the log (the receiver drops it anyway).
@@ -110,8 +112,6 @@ pub struct Options {
     pub plc_baud: u32,
     /// The PLC line's parity (serial device only).
     pub plc_parity: Parity,
-    /// Check Modbus t1.5 gaps (only with byte timestamps close to the wire's).
-    pub gap_check: bool,
     /// The bus side.
     pub bus: BusLine,
     /// The RS485 line rate.
@@ -140,7 +140,6 @@ impl Default for Options {
             plc: PlcLine::Pty,
             plc_baud: 115_200,
             plc_parity: Parity::None,
-            gap_check: false,
             bus: BusLine::Sim {
                 axes: 1,
                 points: false,
@@ -174,19 +173,12 @@ pub enum Ended {
 
 enum BusSide {
     Sim(Box<Bus>),
-    Device {
-        port: Port,
-        /// When the break in progress ends (µs).
-        break_until: Option<u64>,
-    },
+    Device { port: Port },
 }
 
 /// The gateway between two lines; see the [module documentation](self).
 pub struct Host {
-    gateway: Gateway,
-    receiver: Receiver,
-    slave: Slave,
-    reply: ReplyBuffer,
+    node: Box<Node>,
     plc: Port,
     bus: BusSide,
     /// Frames sent to each axis, by command mnemonic.
@@ -194,6 +186,8 @@ pub struct Host {
     log: Log,
     /// The bytes of the Modbus burst in progress, for the log.
     burst: Vec<u8>,
+    /// The node's receiver counters when a burst was last logged.
+    seen_receiver: protocol::modbus::ReceiverCounters,
     started: StdInstant,
     last_bus_rx: u64,
     /// Standard input's partial line, when control lines are read.
@@ -226,10 +220,16 @@ pub fn gateway_config(options: &Options) -> io::Result<GatewayConfig> {
     }
     let mut config = GatewayConfig::new(axes);
     config.unit = options.unit;
+    config.plc = protocol::plc::PlcLine {
+        baud: options.plc_baud,
+        parity: options.plc_parity,
+    };
     config.bus.baud = options.bus_baud;
     config.bus.rtim = Rtim::MIN;
     config.bus.establish = establish;
     config.bus.echo = echo;
+    // Bytes are stamped when read: a pseudo-terminal or a USB adapter has no wire time.
+    config.bus.wire_timing = false;
     if !(1..=247).contains(&options.unit) || config.axis_of_unit(options.unit).is_some() {
         return Err(invalid(format!(
             "unit {}: 1-247 and not an axis unit (axis n is unit n + 1)",
@@ -247,10 +247,10 @@ pub fn gateway_config(options: &Options) -> io::Result<GatewayConfig> {
         return Err(invalid("the stroke must be positive".into()));
     }
     let scale = gateway_scale(options.lead, options.home);
-    config.axes = [AxisConfig {
+    config.axes = protocol::AxisMap::new(AxisConfig {
         scale,
         stroke: options.stroke,
-    }; 16];
+    });
     Ok(config)
 }
 
@@ -325,13 +325,13 @@ impl Host {
     /// Open both lines and build the gateway.
     pub fn new(options: &Options) -> io::Result<Host> {
         let config = gateway_config(options)?;
-        let gateway = Gateway::new(config);
+        let node = Box::new(Node::new(config));
         let bus = match &options.bus {
             BusLine::Sim { axes, points } => {
                 BusSide::Sim(Box::new(simulated_bus(options, *axes, *points)?))
             }
             BusLine::Device { path, .. } => {
-                let bps = gateway.engine().line_baud().bits_per_second();
+                let bps = node.gateway().engine().line_baud().bits_per_second();
                 port::termios_rate(options.bus_baud.bits_per_second()).ok_or_else(|| {
                     invalid(format!(
                         "{} bit/s: termios has no constant for this rate; use 9600, 19200, \
@@ -341,7 +341,6 @@ impl Host {
                 })?;
                 BusSide::Device {
                     port: Port::serial(path, bps, Parity::None)?,
-                    break_until: None,
                 }
             }
         };
@@ -349,21 +348,14 @@ impl Host {
             PlcLine::Pty => Port::pty(options.plc_baud)?,
             PlcLine::Device(path) => Port::serial(path, options.plc_baud, options.plc_parity)?,
         };
-        let receiver = if options.gap_check {
-            Receiver::new(options.plc_baud)
-        } else {
-            Receiver::new(options.plc_baud).without_gap_check()
-        };
         Ok(Host {
-            gateway,
-            receiver,
-            slave: Slave::new(),
-            reply: ReplyBuffer::new(),
+            node,
             plc,
             bus,
             sent: vec![BTreeMap::new(); 16],
             log: Log::new(options.log),
             burst: Vec::new(),
+            seen_receiver: protocol::modbus::ReceiverCounters::default(),
             started: StdInstant::now(),
             last_bus_rx: 0,
             control: options.control.then(Vec::new),
@@ -376,9 +368,9 @@ impl Host {
         self.plc.path()
     }
 
-    /// The gateway.
-    pub fn gateway(&self) -> &Gateway {
-        &self.gateway
+    /// The node (the gateway behind its lines).
+    pub fn node(&self) -> &Node {
+        &self.node
     }
 
     /// The simulated bus, if the bus is simulated.
@@ -405,9 +397,7 @@ impl Host {
                 return Ok(Ended::Stopped);
             }
             let now = self.now();
-            self.end_break(now)?;
             self.read_plc(now, &mut buf)?;
-            self.serve_modbus(now)?;
             self.read_bus(now, &mut buf)?;
             let until = self.drive(now)?;
             if let Some(ended) = self.read_control(now, &mut buf)? {
@@ -421,17 +411,6 @@ impl Host {
         }
     }
 
-    fn end_break(&mut self, now: u64) -> io::Result<()> {
-        if let BusSide::Device { port, break_until } = &mut self.bus {
-            if break_until.is_some_and(|t| now >= t) {
-                port.set_break(false)?;
-                *break_until = None;
-                self.log.note(now, "break ended");
-            }
-        }
-        Ok(())
-    }
-
     fn read_plc(&mut self, now: u64, buf: &mut [u8]) -> io::Result<()> {
         for _ in 0..MAX_READS_PER_PASS {
             let n = match self.plc.read(buf)? {
@@ -440,41 +419,12 @@ impl Host {
             };
             // A frame that ended (t3.5) before these bytes is handled before they start the
             // next one.
-            self.serve_modbus(now)?;
+            self.drive(now)?;
             let bytes = buf.get(..n).unwrap_or(&[]);
-            for &byte in bytes {
-                self.receiver.push(Instant(now), byte);
-            }
+            self.node.plc_received(Instant(now), bytes);
             if self.burst.len() + bytes.len() <= MAX_LOGGED_BURST {
                 self.burst.extend_from_slice(bytes);
             }
-        }
-        Ok(())
-    }
-
-    fn serve_modbus(&mut self, now: u64) -> io::Result<()> {
-        self.gateway.set_time(Instant(now));
-        while let Some(result) = self.slave.poll(
-            &mut self.receiver,
-            Instant(now),
-            &mut self.gateway,
-            &mut self.reply,
-        ) {
-            let outcome = match result {
-                Ok(Handled::Reply(len)) => {
-                    let bytes = self.reply.as_bytes().get(..len).unwrap_or(&[]);
-                    self.plc.send(bytes)?;
-                    "reply".to_string()
-                }
-                Ok(other) => format!("{other:?}"),
-                Err(error) => format!("{error:?}"),
-            };
-            self.gateway.set_plc_counters(self.slave.counters());
-            self.log.modbus_request(now, &self.burst, &outcome);
-            if !self.reply.is_empty() {
-                self.log.modbus_reply(now, self.reply.as_bytes());
-            }
-            self.burst.clear();
         }
         Ok(())
     }
@@ -486,7 +436,7 @@ impl Host {
                     let at = at.max(self.last_bus_rx);
                     self.last_bus_rx = at;
                     self.log.bus_received(at, byte);
-                    self.gateway.receive(Instant(at), &[byte]);
+                    self.node.bus_received(Instant(at), &[byte]);
                 }
             }
             BusSide::Device { port, .. } => {
@@ -499,34 +449,53 @@ impl Host {
                     for &byte in bytes {
                         self.log.bus_received(now, byte);
                     }
-                    self.gateway.receive(Instant(now), bytes);
+                    self.node.bus_received(Instant(now), bytes);
                 }
             }
         }
         Ok(())
     }
 
-    /// Poll the gateway until it is idle; its deadline.
+    /// Poll the node until it is idle; its deadline.
     fn drive(&mut self, now: u64) -> io::Result<Option<u64>> {
         for _ in 0..MAX_OUTPUTS_PER_PASS {
-            match self.gateway.poll(Instant(now)) {
-                Output::Transmit(frame) => {
-                    if let Ok(request) = Request::parse(&frame) {
+            match self.node.poll(Instant(now)) {
+                Some(Action::Bus(bytes)) => {
+                    if let Ok(request) = protocol::Frame::new_checked(&bytes)
+                        .and_then(|frame| Request::parse(&frame))
+                    {
                         if let Some(counts) = self.sent.get_mut(usize::from(request.axis.get())) {
                             *counts.entry(request.command.mnemonic()).or_default() += 1;
                         }
                     }
-                    self.log.bus_sent(now, &frame);
-                    let bytes = frame.to_bytes();
+                    if let Ok(frame) = protocol::Frame::new_checked(&bytes) {
+                        self.log.bus_sent(now, &frame);
+                    }
                     match &mut self.bus {
                         BusSide::Sim(bus) => {
                             bus.host_send(now, &bytes);
                         }
-                        BusSide::Device { port, .. } => port.send(&bytes)?,
+                        BusSide::Device { port } => port.send(&bytes)?,
                     }
                 }
-                Output::Line(action) => self.line(now, action)?,
-                Output::Idle(until) => return Ok(until.map(|t| t.0)),
+                Some(Action::Reply(bytes)) => {
+                    self.plc.send(bytes)?;
+                    self.log.modbus_request(now, &self.burst, "reply");
+                    self.log.modbus_reply(now, bytes);
+                    self.burst.clear();
+                }
+                Some(Action::Line(action)) => self.line(now, action)?,
+                None => {
+                    if self.node.receiver_counters() != self.seen_receiver {
+                        // A burst ended without a reply (a broadcast, another unit, noise).
+                        self.seen_receiver = self.node.receiver_counters();
+                        if !self.burst.is_empty() {
+                            self.log.modbus_request(now, &self.burst, "no reply");
+                            self.burst.clear();
+                        }
+                    }
+                    return Ok(self.node.poll_at().map(|t| t.0));
+                }
             }
         }
         // More to do: come back at once.
@@ -535,23 +504,26 @@ impl Host {
 
     fn line(&mut self, now: u64, action: LineAction) -> io::Result<()> {
         self.log.note(now, &format!("line: {action:?}"));
-        let break_us = u64::from(BREAK_MS) * 1_000;
         match (&mut self.bus, action) {
             (BusSide::Sim(bus), LineAction::SetBaud(baud)) => bus.set_host_baud(baud),
-            (BusSide::Sim(bus), LineAction::Break) => {
-                bus.host_break(now, break_us);
+            (BusSide::Sim(bus), LineAction::BreakStart) => {
+                // The node ends the break BREAK_MS later; the simulated line takes it whole.
+                bus.host_break(now, u64::from(BREAK_MS) * 1_000);
             }
+            (BusSide::Sim(_), LineAction::BreakEnd) => {}
             (BusSide::Sim(bus), LineAction::CommChange) => {
                 bus.host_send(now, &COMM_CHANGE);
             }
-            (BusSide::Device { port, .. }, LineAction::SetBaud(baud)) => {
+            (BusSide::Device { port }, LineAction::SetBaud(baud)) => {
+                port.drain()?;
                 port.set_rate(baud.bits_per_second())?;
             }
-            (BusSide::Device { port, break_until }, LineAction::Break) => {
+            (BusSide::Device { port }, LineAction::BreakStart) => {
+                port.drain()?;
                 port.set_break(true)?;
-                *break_until = Some(now + break_us);
             }
-            (BusSide::Device { port, .. }, LineAction::CommChange) => port.send(&COMM_CHANGE)?,
+            (BusSide::Device { port }, LineAction::BreakEnd) => port.set_break(false)?,
+            (BusSide::Device { port }, LineAction::CommChange) => port.send(&COMM_CHANGE)?,
         }
         Ok(())
     }
@@ -563,9 +535,6 @@ impl Host {
         if let Some(t) = until {
             wake = wake.min(t);
         }
-        if let Some(t) = self.receiver.next_deadline() {
-            wake = wake.min(t.0);
-        }
         let mut fds: Vec<(BorrowedFd<'_>, bool)> = vec![(self.plc.fd(), self.plc.output_pending())];
         match &self.bus {
             BusSide::Sim(bus) => {
@@ -573,10 +542,7 @@ impl Host {
                     wake = wake.min(t.max(now + BUS_EVENT_GRAIN_US));
                 }
             }
-            BusSide::Device { port, break_until } => {
-                if let Some(t) = break_until {
-                    wake = wake.min(*t);
-                }
+            BusSide::Device { port } => {
                 fds.push((port.fd(), port.output_pending()));
             }
         }
@@ -666,7 +632,7 @@ impl Host {
             },
             Control::Stats => (self.stats(now), None),
             Control::StopInput(active) => {
-                self.gateway.set_stop_input(Instant(now), active);
+                self.node.set_stop_input(Instant(now), active);
                 (json!({"ok": true, "cmd": "stop-input"}), None)
             }
             Control::Quit => (json!({"ok": true, "cmd": "quit"}), Some(Ended::Quit)),
@@ -676,9 +642,10 @@ impl Host {
 
     /// What `stats` answers.
     pub fn stats(&self, now: u64) -> Value {
-        let slave = self.slave.counters();
-        let receiver = self.receiver.counters();
-        let config = self.gateway.config();
+        let slave = self.node.plc_counters();
+        let receiver = self.node.receiver_counters();
+        let gateway = self.node.gateway();
+        let config = gateway.config();
         let axes: Vec<Value> = config
             .bus
             .axes
@@ -691,8 +658,8 @@ impl Host {
                     .filter(|(mnemonic, _)| !matches!(**mnemonic, "n" | "R4"))
                     .map(|(_, count)| count)
                     .sum();
-                let (state, reason) = self.gateway.command_state(axis);
-                let link = match self.gateway.engine().axis(axis).link {
+                let (state, reason) = gateway.command_state(axis);
+                let link = match gateway.engine().axis(axis).link {
                     Link::Unknown => "unknown",
                     Link::Online => "online",
                     Link::Offline => "offline",
@@ -705,7 +672,7 @@ impl Host {
                     "cmer": reason,
                     "link": link,
                 });
-                let scale = config.axes.get(i).map(|c| c.scale);
+                let scale = Some(config.axes[axis].scale);
                 if let (Some(c), Some(scale), Value::Object(map)) = (
                     self.sim().and_then(|bus| bus.controller(axis)),
                     scale,
@@ -739,7 +706,7 @@ impl Host {
             "ok": true,
             "cmd": "stats",
             "time_us": now,
-            "failsafe": self.gateway.failsafe(),
+            "failsafe": gateway.failsafe(),
             "modbus": {
                 "frames": slave.frames,
                 "replies": slave.replies,

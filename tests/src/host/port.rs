@@ -12,16 +12,8 @@ use nix::errno::Errno;
 use nix::fcntl::{fcntl, FcntlArg, OFlag};
 use nix::sys::termios::{self, BaudRate, ControlFlags, InputFlags, SetArg};
 
-/// Parity of a serial line (8 data bits, 1 stop bit).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Parity {
-    /// 8N1.
-    None,
-    /// 8E1 (Modbus RTU's default).
-    Even,
-    /// 8O1.
-    Odd,
-}
+/// Parity of a serial line (8 data bits, 1 stop bit): the PLC line's setting.
+pub use protocol::plc::Parity;
 
 /// A serial line: the master side of a pseudo-terminal, or a serial device.
 #[derive(Debug)]

@@ -186,9 +186,8 @@ pub struct ScaleArgs {
     #[arg(long)]
     pub twos: bool,
     /// Encoder pulses per motor revolution
-    #[arg(long, default_value_t = DEFAULT_PULSES_PER_REV,
-          value_parser = clap::value_parser!(u16).range(1..))]
-    pub ppr: u16,
+    #[arg(long, default_value_t = DEFAULT_PULSES_PER_REV)]
+    pub ppr: std::num::NonZeroU16,
 }
 
 impl ScaleArgs {

@@ -129,9 +129,13 @@
 //! there is no second vocabulary to map and keep in step, and tests compare exactly what the
 //! engine will run.
 
+mod debounce;
+
 use crate::bits::bit_flags;
-use crate::engine::{AxisState, Duration, Instant, JobKind, Link};
+use crate::engine::{AxisState, JobKind, Link};
+use crate::time::{Duration, Instant};
 use crate::{HomeDirection, PositionNo, StatusReport};
+use debounce::Debouncer;
 
 /// While *STP is OFF and the axis still reports moving, the stop is repeated this often.
 pub const STOP_REPEAT: Duration = Duration::from_millis(100);
@@ -260,85 +264,19 @@ pub struct Config {
     pub servo_retry: Duration,
 }
 
+impl Config {
+    /// 6 ms debounce and settle (IAI's input time constant), motor-end homing, 1 s servo retry.
+    pub const DEFAULT: Config = Config {
+        debounce: Duration::from_millis(6),
+        settle: Duration::from_millis(6),
+        home_direction: HomeDirection::MotorEnd,
+        servo_retry: Duration::from_millis(1000),
+    };
+}
+
 impl Default for Config {
     fn default() -> Config {
-        Config {
-            debounce: Duration::from_millis(6),
-            settle: Duration::from_millis(6),
-            home_direction: HomeDirection::MotorEnd,
-            servo_retry: Duration::from_millis(1000),
-        }
-    }
-}
-
-/// Debounced inputs: each pin counts once it has read the same level for the debounce time.
-#[derive(Clone, Copy, Debug)]
-struct Debouncer {
-    /// The last sample.
-    raw: u16,
-    /// When each pin last changed in the samples.
-    since: [Instant; 16],
-    /// The recognised levels.
-    stable: u16,
-    /// The pins recognised at least once since start-up.
-    known: u16,
-    /// Whether a sample has been taken.
-    started: bool,
-}
-
-impl Debouncer {
-    const fn new() -> Debouncer {
-        Debouncer {
-            raw: 0,
-            since: [Instant(0); 16],
-            stable: 0,
-            known: 0,
-            started: false,
-        }
-    }
-
-    /// Take a sample; returns the bits whose recognised level changed or that became known.
-    fn update(&mut self, now: Instant, raw: u16, debounce: Duration) -> u16 {
-        let changed_raw = if self.started {
-            self.raw ^ raw
-        } else {
-            PioInputs::MASK
-        };
-        self.started = true;
-        self.raw = raw;
-        let mut changed = 0;
-        for (bit, since) in self.since.iter_mut().enumerate() {
-            let m = 1u16 << bit;
-            if m & PioInputs::MASK == 0 {
-                continue;
-            }
-            if changed_raw & m != 0 {
-                *since = now;
-            }
-            if now.since(*since) < debounce {
-                continue;
-            }
-            let level = raw & m;
-            if self.known & m == 0 || self.stable & m != level {
-                changed |= m;
-                self.known |= m;
-                self.stable = (self.stable & !m) | level;
-            }
-        }
-        changed
-    }
-
-    fn on(&self, flag: PioInputs) -> bool {
-        self.stable & flag.bits() != 0
-    }
-
-    fn known(&self, flag: PioInputs) -> bool {
-        self.known & flag.bits() != 0
-    }
-
-    /// Whether `flag` went from a recognised OFF to ON in the last update.
-    fn rose(&self, flag: PioInputs, changed: u16, known_before: u16) -> bool {
-        changed & flag.bits() != 0 && known_before & flag.bits() != 0 && self.on(flag)
+        Config::DEFAULT
     }
 }
 
@@ -436,9 +374,14 @@ pub struct Pio {
 impl Pio {
     /// A PIO with every input not yet recognised (as OFF: *STP OFF, so nothing may move until
     /// it has read ON for the debounce time).
-    pub fn new(config: Config) -> Pio {
+    pub const fn new(config: Config) -> Pio {
+        let servo_retry = if config.servo_retry.0 < SERVO_RETRY_MIN.0 {
+            SERVO_RETRY_MIN
+        } else {
+            config.servo_retry
+        };
         let config = Config {
-            servo_retry: config.servo_retry.max(SERVO_RETRY_MIN),
+            servo_retry,
             ..config
         };
         Pio {

@@ -1,6 +1,6 @@
-//! Time as the engine sees it: numbers the caller passes in. The engine never reads a clock
+//! Time as this crate sees it: numbers the caller passes in. Nothing here reads a clock
 //! (smoltcp's `poll(timestamp)` model), so the same code runs on the MCU, on a PC and in
-//! virtual-time tests.
+//! virtual-time tests. The bus engine, the Modbus receiver and the PIO all take these.
 
 use core::ops::{Add, Sub};
 
@@ -40,9 +40,24 @@ impl Duration {
 }
 
 impl Instant {
+    /// The origin.
+    pub const ZERO: Instant = Instant(0);
+
     /// The time elapsed since `earlier` (zero if `earlier` is later).
     pub const fn since(self, earlier: Instant) -> Duration {
         Duration(self.0.saturating_sub(earlier.0))
+    }
+}
+
+/// The earlier of two optional deadlines, where `None` means "no deadline" (not "now").
+///
+/// `Option::min` would take `None` as the smaller value and so lose every real deadline merged
+/// with an empty one: a loop sleeping on the result would sleep forever.
+pub const fn earliest(a: Option<Instant>, b: Option<Instant>) -> Option<Instant> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(if a.0 <= b.0 { a } else { b }),
+        (Some(t), None) | (None, Some(t)) => Some(t),
+        (None, None) => None,
     }
 }
 

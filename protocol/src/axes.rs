@@ -1,0 +1,127 @@
+//! Per-axis collections: a set of axes ([`AxisSet`], one bit each) and a value for every axis
+//! ([`AxisMap`]), both indexed by [`Axis`] so that no caller ever turns an axis into an array
+//! index (and no look-up can miss).
+
+use core::ops::{Index, IndexMut};
+
+use crate::Axis;
+
+/// Axes on one bus (the one-hex-digit address, brief edition §4-1).
+pub const AXES: usize = 16;
+
+/// A set of axes, bit n = axis n.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AxisSet(pub u16);
+
+impl AxisSet {
+    /// Every axis.
+    pub const ALL: AxisSet = AxisSet(u16::MAX);
+    /// No axis.
+    pub const EMPTY: AxisSet = AxisSet(0);
+
+    /// Whether `axis` is in the set.
+    pub const fn contains(self, axis: Axis) -> bool {
+        self.0 & (1 << axis.get()) != 0
+    }
+
+    /// The set with `axis` added.
+    #[must_use]
+    pub const fn with(self, axis: Axis) -> AxisSet {
+        AxisSet(self.0 | 1 << axis.get())
+    }
+
+    /// The set without `axis`.
+    #[must_use]
+    pub const fn without(self, axis: Axis) -> AxisSet {
+        AxisSet(self.0 & !(1 << axis.get()))
+    }
+
+    /// Whether the set is empty.
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    /// How many axes are in the set.
+    pub const fn len(self) -> usize {
+        self.0.count_ones() as usize
+    }
+
+    /// The first `n` axes (0..n).
+    pub const fn first(n: u8) -> AxisSet {
+        if n >= 16 {
+            AxisSet::ALL
+        } else {
+            AxisSet((1u16 << n) - 1)
+        }
+    }
+
+    /// The axes, ascending.
+    pub fn iter(self) -> impl Iterator<Item = Axis> {
+        Axis::all().filter(move |&a| self.contains(a))
+    }
+}
+
+impl FromIterator<Axis> for AxisSet {
+    fn from_iter<I: IntoIterator<Item = Axis>>(iter: I) -> AxisSet {
+        iter.into_iter().fold(AxisSet::EMPTY, AxisSet::with)
+    }
+}
+
+/// One `T` for every axis, indexed by [`Axis`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AxisMap<T>([T; AXES]);
+
+impl<T: Copy> AxisMap<T> {
+    /// `value` for every axis.
+    pub const fn new(value: T) -> AxisMap<T> {
+        AxisMap([value; AXES])
+    }
+}
+
+impl<T> AxisMap<T> {
+    /// Every axis with its value, ascending.
+    pub fn iter(&self) -> impl Iterator<Item = (Axis, &T)> {
+        Axis::all().zip(self.0.iter())
+    }
+
+    /// Every axis with its value, mutably.
+    pub fn iter_mut(&mut self) -> impl Iterator<Item = (Axis, &mut T)> {
+        Axis::all().zip(self.0.iter_mut())
+    }
+
+    /// The values, axis 0 first.
+    pub fn values(&self) -> impl Iterator<Item = &T> {
+        self.0.iter()
+    }
+
+    /// The values, mutably.
+    pub fn values_mut(&mut self) -> impl Iterator<Item = &mut T> {
+        self.0.iter_mut()
+    }
+}
+
+impl<T: Default + Copy> Default for AxisMap<T> {
+    fn default() -> AxisMap<T> {
+        AxisMap::new(T::default())
+    }
+}
+
+// `Axis` holds 0..=15 by construction and the array has 16 entries, so these look-ups cannot
+// fail; the mask makes that visible to the compiler too, so no bounds check (and no panic
+// path) is emitted.
+#[allow(clippy::indexing_slicing)]
+impl<T> Index<Axis> for AxisMap<T> {
+    type Output = T;
+    fn index(&self, axis: Axis) -> &T {
+        &self.0[usize::from(axis.get()) & (AXES - 1)]
+    }
+}
+
+#[allow(clippy::indexing_slicing)]
+impl<T> IndexMut<Axis> for AxisMap<T> {
+    fn index_mut(&mut self, axis: Axis) -> &mut T {
+        &mut self.0[usize::from(axis.get()) & (AXES - 1)]
+    }
+}

@@ -1,0 +1,299 @@
+//! Running the jobs: one per axis at a time, the others wait in the queue. A job is its
+//! description and a cursor into its program ([`program`]); responses move the cursor, waits
+//! are judged on status responses, and the end of the program (or a failure) reports once.
+
+use super::job::{self, program, readback_slot, written, Op, STORE_COMPARED};
+use super::{Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Next, Origin};
+use crate::axes::AxisSet;
+use crate::jobs::{PointReadback, StepError};
+use crate::time::Instant;
+use crate::{Axis, Command, Reply, Request, StatusReport};
+
+/// What the last response of a running job carried, for its result.
+#[derive(Clone, Copy, Debug)]
+enum Last {
+    Done,
+    Status(StatusReport),
+    Value(u32),
+}
+
+/// A running job.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Active {
+    pub(super) id: JobId,
+    pub(super) job: Job,
+    pub(super) cursor: u8,
+    /// The furthest op reached; retries reset only past it (so a W4 rewound to its T4 keeps
+    /// counting).
+    high_water: u8,
+    pub(super) attempt: u8,
+    /// Status responses received after this instant count for an `Await`.
+    since: Instant,
+    pub(super) wait_deadline: Option<Instant>,
+    readback: PointReadback,
+    last: Last,
+}
+
+impl Engine {
+    /// Cancel the running and waiting jobs of `axis` (a stop is coming).
+    pub(super) fn cancel_jobs(&mut self, axis: Axis, error: JobError) {
+        if let Some(active) = self.active[axis].take() {
+            self.emit(Event::JobDone {
+                id: active.id,
+                axis,
+                result: Err(error),
+            });
+        }
+        self.cancel_waiting(axis, error);
+        if matches!(self.in_flight, Some(f) if f.origin == Origin::Job && f.request.axis == axis) {
+            // The answer still completes the transaction; nothing routes it to a job.
+            if let Some(f) = self.in_flight.as_mut() {
+                f.origin = Origin::Cancelled;
+            }
+        }
+        if matches!(self.retry, Some(f) if f.origin == Origin::Job && f.request.axis == axis) {
+            self.retry = None;
+        }
+        if matches!(self.pending, Some((r, Origin::Job, _)) if r.axis == axis) {
+            // A job frame parked for a baud change: its job is gone.
+            self.pending = None;
+        }
+    }
+
+    /// Fail the jobs waiting for `axis` (not the running one).
+    pub(super) fn cancel_waiting(&mut self, axis: Axis, error: JobError) {
+        for _ in 0..self.queue.len() {
+            if let Some((id, job)) = self.queue.pop_front() {
+                if job.axis == axis {
+                    self.emit(Event::JobDone {
+                        id,
+                        axis,
+                        result: Err(error),
+                    });
+                } else {
+                    let _ = self.queue.push_back((id, job));
+                }
+            }
+        }
+    }
+
+    pub(super) fn expire_waits(&mut self, now: Instant) {
+        for axis in Axis::all() {
+            let expired = self.active[axis]
+                .and_then(|a| a.wait_deadline)
+                .is_some_and(|deadline| now >= deadline);
+            if expired {
+                self.fail_job(axis, JobError::WaitTimeout);
+            }
+        }
+    }
+
+    /// Put a stop back in its slot, unless a newer stop for the axis supersedes it.
+    pub(super) fn requeue_stop(&mut self, axis: Axis, id: JobId, attempt: u8) {
+        match &mut self.stops[axis] {
+            slot @ None => *slot = Some((id, attempt)),
+            Some(_) => self.emit(Event::JobDone {
+                id,
+                axis,
+                result: Err(JobError::Cancelled),
+            }),
+        }
+    }
+
+    /// The next stop (`d`) waiting to go, if any.
+    pub(super) fn next_stop(&mut self) -> Option<Next> {
+        Axis::all().find_map(|axis| {
+            self.stops[axis].take().map(|(id, attempt)| {
+                (
+                    Request::new(axis, Command::CancelMotion),
+                    Origin::Stop(id),
+                    attempt,
+                )
+            })
+        })
+    }
+
+    /// Start the waiting jobs whose axis is free; a job for an axis that does not answer fails
+    /// at once ([`JobError::Offline`]): it must not run when the axis comes back.
+    pub(super) fn activate_jobs(&mut self, now: Instant) {
+        for _ in 0..self.queue.len() {
+            let Some((id, job)) = self.queue.pop_front() else {
+                break;
+            };
+            if self.active[job.axis].is_some() {
+                let _ = self.queue.push_back((id, job));
+                continue;
+            }
+            if self.axes[job.axis].link == super::Link::Offline {
+                self.emit(Event::JobDone {
+                    id,
+                    axis: job.axis,
+                    result: Err(JobError::Offline),
+                });
+                continue;
+            }
+            let wait_deadline = match program(&job, 0) {
+                Some(Op::Await(_)) => Some(now + self.config.motion_timeout),
+                _ => None,
+            };
+            self.active[job.axis] = Some(Active {
+                id,
+                job,
+                cursor: 0,
+                high_water: 0,
+                attempt: 0,
+                since: now,
+                wait_deadline,
+                readback: PointReadback::default(),
+                last: Last::Done,
+            });
+        }
+    }
+
+    /// The next frame of a running job, taking the axes in turn.
+    pub(super) fn next_job_frame(&mut self) -> Option<Next> {
+        for offset in 0..16u8 {
+            let axis = Axis::new((self.job_cursor + offset) % 16)?;
+            let Some(active) = self.active[axis] else {
+                continue;
+            };
+            if let Some(Op::Send(step)) = program(&active.job, usize::from(active.cursor)) {
+                self.job_cursor = (axis.get() + 1) % 16;
+                return Some((step.request, Origin::Job, active.attempt));
+            }
+        }
+        None
+    }
+
+    pub(super) fn check_await(&mut self, now: Instant, axis: Axis, report: &StatusReport) {
+        let Some(active) = self.active[axis] else {
+            return;
+        };
+        let Some(Op::Await(condition)) = program(&active.job, usize::from(active.cursor)) else {
+            return;
+        };
+        if now <= active.since {
+            return;
+        }
+        if report.outputs.alarm_active() && report.alarm.level() == crate::alarm::Level::Error {
+            self.fail_job(axis, JobError::Alarm(report.alarm));
+        } else if let job::Condition::Unbuffered(axes) = condition {
+            if self.all_unbuffered(axes, active.since) {
+                self.advance(now, axis);
+            }
+        } else if condition.met(report) {
+            self.advance(now, axis);
+        }
+    }
+
+    /// Whether every axis of `axes` reported, after `since`, that it has no buffered command.
+    fn all_unbuffered(&self, axes: AxisSet, since: Instant) -> bool {
+        axes.iter().all(|a| {
+            let state = self.axis(a);
+            state.report_at.is_some_and(|t| t > since)
+                && state.report.is_some_and(|r| !r.status.buffered())
+        })
+    }
+
+    /// Jobs on other axes that wait for this axis too (a synchronized start).
+    pub(super) fn check_cross_axis_waits(&mut self, now: Instant, axis: Axis) {
+        for lead in Axis::all().filter(|&a| a != axis) {
+            let Some(active) = self.active[lead] else {
+                continue;
+            };
+            if let Some(Op::Await(job::Condition::Unbuffered(axes))) =
+                program(&active.job, usize::from(active.cursor))
+            {
+                if axes.contains(axis) && self.all_unbuffered(axes, active.since) {
+                    self.advance(now, lead);
+                }
+            }
+        }
+    }
+
+    pub(super) fn job_reply(&mut self, now: Instant, axis: Axis, reply: &Reply) {
+        let Some(active) = self.active[axis].as_mut() else {
+            return;
+        };
+        let cursor = usize::from(active.cursor);
+        let Some(Op::Send(step)) = program(&active.job, cursor) else {
+            return;
+        };
+        match step.expect.check(reply) {
+            Err(StepError::Rejected(code)) => self.fail_job(axis, JobError::Rejected(code)),
+            Err(StepError::Unexpected) => self.fail_job(axis, JobError::Unexpected),
+            Ok(value) => {
+                if let (Some(slot), Some(value)) = (readback_slot(&active.job, cursor), value) {
+                    if let Some(v) = active.readback.0.get_mut(slot) {
+                        *v = value;
+                    }
+                }
+                active.last = match (value, reply.report()) {
+                    (Some(value), _) => Last::Value(value),
+                    (None, Some(report)) => Last::Status(*report),
+                    (None, None) => Last::Done,
+                };
+                self.advance(now, axis);
+            }
+        }
+    }
+
+    /// Move the job of `axis` past its current op, and finish it at the end of its program.
+    pub(super) fn advance(&mut self, now: Instant, axis: Axis) {
+        let motion_timeout = self.config.motion_timeout;
+        let Some(active) = self.active[axis].as_mut() else {
+            return;
+        };
+        active.cursor = active.cursor.saturating_add(1);
+        if active.cursor > active.high_water {
+            active.high_water = active.cursor;
+            active.attempt = 0;
+        }
+        active.since = now;
+        active.wait_deadline = None;
+        let cursor = usize::from(active.cursor);
+        if let (JobKind::StorePoint { data, .. }, STORE_COMPARED) = (active.job.kind, cursor) {
+            if active.readback.matches(&data) {
+                // Already stored: no V5.
+                let readback = active.readback;
+                self.finish(axis, Ok(JobOutput::Unchanged(readback)));
+                return;
+            }
+        }
+        match program(&active.job, cursor) {
+            Some(Op::Await(_)) => active.wait_deadline = Some(now + motion_timeout),
+            Some(Op::Send(_)) => {}
+            None => {
+                let active = *active;
+                let result = match (written(&active.job), active.job.kind) {
+                    (Some(data), _) if !active.readback.matches(&data) => {
+                        Err(JobError::VerifyFailed)
+                    }
+                    (Some(_), _) | (None, JobKind::ReadPoint(_)) => {
+                        Ok(JobOutput::Point(active.readback))
+                    }
+                    _ => Ok(match active.last {
+                        Last::Done => JobOutput::Done,
+                        Last::Status(report) => JobOutput::Status(report),
+                        Last::Value(value) => JobOutput::Value(value),
+                    }),
+                };
+                self.finish(axis, result);
+            }
+        }
+    }
+
+    fn finish(&mut self, axis: Axis, result: Result<JobOutput, JobError>) {
+        if let Some(active) = self.active[axis].take() {
+            self.emit(Event::JobDone {
+                id: active.id,
+                axis,
+                result,
+            });
+        }
+    }
+
+    pub(super) fn fail_job(&mut self, axis: Axis, error: JobError) {
+        self.finish(axis, Err(error));
+    }
+}

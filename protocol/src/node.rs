@@ -1,0 +1,280 @@
+//! The one object the firmware drives: the whole gateway behind two serial lines and a few
+//! pins.
+//!
+//! A [`Node`] owns the [`Gateway`] (the bus master and the PLC's register map), the Modbus RTU
+//! port toward the PLC (frame receiver, slave, reply buffer) and the PIO logic of the axis the
+//! discrete I/O drives. The firmware (or the PC gateway, or a test) only moves bytes and pin
+//! levels in and out, stamped with the time:
+//!
+//! | In | Out |
+//! |---|---|
+//! | [`bus_received`](Node::bus_received): bytes from the RS485 bus | [`Action::Bus`]: a frame for the bus |
+//! | [`plc_received`](Node::plc_received): bytes from the PLC line | [`Action::Reply`]: a Modbus reply for the PLC |
+//! | [`sample_inputs`](Node::sample_inputs): the PIO input pins | [`outputs`](Node::outputs): the PIO output pins |
+//! | [`set_stop_input`](Node::set_stop_input): the stop input | [`Action::Line`]: break start/end, rate change, broadcast |
+//! | [`poll`](Node::poll) with the time | [`poll_at`](Node::poll_at): when to poll next |
+//!
+//! # The hardware contract
+//!
+//! - **Time** is a monotonic count of microseconds ([`Instant`]), the same clock for every
+//!   call. Stamp received bytes with the time they were read from the UART, as soon as they
+//!   are: a stamp may be late (the engine then only waits a little longer), never early.
+//! - **Ingress before egress**: hand over everything that has arrived (both lines, the inputs)
+//!   before calling [`poll`](Node::poll), then call it until it returns `None`. Each action is
+//!   carried out before the next call.
+//! - **[`Action::Bus`]**: write the 16 bytes and wait until the last one has left the shift
+//!   register (`flush`, transmission complete) before releasing the driver (DE) and listening:
+//!   the answer can start RTIM (3 ms) after the command's last stop bit.
+//! - **[`Action::Reply`]**: the same on the PLC line (write, flush, release DE).
+//! - **[`Action::Line`]**: [`LineAction::SetBaud`] only after the previous transmission has been
+//!   flushed (a rate change mid-byte garbles it); [`LineAction::BreakStart`] holds the bus' TX
+//!   low (the driver enabled) until [`LineAction::BreakEnd`]; [`LineAction::CommChange`] writes
+//!   [`COMM_CHANGE`](crate::frame::COMM_CHANGE) (nobody answers).
+//! - **Inputs** are sampled every millisecond or so ([`sample_inputs`](Node::sample_inputs));
+//!   the PIO's debounce and settle times count in the samples' times. The outputs are valid at
+//!   any time ([`outputs`](Node::outputs)), and all OFF (the safe state: *ALM OFF shows an
+//!   alarm) until the axis has answered.
+//! - **Sleep** until [`poll_at`](Node::poll_at) or until something arrives. Polling early is
+//!   harmless; polling late only delays the bus (and the Modbus reply past t3.5).
+//!
+//! # The loop
+//!
+//! ```
+//! use protocol::node::{Action, Node};
+//! use protocol::line::LineAction;
+//! use protocol::pio::PioInputs;
+//! use protocol::plc::GatewayConfig;
+//! use protocol::time::Instant;
+//! use protocol::AxisSet;
+//!
+//! /// Stand-ins for the board: two half-duplex UARTs, the input pins and a clock.
+//! #[derive(Default)]
+//! struct Board { now: u64, bus_tx: Vec<u8>, plc_tx: Vec<u8>, break_held: bool }
+//! impl Board {
+//!     fn now(&self) -> Instant { Instant(self.now) }
+//!     fn bus_rx(&mut self, _buf: &mut [u8]) -> usize { 0 }
+//!     fn plc_rx(&mut self, _buf: &mut [u8]) -> usize { 0 }
+//!     fn input_pins(&self) -> u16 { PioInputs::STP_N.bits() }
+//!     fn bus_write_and_flush(&mut self, bytes: &[u8]) { self.bus_tx.extend_from_slice(bytes) }
+//!     fn plc_write_and_flush(&mut self, bytes: &[u8]) { self.plc_tx.extend_from_slice(bytes) }
+//!     fn set_bus_baud(&mut self, _bps: u32) {}
+//!     fn hold_bus_tx_low(&mut self, low: bool) { self.break_held = low }
+//!     fn write_output_pins(&mut self, _bits: u16) {}
+//!     fn sleep_until(&mut self, deadline: Option<Instant>) {
+//!         self.now = deadline.map_or(self.now + 1_000, |t| t.0.max(self.now)).min(self.now + 1_000);
+//!     }
+//! }
+//!
+//! // In the firmware the node lives in a `static` (it is about 10 KB): `Node::new` is const.
+//! let mut config = GatewayConfig::new(AxisSet::first(2));
+//! config.bus.establish = false;
+//! let mut node = Node::new(config);
+//! let mut board = Board::default();
+//! let mut buf = [0u8; 64];
+//! for _ in 0..50 {
+//!     let now = board.now();
+//!     // Ingress: everything that arrived, stamped.
+//!     let n = board.bus_rx(&mut buf);
+//!     node.bus_received(now, &buf[..n]);
+//!     let n = board.plc_rx(&mut buf);
+//!     node.plc_received(now, &buf[..n]);
+//!     node.sample_inputs(now, PioInputs::from_bits(board.input_pins()));
+//!     // Egress: until there is nothing left to do now.
+//!     while let Some(action) = node.poll(now) {
+//!         match action {
+//!             Action::Bus(frame) => board.bus_write_and_flush(&frame),
+//!             Action::Reply(bytes) => board.plc_write_and_flush(bytes),
+//!             Action::Line(LineAction::SetBaud(baud)) => board.set_bus_baud(baud.bits_per_second()),
+//!             Action::Line(LineAction::BreakStart) => board.hold_bus_tx_low(true),
+//!             Action::Line(LineAction::BreakEnd) => board.hold_bus_tx_low(false),
+//!             Action::Line(LineAction::CommChange) => {
+//!                 board.bus_write_and_flush(&protocol::frame::COMM_CHANGE)
+//!             }
+//!         }
+//!     }
+//!     board.write_output_pins(node.outputs().bits());
+//!     board.sleep_until(node.poll_at());
+//! }
+//! // Nobody answers on this bench: the node polled both axes (and retried) meanwhile.
+//! assert!(board.bus_tx.len() >= 2 * 16);
+//! assert!(board.bus_tx.starts_with(b"\x020n"));
+//! ```
+
+use crate::engine::{JobKind, Output};
+use crate::frame::FRAME_LEN;
+use crate::line::LineAction;
+use crate::modbus::{Handled, Receiver, ReceiverCounters, ReplyBuffer, Slave, SlaveCounters};
+use crate::pio::{self, Pio, PioInputs, PioOutputs};
+use crate::plc::{Gateway, GatewayConfig};
+use crate::time::{earliest, Instant};
+
+/// What the caller does next; see the [hardware contract](self#the-hardware-contract).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Action<'a> {
+    /// Transmit this frame on the RS485 bus, then flush.
+    Bus([u8; FRAME_LEN]),
+    /// Do this to the RS485 line.
+    Line(LineAction),
+    /// Transmit this Modbus reply on the PLC line, then flush.
+    Reply(&'a [u8]),
+}
+
+/// The state of the indicator LEDs (besides a run LED the firmware blinks itself).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Indicators {
+    /// Every configured axis answers.
+    pub link: bool,
+    /// A fail-safe is latched, or an axis is in alarm or offline.
+    pub alarm: bool,
+}
+
+/// The gateway behind its two lines and its pins; see the [module documentation](self).
+#[derive(Debug)]
+pub struct Node {
+    gateway: Gateway,
+    receiver: Receiver,
+    slave: Slave,
+    reply: ReplyBuffer,
+    pio: Pio,
+    outputs: PioOutputs,
+    /// When the gateway is due next, as of its last idle answer.
+    idle_until: Option<Instant>,
+    /// Something arrived since that answer: poll now.
+    dirty: bool,
+}
+
+impl Node {
+    /// A node for `config`. Const, so that it can be built in a `static` rather than on a
+    /// task's stack. The Modbus receiver's t3.5 follows `config.plc.baud`; its t1.5 gap check
+    /// is off, since byte stamps taken when a task reads the UART are not accurate to the
+    /// 750 µs it needs (the CRC still rejects a garbled frame).
+    pub const fn new(config: GatewayConfig) -> Node {
+        Node {
+            gateway: Gateway::new(config),
+            receiver: Receiver::new(config.plc.baud).without_gap_check(),
+            slave: Slave::new(),
+            reply: ReplyBuffer::new(),
+            pio: Pio::new(pio::Config::DEFAULT),
+            outputs: PioOutputs::SAFE,
+            idle_until: None,
+            dirty: true,
+        }
+    }
+
+    /// Bytes received on the RS485 bus at `now`.
+    pub fn bus_received(&mut self, now: Instant, bytes: &[u8]) {
+        if !bytes.is_empty() {
+            self.gateway.receive(now, bytes);
+            self.dirty = true;
+        }
+    }
+
+    /// Bytes received on the PLC line at `now`.
+    pub fn plc_received(&mut self, now: Instant, bytes: &[u8]) {
+        for &byte in bytes {
+            self.receiver.push(now, byte);
+        }
+    }
+
+    /// The PIO input pins at `now` (bit n = PCON pattern 0 port INn; *STP high = may run).
+    pub fn sample_inputs(&mut self, now: Instant, inputs: PioInputs) {
+        let Some(axis) = self.gateway.config().pio_axis else {
+            self.outputs = PioOutputs::SAFE;
+            return;
+        };
+        let state = *self.gateway.engine().axis(axis);
+        let link_ok = !self.gateway.engine().establishing();
+        let (outputs, job) = self.pio.sample(now, inputs, &state, link_ok);
+        self.outputs = outputs;
+        if let Some(kind) = job {
+            // The direction is the axis' configured one (AXISCFG).
+            let kind = match kind {
+                JobKind::Home(_) => JobKind::Home(self.gateway.config().axes[axis].scale.home),
+                other => other,
+            };
+            // A refusal is shown in CMST (or, for an axis that went offline between the sample
+            // and now, not taken at all): the PIO has nothing to add.
+            let _ = self.gateway.command(axis, kind);
+            self.dirty = true;
+        }
+    }
+
+    /// The stop input at `now`: `active` when it is OFF (a safety input).
+    pub fn set_stop_input(&mut self, now: Instant, active: bool) {
+        self.gateway.set_stop_input(now, active);
+        self.dirty = true;
+    }
+
+    /// What to do at `now`, if anything: a Modbus reply first (the PLC waits for it), then the
+    /// bus. Call until `None`, carrying out each action before the next call.
+    pub fn poll(&mut self, now: Instant) -> Option<Action<'_>> {
+        let link = self.slave.counters();
+        let mut model = self.gateway.registers(now, link);
+        let handled = self
+            .slave
+            .poll(&mut self.receiver, now, &mut model, &mut self.reply);
+        if let Some(Ok(handled @ (Handled::Reply(_) | Handled::Broadcast))) = handled {
+            // Any valid request to the gateway or its axes is the PLC's sign of life, whether
+            // it reads, writes, asks for an echo or gets an exception.
+            self.gateway.plc_activity(now);
+            self.dirty = true;
+            if let Handled::Reply(_) = handled {
+                return Some(Action::Reply(self.reply.as_bytes()));
+            }
+        }
+        match self.gateway.poll(now) {
+            Output::Transmit(frame) => Some(Action::Bus(frame.to_bytes())),
+            Output::Line(action) => Some(Action::Line(action)),
+            Output::Idle(until) => {
+                self.idle_until = until;
+                self.dirty = false;
+                None
+            }
+        }
+    }
+
+    /// The earliest moment anything is due: the bus engine's next deadline, the PLC watchdog,
+    /// the end of a Modbus frame (t3.5 of silence). After input that [`poll`](Node::poll) has
+    /// not seen yet, [`Instant::ZERO`]: poll now. `None`: nothing until something arrives.
+    pub fn poll_at(&self) -> Option<Instant> {
+        if self.dirty {
+            return Some(Instant::ZERO);
+        }
+        earliest(self.idle_until, self.receiver.next_deadline())
+    }
+
+    /// The PIO output pins (bit n = PCON pattern 0 port OUTn): all OFF while the PIO axis has
+    /// not answered, or none is configured.
+    pub fn outputs(&self) -> PioOutputs {
+        self.outputs
+    }
+
+    /// The indicator LEDs.
+    pub fn indicators(&self) -> Indicators {
+        Indicators {
+            link: self.gateway.all_online(),
+            alarm: self.gateway.alarm(),
+        }
+    }
+
+    /// The gateway (for diagnostics: its engine, configuration and command states).
+    pub fn gateway(&self) -> &Gateway {
+        &self.gateway
+    }
+
+    /// What the Modbus slave has counted.
+    pub fn plc_counters(&self) -> SlaveCounters {
+        self.slave.counters()
+    }
+
+    /// What the Modbus frame receiver has counted.
+    pub fn receiver_counters(&self) -> ReceiverCounters {
+        self.receiver.counters()
+    }
+
+    /// The PIO logic (its recognised inputs).
+    pub fn pio(&self) -> &Pio {
+        &self.pio
+    }
+}

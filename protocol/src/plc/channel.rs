@@ -1,0 +1,252 @@
+//! The command channel on the gateway unit (REQ at 0x0200, RESP at 0x0210): point-table fields
+//! read and written one at a time, with ROBONET's five-step handshake (field research §2):
+//! 1. the PLC writes a request while the response is 0;
+//! 2. the gateway runs it;
+//! 3. the gateway posts the response;
+//! 4. the PLC clears the request (code 0);
+//! 5. the gateway clears the response.
+//!
+//! Code 1 reads a field, code 2 writes it. A write reads the point first and skips the write
+//! when the value is already stored (RESP word 4 = 0xFFFF), so the controller's non-volatile
+//! memory (about 100,000 writes per area) is never worn by unchanged data.
+
+use super::gateway::Reason;
+use super::map::{G_REQUEST, G_RESPONSE};
+use super::registers::{join, split};
+use crate::axes::AxisSet;
+use crate::engine::{Engine, Job, JobError, JobId, JobKind, JobOutput};
+use crate::memory::PointField;
+use crate::modbus::Exception;
+use crate::{Address, Axis, PositionNo};
+
+/// Registers of the request block: code, axis, point, field, value high, value low.
+pub(super) const REQ_LEN: usize = 6;
+/// Registers of the response block: code, error, value high, value low, V5 write count.
+pub(super) const RESP_LEN: usize = 5;
+
+/// Request code: read a field.
+const READ_FIELD: u16 = 1;
+/// Request code: write a field.
+const WRITE_FIELD: u16 = 2;
+/// In RESP word 4: the write was skipped because the value was already stored (no V5 spent).
+const UNCHANGED: u16 = 0xFFFF;
+/// In RESP word 0: the request failed (word 1 says why, as CMER).
+const FAILED: u16 = 0x8000;
+
+type Request = [u16; REQ_LEN];
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+enum State {
+    #[default]
+    Idle,
+    /// Reading the point (both codes start so: a write compares first), for this request.
+    Reading(JobId, Request),
+    /// Writing the field, for this request.
+    Writing(JobId, Request),
+    /// Response posted; waiting for the PLC to clear the request.
+    Answered,
+}
+
+/// The command channel.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Channel {
+    request: Request,
+    response: [u16; RESP_LEN],
+    state: State,
+}
+
+/// The point field a request names: its offset from 0x400.
+fn field(offset: u16) -> Option<PointField> {
+    PointField::from_address(Address(0x400 + u32::from(offset)))
+}
+
+impl Channel {
+    pub(super) const fn new() -> Channel {
+        Channel {
+            request: [0; REQ_LEN],
+            response: [0; RESP_LEN],
+            state: State::Idle,
+        }
+    }
+
+    /// REQ or RESP register `address`, if it is one.
+    pub(super) fn read(&self, address: u16) -> Option<u16> {
+        let at = |base: u16, block: &[u16]| {
+            address
+                .checked_sub(base)
+                .and_then(|i| block.get(usize::from(i)))
+                .copied()
+        };
+        at(G_REQUEST, &self.request).or_else(|| at(G_RESPONSE, &self.response))
+    }
+
+    /// Whether `address` is a request register (writable).
+    pub(super) fn is_request(address: u16) -> bool {
+        address
+            .checked_sub(G_REQUEST)
+            .is_some_and(|i| usize::from(i) < REQ_LEN)
+    }
+
+    /// The request block as a write of `values` at `address` would leave it, if the write
+    /// touches it.
+    pub(super) fn after_write(&self, address: u16, values: &[u16]) -> Option<Request> {
+        let mut request = self.request;
+        let mut touched = false;
+        for (i, &value) in values.iter().enumerate() {
+            let slot = u16::try_from(i)
+                .ok()
+                .and_then(|i| address.checked_add(i))
+                .and_then(|a| a.checked_sub(G_REQUEST))
+                .and_then(|o| request.get_mut(usize::from(o)));
+            if let Some(slot) = slot {
+                *slot = value;
+                touched = true;
+            }
+        }
+        touched.then_some(request)
+    }
+
+    /// Check a new request block before anything is stored: the axis and point it would
+    /// start on, if it starts something. Step 1 requires the response to be clear: a request
+    /// while one runs or is answered is refused with 04.
+    pub(super) fn check(
+        &self,
+        request: Request,
+        axes: AxisSet,
+    ) -> Result<Option<(Axis, PositionNo)>, Exception> {
+        let [code, axis, point, offset, _, _] = request;
+        if code == 0 {
+            return Ok(None);
+        }
+        if request == self.request && self.state != State::Idle {
+            // The same request written again while it runs or is answered: nothing new.
+            return Ok(None);
+        }
+        if self.state != State::Idle || self.response[0] != 0 {
+            return Err(Exception::ServerDeviceFailure);
+        }
+        let axis = u8::try_from(axis)
+            .ok()
+            .and_then(Axis::new)
+            .filter(|&a| axes.contains(a))
+            .ok_or(Exception::IllegalDataValue)?;
+        let point = u8::try_from(point)
+            .ok()
+            .and_then(PositionNo::new)
+            .ok_or(Exception::IllegalDataValue)?;
+        field(offset).ok_or(Exception::IllegalDataValue)?;
+        if code != READ_FIELD && code != WRITE_FIELD {
+            return Err(Exception::IllegalDataValue);
+        }
+        Ok(Some((axis, point)))
+    }
+
+    /// Store the checked request block and act on it: start a request, or step 4 -> 5.
+    pub(super) fn store(
+        &mut self,
+        request: Request,
+        start: Option<(Axis, PositionNo)>,
+        engine: &mut Engine,
+    ) -> Result<(), Exception> {
+        let Some((axis, point)) = start else {
+            self.request = request;
+            if request[0] == 0 && self.state == State::Answered {
+                // Step 4 -> 5: the PLC cleared its request, the gateway clears the response.
+                self.response = [0; RESP_LEN];
+                self.state = State::Idle;
+            }
+            return Ok(());
+        };
+        if !engine.online(axis) {
+            return Err(Exception::ServerDeviceFailure);
+        }
+        let id = engine
+            .submit(Job {
+                axis,
+                kind: JobKind::ReadPoint(point),
+            })
+            .map_err(|_| Exception::ServerDeviceFailure)?;
+        self.request = request;
+        self.state = State::Reading(id, request);
+        Ok(())
+    }
+
+    /// A job finished: the next step if it is the channel's. Returns the point a write was
+    /// submitted to (its cached row is stale from now on).
+    pub(super) fn job_done(
+        &mut self,
+        id: JobId,
+        result: &Result<JobOutput, JobError>,
+        engine: &mut Engine,
+    ) -> Option<(Axis, PositionNo)> {
+        let request = match self.state {
+            State::Reading(r, request) | State::Writing(r, request) if r == id => request,
+            _ => return None,
+        };
+        if self.request != request {
+            // The PLC cleared (or changed) its request while it ran: drop the result, and never
+            // write on behalf of a request that is gone.
+            self.state = State::Idle;
+            return None;
+        }
+        let [code, axis, point, offset, hi, lo] = request;
+        let wanted = join(hi, lo);
+        let unexpected = Reason::Unexpected.code(0);
+        match (self.state, result) {
+            (State::Reading(..), Ok(JobOutput::Point(readback))) => {
+                let Some(field) = field(offset) else {
+                    self.fail(code, unexpected);
+                    return None;
+                };
+                let stored = readback.get(field);
+                if code == READ_FIELD || stored == wanted {
+                    let count = if code == WRITE_FIELD { UNCHANGED } else { 0 };
+                    let [h, l] = split(stored);
+                    self.answer([code, 0, h, l, count]);
+                    return None;
+                }
+                let (Some(axis), Some(point)) = (
+                    u8::try_from(axis).ok().and_then(Axis::new),
+                    u8::try_from(point).ok().and_then(PositionNo::new),
+                ) else {
+                    self.fail(code, unexpected);
+                    return None;
+                };
+                let job = Job {
+                    axis,
+                    kind: JobKind::WriteField {
+                        point,
+                        field,
+                        value: wanted,
+                    },
+                };
+                match engine.submit(job) {
+                    Ok(w) => {
+                        self.state = State::Writing(w, request);
+                        return Some((axis, point));
+                    }
+                    Err(_) => self.fail(code, Reason::QueueFull.code(0)),
+                }
+            }
+            (State::Writing(..), Ok(output)) => {
+                let count = match output {
+                    JobOutput::Value(v) => u16::try_from(*v).unwrap_or(u16::MAX - 1),
+                    _ => 0,
+                };
+                self.answer([code, 0, hi, lo, count]);
+            }
+            (_, Err(e)) => self.fail(code, Reason::of(*e)),
+            _ => self.fail(code, unexpected),
+        }
+        None
+    }
+
+    fn answer(&mut self, response: [u16; RESP_LEN]) {
+        self.response = response;
+        self.state = State::Answered;
+    }
+
+    fn fail(&mut self, code: u16, error: u16) {
+        self.answer([code | FAILED, error, 0, 0, 0]);
+    }
+}

@@ -1,0 +1,334 @@
+//! The gateway unit (id 63 by default, as IAI's RGW-SIO): the gateway's own settings, counters,
+//! the synchronized start and the command channel. See [`map`](super::map) for the table.
+//!
+//! Writes are checked register by register before any is applied; a register that exists but
+//! cannot be written answers 03, one that does not exist 02 (as the axis units do).
+
+use super::axis_unit::{link_code, nth};
+use super::channel::Channel;
+use super::config::WatchdogAction;
+use super::gateway::Gateway;
+use super::map::{self, *};
+use super::registers::{join, split};
+use crate::axes::AxisSet;
+use crate::engine::LinkError;
+use crate::line::Baud;
+use crate::modbus::{Exception, SlaveCounters};
+use crate::time::Duration;
+use crate::units::{Complement, Lead, Length};
+use crate::{Axis, HomeDirection, PositionNo, Rtim};
+
+/// AXISCFG field offsets.
+mod axis_cfg {
+    pub const ENABLED: u16 = 0;
+    pub const LEAD: u16 = 1;
+    pub const HOME: u16 = 2;
+    pub const PULSES: u16 = 3;
+    pub const STROKE_HI: u16 = 4;
+    pub const STROKE_LO: u16 = 5;
+    pub const COMPLEMENT: u16 = 6;
+}
+
+/// DIAG word offsets past the seven u32 counters.
+const DIAG_LINK: u16 = 14;
+const DIAG_LAST_ERROR: u16 = 15;
+
+/// The axis and field offset of an address in a per-axis block of `len` registers at `base`.
+fn per_axis(address: u16, base: u16, len: u16) -> Option<(Axis, u16)> {
+    let offset = address.checked_sub(base)?;
+    let axis = Axis::new(u8::try_from(offset / len).ok()?)?;
+    Some((axis, offset % len))
+}
+
+/// Register `offset` of a block of u32 counters, two registers each, high word first.
+fn counter_register(counters: &[u32], offset: u16) -> u16 {
+    let word = counters.get(usize::from(offset / 2)).copied().unwrap_or(0);
+    split(word)
+        .get(usize::from(offset % 2))
+        .copied()
+        .unwrap_or(0)
+}
+
+impl Gateway {
+    pub(super) fn gateway_read(
+        &self,
+        address: u16,
+        link: &SlaveCounters,
+    ) -> Result<u16, Exception> {
+        let (major, minor, patch) = self.config.version;
+        let uptime = u32::try_from(self.now.0 / 1_000_000).unwrap_or(u32::MAX);
+        let sync = &self.sync;
+        match address {
+            G_VERSION => Ok(u16::from(major) << 8 | u16::from(minor)),
+            0x0001 => Ok(patch),
+            G_UPTIME => Ok(split(uptime)[0]),
+            0x0003 => Ok(split(uptime)[1]),
+            G_FAILSAFE => Ok(self.failsafe.latched()),
+            G_FAILSAFE_COUNT => Ok(self.failsafe.count()),
+            G_WATCHDOG => {
+                Ok(u16::try_from(self.config.watchdog.as_micros() / 1000).unwrap_or(u16::MAX))
+            }
+            G_BUS_BAUD => Ok(u16::try_from(self.bus_line.0.bits_per_second() / 100).unwrap_or(0)),
+            G_BUS_RTIM => Ok(u16::from(self.bus_line.1.get())),
+            G_RETRIES => Ok(u16::from(self.engine.config().retries)),
+            G_APPLY | G_SYNC_START => Ok(0),
+            G_WD_ACTION => Ok(match self.config.watchdog_action {
+                WatchdogAction::StopAll => 0,
+                WatchdogAction::LatchOnly => 1,
+            }),
+            G_PIO_AXIS => Ok(self.config.pio_axis.map_or(0xFFFF, |a| u16::from(a.get()))),
+            G_SYNC_MASK => Ok(sync.mask().0),
+            G_SYNC_STATUS => Ok(sync.status() as u16),
+            a if self.channel.read(a).is_some() => {
+                self.channel.read(a).ok_or(Exception::IllegalDataAddress)
+            }
+            a => {
+                if let Some((axis, field)) = per_axis(a, G_AXIS_CONFIG, G_AXIS_CONFIG_LEN) {
+                    return Ok(self.axis_config_read(axis, field));
+                }
+                if let Some((axis, offset)) = per_axis(a, G_DIAG, G_DIAG_LEN) {
+                    return Ok(self.diagnostics(axis, offset));
+                }
+                if let Some(offset) = a.checked_sub(G_PLC).filter(|&o| o < 14) {
+                    let exceptions = [
+                        Exception::IllegalFunction,
+                        Exception::IllegalDataAddress,
+                        Exception::IllegalDataValue,
+                        Exception::ServerDeviceFailure,
+                    ]
+                    .into_iter()
+                    .fold(0u32, |n, e| n.wrapping_add(link.exceptions(e)));
+                    let values = [
+                        link.frames,
+                        link.crc_errors,
+                        exceptions,
+                        link.replies,
+                        link.ignored,
+                        link.broadcasts,
+                        link.malformed,
+                    ];
+                    return Ok(counter_register(&values, offset));
+                }
+                if let Some(offset) = a.checked_sub(G_BUS).filter(|&o| o < 8) {
+                    let c = self.engine.bus_counters();
+                    let values = [c.unsolicited, c.events_lost, c.queue_full, c.establishments];
+                    return Ok(counter_register(&values, offset));
+                }
+                Err(Exception::IllegalDataAddress)
+            }
+        }
+    }
+
+    fn diagnostics(&self, axis: Axis, offset: u16) -> u16 {
+        let state = self.engine.axis(axis);
+        let c = state.counters;
+        let words = [
+            c.frames_sent,
+            c.replies,
+            c.timeouts,
+            c.bcc_errors,
+            c.bad_replies,
+            c.retries,
+            c.rejections,
+        ];
+        match offset {
+            DIAG_LINK => link_code(state.link),
+            DIAG_LAST_ERROR => match state.last_error {
+                None => 0,
+                Some(LinkError::Timeout) => 0x0100,
+                Some(LinkError::Rejected(code)) => 0x0300 | u16::from(code.0),
+            },
+            _ => counter_register(&words, offset),
+        }
+    }
+
+    fn axis_config_read(&self, axis: Axis, field: u16) -> u16 {
+        let c = self.config.axes[axis];
+        let stroke = split(u32::try_from(c.stroke.0).unwrap_or(0));
+        match field {
+            axis_cfg::ENABLED => u16::from(self.config.bus.axes.contains(axis)),
+            axis_cfg::LEAD => c.scale.lead.hundredths(),
+            axis_cfg::HOME => u16::from(c.scale.home.code()),
+            axis_cfg::PULSES => c.scale.pulses_per_rev.get(),
+            axis_cfg::STROKE_HI => stroke[0],
+            axis_cfg::STROKE_LO => stroke[1],
+            axis_cfg::COMPLEMENT => match c.scale.complement {
+                Complement::Ones => 1,
+                Complement::Twos => 2,
+            },
+            _ => 0,
+        }
+    }
+
+    /// Nothing moving, running or waiting, and no establishment under way: APPLY (a break and
+    /// the whole establishment, during which no stop could reach an axis) is only safe then.
+    fn bus_idle(&self) -> bool {
+        !self.engine.establishing()
+            && self.sync.status() != super::sync::SyncStatus::Running
+            && self
+                .config
+                .bus
+                .axes
+                .iter()
+                .all(|a| !self.engine.busy(a) && !self.engine.axis(a).moving())
+    }
+
+    /// Check one gateway register write without applying it: 02 for an address that does not
+    /// exist, 03 for a read-only register or a value out of range.
+    fn gateway_check(&self, address: u16, value: u16) -> Result<(), Exception> {
+        let entry = map::find(Unit::Gateway, address).ok_or(Exception::IllegalDataAddress)?;
+        if !entry.writable {
+            return Err(Exception::IllegalDataValue);
+        }
+        let valid = match address {
+            G_FAILSAFE => value == 0,
+            G_WATCHDOG => value == 0 || (50..=60_000).contains(&value),
+            G_BUS_BAUD => Baud::from_bits_per_second(u32::from(value) * 100).is_some(),
+            G_BUS_RTIM => u8::try_from(value).ok().and_then(Rtim::new).is_some(),
+            G_RETRIES => value <= 3,
+            G_APPLY => value == 0 || (value == 1 && self.bus_idle()),
+            G_WD_ACTION => value <= 1,
+            G_PIO_AXIS => value == 0xFFFF || value <= 15,
+            G_SYNC_MASK => value & !self.config.bus.axes.0 == 0,
+            G_SYNC_START => value <= 1,
+            a if Channel::is_request(a) => true,
+            a => match per_axis(a, G_AXIS_CONFIG, G_AXIS_CONFIG_LEN) {
+                Some((axis, field)) => match field {
+                    axis_cfg::ENABLED => value == u16::from(self.config.bus.axes.contains(axis)),
+                    axis_cfg::LEAD | axis_cfg::PULSES => value > 0,
+                    axis_cfg::HOME => value == 7 || value == 8,
+                    // The stroke's high word: strokes above i32::MAX (0.01 mm) make no sense.
+                    axis_cfg::STROKE_HI => value < 0x8000,
+                    axis_cfg::STROKE_LO => true,
+                    axis_cfg::COMPLEMENT => value == 1 || value == 2,
+                    _ => false,
+                },
+                None => false,
+            },
+        };
+        if valid {
+            Ok(())
+        } else {
+            Err(Exception::IllegalDataValue)
+        }
+    }
+
+    /// Apply one checked gateway register write (the command channel and SYNCSTART aside).
+    fn gateway_apply(&mut self, address: u16, value: u16) {
+        match address {
+            G_FAILSAFE => self.failsafe.clear(),
+            G_WATCHDOG => self.config.watchdog = Duration::from_millis(u64::from(value)),
+            G_BUS_BAUD => {
+                if let Some(baud) = Baud::from_bits_per_second(u32::from(value) * 100) {
+                    self.bus_line.0 = baud;
+                }
+            }
+            G_BUS_RTIM => {
+                if let Some(rtim) = u8::try_from(value).ok().and_then(Rtim::new) {
+                    self.bus_line.1 = rtim;
+                }
+            }
+            G_RETRIES => self.engine.set_retries(u8::try_from(value).unwrap_or(3)),
+            G_APPLY if value == 1 => {
+                let (baud, rtim) = self.bus_line;
+                self.config.bus.baud = baud;
+                self.config.bus.rtim = rtim;
+                self.engine.reconfigure(baud, rtim);
+            }
+            G_WD_ACTION => {
+                self.config.watchdog_action = if value == 0 {
+                    WatchdogAction::StopAll
+                } else {
+                    WatchdogAction::LatchOnly
+                }
+            }
+            G_PIO_AXIS => self.config.pio_axis = u8::try_from(value).ok().and_then(Axis::new),
+            G_SYNC_MASK => self.sync.set_mask(AxisSet(value)),
+            a => {
+                let Some((axis, field)) = per_axis(a, G_AXIS_CONFIG, G_AXIS_CONFIG_LEN) else {
+                    return;
+                };
+                let c = &mut self.config.axes[axis];
+                match field {
+                    axis_cfg::LEAD => {
+                        c.scale.lead = Lead::from_hundredths(value).unwrap_or(c.scale.lead)
+                    }
+                    axis_cfg::HOME => {
+                        c.scale.home = if value == 7 {
+                            HomeDirection::MotorEnd
+                        } else {
+                            HomeDirection::NonMotorEnd
+                        }
+                    }
+                    axis_cfg::PULSES => {
+                        c.scale.pulses_per_rev =
+                            core::num::NonZeroU16::new(value).unwrap_or(c.scale.pulses_per_rev)
+                    }
+                    axis_cfg::STROKE_HI | axis_cfg::STROKE_LO => {
+                        let [hi, lo] = split(u32::try_from(c.stroke.0).unwrap_or(0));
+                        let (hi, lo) = if field == axis_cfg::STROKE_HI {
+                            (value, lo)
+                        } else {
+                            (hi, value)
+                        };
+                        c.stroke = Length(i32::try_from(join(hi, lo)).unwrap_or(i32::MAX));
+                    }
+                    axis_cfg::COMPLEMENT => {
+                        c.scale.complement = if value == 1 {
+                            Complement::Ones
+                        } else {
+                            Complement::Twos
+                        }
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+
+    /// FC06/FC10 to the gateway unit: every register checked, then applied in order; the
+    /// command channel's request block as a whole, and SYNCSTART last (with the mask the same
+    /// write sets).
+    pub(super) fn gateway_write(&mut self, address: u16, values: &[u16]) -> Result<(), Exception> {
+        for (i, &value) in values.iter().enumerate() {
+            let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
+            self.gateway_check(a, value)?;
+        }
+        let at = |register: u16| {
+            register
+                .checked_sub(address)
+                .and_then(|i| values.get(usize::from(i)))
+                .copied()
+        };
+        let start_sync = at(G_SYNC_START) == Some(1);
+        if start_sync {
+            let mask = at(G_SYNC_MASK).map_or(self.sync.mask(), AxisSet);
+            self.sync.check(mask, self.blocked(), &self.engine)?;
+        }
+        let request = self.channel.after_write(address, values);
+        let start = match request {
+            Some(request) => self.channel.check(request, self.config.bus.axes)?,
+            None => None,
+        };
+        if let Some(request) = request {
+            self.channel.store(request, start, &mut self.engine)?;
+        }
+        for (i, &value) in values.iter().enumerate() {
+            if let Some(a) = nth(address, i).filter(|&a| a != G_SYNC_START) {
+                self.gateway_apply(a, value);
+            }
+        }
+        if start_sync {
+            let blocked = self.blocked();
+            let mask = self.sync.mask();
+            let axes = &self.axes;
+            let posr = |axis: Axis| {
+                PositionNo::new(u8::try_from(axes[axis].posr).unwrap_or(0))
+                    .unwrap_or(PositionNo::MIN)
+            };
+            self.sync.start(blocked, posr, &mut self.engine)?;
+            self.sync_taken(mask);
+        }
+        Ok(())
+    }
+}

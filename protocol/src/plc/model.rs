@@ -1,0 +1,155 @@
+//! The gateway as the Modbus slave's [`DataModel`]: which unit a request is for, and that every
+//! address of it exists, before anything is read, fetched or written.
+//!
+//! [`Registers`] is the gateway seen by one request: it carries the time the request arrived
+//! (UPTIME, the fail-safe) and the PLC link's counters (PLCLINK), so that the gateway itself
+//! never needs to be told either out of band.
+
+use super::axis_unit::{coils_exist, nth, readable};
+use super::gateway::Gateway;
+use super::map::{COIL_STOP, COIL_STP, DRG1, DRG1_EMG, DRG1_STP, DRG1_SUPPORTED, POSR};
+use super::table;
+use crate::engine::JobKind;
+use crate::modbus::{
+    BitTable, Bits, BitsMut, DataModel, Exception, RegisterTable, SlaveCounters, BROADCAST,
+};
+use crate::time::Instant;
+
+/// The gateway answering one Modbus request; see the [module documentation](self).
+#[derive(Debug)]
+pub struct Registers<'a> {
+    gateway: &'a mut Gateway,
+    link: SlaveCounters,
+}
+
+impl Gateway {
+    /// The gateway as the data model of a Modbus request received at `now`; `link` is what
+    /// the slave has counted so far (PLCLINK).
+    pub fn registers(&mut self, now: Instant, link: SlaveCounters) -> Registers<'_> {
+        self.now = now;
+        Registers {
+            gateway: self,
+            link,
+        }
+    }
+}
+
+impl DataModel for Registers<'_> {
+    fn serves(&self, unit: u8) -> bool {
+        let config = &self.gateway.config;
+        unit == config.unit || config.axis_of_unit(unit).is_some()
+    }
+
+    fn read_bits(
+        &mut self,
+        unit: u8,
+        table: BitTable,
+        address: u16,
+        out: &mut BitsMut<'_>,
+    ) -> Result<(), Exception> {
+        let gateway = &mut *self.gateway;
+        let axis = gateway
+            .config
+            .axis_of_unit(unit)
+            .ok_or(Exception::IllegalDataAddress)?;
+        if table != BitTable::Coils {
+            return Err(Exception::IllegalDataAddress);
+        }
+        for i in 0..out.len() {
+            let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
+            out.set(i, gateway.axis_coil(axis, a)?);
+        }
+        Ok(())
+    }
+
+    fn read_registers(
+        &mut self,
+        unit: u8,
+        table: RegisterTable,
+        address: u16,
+        out: &mut [u16],
+    ) -> Result<(), Exception> {
+        let gateway = &mut *self.gateway;
+        let Some(axis) = gateway.config.axis_of_unit(unit) else {
+            for (i, slot) in out.iter_mut().enumerate() {
+                let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
+                *slot = gateway.gateway_read(a, &self.link)?;
+            }
+            return Ok(());
+        };
+        // Every address must exist in this table before anything is fetched from the bus.
+        let mut touches_table = false;
+        for i in 0..out.len() {
+            let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
+            let in_table = table::locate(a).is_some();
+            touches_table |= in_table;
+            if (in_table && table != RegisterTable::Holding) || (!in_table && !readable(a, table)) {
+                return Err(Exception::IllegalDataAddress);
+            }
+        }
+        if touches_table && !gateway.table_rows_ready(axis, address, out.len()) {
+            // Not read from the controller yet: it is being fetched; ask again shortly.
+            return Err(Exception::ServerDeviceFailure);
+        }
+        for (i, slot) in out.iter_mut().enumerate() {
+            let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
+            *slot = gateway.axis_read(axis, table, a)?;
+        }
+        Ok(())
+    }
+
+    fn write_bits(&mut self, unit: u8, address: u16, values: Bits<'_>) -> Result<(), Exception> {
+        let gateway = &mut *self.gateway;
+        if unit == BROADCAST {
+            // Every axis that answers; those that do not only get the stop, if the write
+            // stops (a stop can only help).
+            coils_exist(address, values.len())?;
+            let stops = values
+                .iter()
+                .enumerate()
+                .any(|(i, on)| on && matches!(nth(address, i), Some(COIL_STOP | COIL_STP)));
+            for axis in gateway.config.bus.axes.iter() {
+                if gateway.engine.online(axis) {
+                    gateway.axis_coils(axis, address, values.iter())?;
+                } else if stops {
+                    gateway.command(axis, JobKind::Stop)?;
+                }
+            }
+            return Ok(());
+        }
+        let axis = gateway
+            .config
+            .axis_of_unit(unit)
+            .ok_or(Exception::IllegalDataAddress)?;
+        gateway.axis_coils(axis, address, values.iter())
+    }
+
+    fn write_registers(&mut self, unit: u8, address: u16, values: &[u16]) -> Result<(), Exception> {
+        let gateway = &mut *self.gateway;
+        if unit == BROADCAST {
+            // Broadcast: DRG1 or POSR of every axis (checked by value first, so a bad value
+            // refuses before any effect). An axis that does not answer only gets the stop, if
+            // the write stops. Not a direct move: travel differs between axes.
+            let (DRG1 | POSR, &[value]) = (address, values) else {
+                return Err(Exception::IllegalDataAddress);
+            };
+            if (address == DRG1 && value & !DRG1_SUPPORTED != 0) || (address == POSR && value > 15)
+            {
+                return Err(Exception::IllegalDataValue);
+            }
+            let stops = address == DRG1 && value & (DRG1_STP | DRG1_EMG) != 0;
+            for axis in gateway.config.bus.axes.iter() {
+                if address == POSR || gateway.engine.online(axis) {
+                    gateway.axis_write(axis, address, values)?;
+                } else if stops {
+                    gateway.command(axis, JobKind::Stop)?;
+                }
+            }
+            return Ok(());
+        }
+        match gateway.config.axis_of_unit(unit) {
+            Some(axis) => gateway.axis_write(axis, address, values),
+            None => gateway.gateway_write(address, values),
+        }
+    }
+}

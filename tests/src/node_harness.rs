@@ -1,0 +1,269 @@
+//! The whole gateway ([`Node`]) between a simulated bus and a scripted PLC, in virtual time.
+//!
+//! This is the firmware's loop (ingress, poll until idle, sleep until `poll_at`) with the
+//! simulator in place of the RS485 UART and a Modbus RTU master in place of the PLC: requests
+//! are real RTU frames (CRC and all) handed to [`Node::plc_received`], replies are what
+//! [`Action::Reply`] hands back, decoded. So a test here exercises exactly the object the
+//! firmware runs, down to the bytes on both lines.
+
+use crate::sim::Bus;
+use protocol::frame::COMM_CHANGE;
+use protocol::line::{LineAction, BREAK_MS};
+use protocol::modbus::{crc, Exception};
+use protocol::node::{Action, Node};
+use protocol::pio::{PioInputs, PioOutputs};
+use protocol::time::Instant;
+use protocol::Request;
+
+/// How long a request may wait for its reply before the master gives up (virtual µs).
+const REPLY_TIMEOUT_US: u64 = 500_000;
+
+/// What a Modbus request got back.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Answer {
+    /// A normal reply: the PDU after the function code.
+    Data(Vec<u8>),
+    /// An exception reply.
+    Exception(Exception),
+    /// Nothing (a broadcast, or a unit nobody serves).
+    Silence,
+}
+
+/// Node + simulated bus + a Modbus master + virtual clock.
+pub struct NodeHarness {
+    /// The gateway under test.
+    pub node: Box<Node>,
+    /// The simulated line and controllers.
+    pub bus: Bus,
+    /// Virtual time, microseconds.
+    pub now: u64,
+    /// Every frame the node transmitted on the bus, with its time.
+    pub sent: Vec<(u64, Request)>,
+    /// The PIO input pins, sampled every millisecond (none when `None`).
+    pub inputs: Option<PioInputs>,
+    /// The PIO outputs as of the last sample.
+    pub outputs: PioOutputs,
+    /// Modbus replies not yet taken, with the time they were sent.
+    replies: Vec<(u64, Vec<u8>)>,
+    /// The next input sample is due then.
+    next_sample: u64,
+}
+
+impl NodeHarness {
+    /// The node starts with the bus at time 0; the bus' host side starts at the node's rate.
+    pub fn new(node: Node, mut bus: Bus) -> NodeHarness {
+        bus.set_host_baud(node.gateway().engine().line_baud());
+        NodeHarness {
+            node: Box::new(node),
+            bus,
+            now: 0,
+            sent: Vec::new(),
+            inputs: None,
+            outputs: PioOutputs::SAFE,
+            replies: Vec::new(),
+            next_sample: 0,
+        }
+    }
+
+    /// Carry out everything the node has to do now.
+    fn drain(&mut self) {
+        let now = Instant(self.now);
+        for _ in 0..10_000 {
+            match self.node.poll(now) {
+                None => return,
+                Some(Action::Bus(bytes)) => {
+                    if let Ok(frame) = protocol::Frame::new_checked(&bytes) {
+                        if let Ok(request) = Request::parse(&frame) {
+                            self.sent.push((self.now, request));
+                        }
+                    }
+                    self.bus.host_send(self.now, &bytes);
+                }
+                Some(Action::Line(LineAction::SetBaud(baud))) => self.bus.set_host_baud(baud),
+                Some(Action::Line(LineAction::BreakStart)) => {
+                    // The node ends the break BREAK_MS later; the simulated line takes the
+                    // whole break at once.
+                    self.bus
+                        .host_break(self.now, u64::from(BREAK_MS).saturating_mul(1000));
+                }
+                Some(Action::Line(LineAction::BreakEnd)) => {}
+                Some(Action::Line(LineAction::CommChange)) => {
+                    self.bus.host_send(self.now, &COMM_CHANGE);
+                }
+                Some(Action::Reply(bytes)) => self.replies.push((self.now, bytes.to_vec())),
+            }
+        }
+        panic!("the node never went idle at {} µs", self.now);
+    }
+
+    /// Run one pass: act on the node, then advance time to the next thing that happens (a
+    /// byte arrives, the node's deadline, an input sample) but not beyond `limit`.
+    pub fn step(&mut self, limit: u64) {
+        self.drain();
+        let wake = [
+            self.node.poll_at().map(|t| t.0),
+            self.bus.next_event(),
+            self.inputs.map(|_| self.next_sample),
+            Some(limit),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+        .unwrap_or(limit)
+        .max(self.now);
+        for (at, byte) in self.bus.advance(wake) {
+            self.node.bus_received(Instant(at), &[byte]);
+        }
+        self.now = wake;
+        if let Some(inputs) = self.inputs {
+            if self.now >= self.next_sample {
+                self.node.sample_inputs(Instant(self.now), inputs);
+                self.outputs = self.node.outputs();
+                self.next_sample = self.now + 1_000;
+            }
+        }
+    }
+
+    /// Run until virtual time `until`.
+    pub fn run_until(&mut self, until: u64) {
+        let mut guard = 0u64;
+        while self.now < until {
+            self.step(until);
+            guard += 1;
+            assert!(guard < 50_000_000, "no progress at {} µs", self.now);
+        }
+        self.drain();
+    }
+
+    /// Run for `us` microseconds.
+    pub fn run_for(&mut self, us: u64) {
+        self.run_until(self.now + us);
+    }
+
+    /// Send one Modbus request (unit and PDU; the CRC is added) and wait for its answer.
+    pub fn request(&mut self, unit: u8, pdu: &[u8]) -> Answer {
+        let mut adu = vec![unit];
+        adu.extend_from_slice(pdu);
+        adu.extend_from_slice(&crc::to_wire(crc::checksum(&adu)));
+        self.replies.clear();
+        let handled = self.node.plc_counters().frames;
+        self.node.plc_received(Instant(self.now), &adu);
+        let until = self.now + REPLY_TIMEOUT_US;
+        // The slave answers in the same poll that takes the frame in: once it has counted the
+        // frame, the reply is there or there is none (a broadcast, another unit).
+        while self.now < until && self.node.plc_counters().frames == handled {
+            self.step(until);
+            self.drain();
+        }
+        let Some((_, reply)) = self.replies.pop() else {
+            return Answer::Silence;
+        };
+        assert!(crc::is_valid(&reply), "reply with a bad CRC: {reply:02X?}");
+        assert_eq!(reply.first(), Some(&unit), "reply from another unit");
+        let function = reply[1];
+        if function & 0x80 != 0 {
+            assert_eq!(function & 0x7F, pdu[0], "exception for another function");
+            return Answer::Exception(Exception::from_code(reply[2]).expect("an exception code"));
+        }
+        assert_eq!(function, pdu[0], "reply to another function");
+        Answer::Data(reply[2..reply.len() - 2].to_vec())
+    }
+
+    /// FC03 (or FC04 with `input`): `n` registers.
+    pub fn read_registers(
+        &mut self,
+        unit: u8,
+        address: u16,
+        n: u16,
+        input: bool,
+    ) -> Result<Vec<u16>, Exception> {
+        let function = if input { 0x04 } else { 0x03 };
+        let [a0, a1] = address.to_be_bytes();
+        let [n0, n1] = n.to_be_bytes();
+        match self.request(unit, &[function, a0, a1, n0, n1]) {
+            Answer::Data(data) => {
+                assert_eq!(usize::from(data[0]), 2 * usize::from(n), "byte count");
+                Ok(data[1..]
+                    .chunks(2)
+                    .map(|c| u16::from_be_bytes([c[0], c[1]]))
+                    .collect())
+            }
+            Answer::Exception(e) => Err(e),
+            Answer::Silence => panic!("no answer to FC{function:02X} at unit {unit}"),
+        }
+    }
+
+    /// FC03: `n` holding registers.
+    pub fn read(&mut self, unit: u8, address: u16, n: u16) -> Result<Vec<u16>, Exception> {
+        self.read_registers(unit, address, n, false)
+    }
+
+    /// FC06 for one value, FC10 for several; a broadcast (unit 0) returns `Ok` unanswered.
+    pub fn write(&mut self, unit: u8, address: u16, values: &[u16]) -> Result<(), Exception> {
+        let [a0, a1] = address.to_be_bytes();
+        let pdu = match values {
+            [value] => {
+                let [v0, v1] = value.to_be_bytes();
+                vec![0x06, a0, a1, v0, v1]
+            }
+            _ => {
+                let n = u16::try_from(values.len()).expect("at most 123 registers");
+                let [n0, n1] = n.to_be_bytes();
+                let mut pdu = vec![0x10, a0, a1, n0, n1, (2 * values.len()) as u8];
+                for v in values {
+                    pdu.extend_from_slice(&v.to_be_bytes());
+                }
+                pdu
+            }
+        };
+        self.answer_to_write(unit, &pdu)
+    }
+
+    /// FC05: one coil.
+    pub fn write_coil(&mut self, unit: u8, address: u16, on: bool) -> Result<(), Exception> {
+        let [a0, a1] = address.to_be_bytes();
+        let value = if on { 0xFF } else { 0x00 };
+        self.answer_to_write(unit, &[0x05, a0, a1, value, 0x00])
+    }
+
+    /// FC0F: several coils.
+    pub fn write_coils(
+        &mut self,
+        unit: u8,
+        address: u16,
+        values: &[bool],
+    ) -> Result<(), Exception> {
+        let [a0, a1] = address.to_be_bytes();
+        let n = u16::try_from(values.len()).expect("at most 1968 coils");
+        let [n0, n1] = n.to_be_bytes();
+        let mut bytes = vec![0u8; values.len().div_ceil(8)];
+        for (i, &on) in values.iter().enumerate() {
+            bytes[i / 8] |= u8::from(on) << (i % 8);
+        }
+        let mut pdu = vec![0x0F, a0, a1, n0, n1, bytes.len() as u8];
+        pdu.extend_from_slice(&bytes);
+        self.answer_to_write(unit, &pdu)
+    }
+
+    /// FC01: `n` coils.
+    pub fn read_coils(&mut self, unit: u8, address: u16, n: u16) -> Result<Vec<bool>, Exception> {
+        let [a0, a1] = address.to_be_bytes();
+        let [n0, n1] = n.to_be_bytes();
+        match self.request(unit, &[0x01, a0, a1, n0, n1]) {
+            Answer::Data(data) => Ok((0..usize::from(n))
+                .map(|i| data[1 + i / 8] >> (i % 8) & 1 != 0)
+                .collect()),
+            Answer::Exception(e) => Err(e),
+            Answer::Silence => panic!("no answer to FC01 at unit {unit}"),
+        }
+    }
+
+    fn answer_to_write(&mut self, unit: u8, pdu: &[u8]) -> Result<(), Exception> {
+        match self.request(unit, pdu) {
+            Answer::Data(_) => Ok(()),
+            Answer::Exception(e) => Err(e),
+            Answer::Silence if unit == 0 => Ok(()),
+            Answer::Silence => panic!("no answer to FC{:02X} at unit {unit}", pdu[0]),
+        }
+    }
+}
