@@ -108,6 +108,14 @@ use crate::pio::{self, Pio, PioInputs, PioOutputs};
 use crate::plc::{Gateway, GatewayConfig};
 use crate::time::{earliest, Instant};
 
+/// The most the whole node may take on a microcontroller: 12 KiB for 16 axes (an STM32F103C8
+/// has 20 KiB of RAM in all). Checked at compile time on the firmware's targets; the host test
+/// `the_whole_state_fits_12_kib` prints the figures.
+pub const RAM_BUDGET: usize = 12 * 1024;
+
+#[cfg(target_os = "none")]
+const _: () = assert!(core::mem::size_of::<Node>() <= RAM_BUDGET);
+
 /// What the caller does next; see the [hardware contract](self#the-hardware-contract).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Action<'a> {

@@ -9,7 +9,7 @@
 use crate::sim::Bus;
 use protocol::frame::COMM_CHANGE;
 use protocol::line::{LineAction, BREAK_MS};
-use protocol::modbus::{crc, Exception};
+use protocol::modbus::{client, Adu, Exception, Request as Modbus, MAX_ADU_LEN};
 use protocol::node::{Action, Node};
 use protocol::pio::{PioInputs, PioOutputs};
 use protocol::time::Instant;
@@ -140,14 +140,13 @@ impl NodeHarness {
         self.run_until(self.now + us);
     }
 
-    /// Send one Modbus request (unit and PDU; the CRC is added) and wait for its answer.
-    pub fn request(&mut self, unit: u8, pdu: &[u8]) -> Answer {
-        let mut adu = vec![unit];
-        adu.extend_from_slice(pdu);
-        adu.extend_from_slice(&crc::to_wire(crc::checksum(&adu)));
+    /// Send one Modbus request and wait for its answer.
+    pub fn request(&mut self, unit: u8, request: &Modbus<'_>) -> Answer {
+        let mut adu = [0u8; MAX_ADU_LEN];
+        let len = request.emit(unit, &mut adu).expect("a request that fits");
         self.replies.clear();
         let handled = self.node.plc_counters().frames;
-        self.node.plc_received(Instant(self.now), &adu);
+        self.node.plc_received(Instant(self.now), &adu[..len]);
         let until = self.now + REPLY_TIMEOUT_US;
         // The slave answers in the same poll that takes the frame in: once it has counted the
         // frame, the reply is there or there is none (a broadcast, another unit).
@@ -158,15 +157,11 @@ impl NodeHarness {
         let Some((_, reply)) = self.replies.pop() else {
             return Answer::Silence;
         };
-        assert!(crc::is_valid(&reply), "reply with a bad CRC: {reply:02X?}");
-        assert_eq!(reply.first(), Some(&unit), "reply from another unit");
-        let function = reply[1];
-        if function & 0x80 != 0 {
-            assert_eq!(function & 0x7F, pdu[0], "exception for another function");
-            return Answer::Exception(Exception::from_code(reply[2]).expect("an exception code"));
+        let adu = Adu::new_checked(&reply).expect("a reply with a good CRC");
+        match client::answer(&adu, unit, request.function()).expect("the reply to the request") {
+            Ok(body) => Answer::Data(body.to_vec()),
+            Err(exception) => Answer::Exception(exception),
         }
-        assert_eq!(function, pdu[0], "reply to another function");
-        Answer::Data(reply[2..reply.len() - 2].to_vec())
     }
 
     /// FC03 (or FC04 with `input`): `n` registers.
@@ -177,19 +172,21 @@ impl NodeHarness {
         n: u16,
         input: bool,
     ) -> Result<Vec<u16>, Exception> {
-        let function = if input { 0x04 } else { 0x03 };
-        let [a0, a1] = address.to_be_bytes();
-        let [n0, n1] = n.to_be_bytes();
-        match self.request(unit, &[function, a0, a1, n0, n1]) {
-            Answer::Data(data) => {
-                assert_eq!(usize::from(data[0]), 2 * usize::from(n), "byte count");
-                Ok(data[1..]
-                    .chunks(2)
-                    .map(|c| u16::from_be_bytes([c[0], c[1]]))
-                    .collect())
+        let request = if input {
+            Modbus::ReadInputRegisters {
+                address,
+                quantity: n,
             }
+        } else {
+            Modbus::ReadHoldingRegisters {
+                address,
+                quantity: n,
+            }
+        };
+        match self.request(unit, &request) {
+            Answer::Data(body) => Ok(client::registers(&body).collect()),
             Answer::Exception(e) => Err(e),
-            Answer::Silence => panic!("no answer to FC{function:02X} at unit {unit}"),
+            Answer::Silence => panic!("no answer to {request:?} at unit {unit}"),
         }
     }
 
@@ -200,30 +197,23 @@ impl NodeHarness {
 
     /// FC06 for one value, FC10 for several; a broadcast (unit 0) returns `Ok` unanswered.
     pub fn write(&mut self, unit: u8, address: u16, values: &[u16]) -> Result<(), Exception> {
-        let [a0, a1] = address.to_be_bytes();
-        let pdu = match values {
-            [value] => {
-                let [v0, v1] = value.to_be_bytes();
-                vec![0x06, a0, a1, v0, v1]
-            }
-            _ => {
-                let n = u16::try_from(values.len()).expect("at most 123 registers");
-                let [n0, n1] = n.to_be_bytes();
-                let mut pdu = vec![0x10, a0, a1, n0, n1, (2 * values.len()) as u8];
-                for v in values {
-                    pdu.extend_from_slice(&v.to_be_bytes());
-                }
-                pdu
-            }
+        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_be_bytes()).collect();
+        let request = match values {
+            [value] => Modbus::WriteSingleRegister {
+                address,
+                value: *value,
+            },
+            _ => Modbus::WriteMultipleRegisters {
+                address,
+                values: &bytes,
+            },
         };
-        self.answer_to_write(unit, &pdu)
+        self.answer_to_write(unit, &request)
     }
 
     /// FC05: one coil.
     pub fn write_coil(&mut self, unit: u8, address: u16, on: bool) -> Result<(), Exception> {
-        let [a0, a1] = address.to_be_bytes();
-        let value = if on { 0xFF } else { 0x00 };
-        self.answer_to_write(unit, &[0x05, a0, a1, value, 0x00])
+        self.answer_to_write(unit, &Modbus::WriteSingleCoil { address, value: on })
     }
 
     /// FC0F: several coils.
@@ -233,37 +223,37 @@ impl NodeHarness {
         address: u16,
         values: &[bool],
     ) -> Result<(), Exception> {
-        let [a0, a1] = address.to_be_bytes();
-        let n = u16::try_from(values.len()).expect("at most 1968 coils");
-        let [n0, n1] = n.to_be_bytes();
         let mut bytes = vec![0u8; values.len().div_ceil(8)];
         for (i, &on) in values.iter().enumerate() {
             bytes[i / 8] |= u8::from(on) << (i % 8);
         }
-        let mut pdu = vec![0x0F, a0, a1, n0, n1, bytes.len() as u8];
-        pdu.extend_from_slice(&bytes);
-        self.answer_to_write(unit, &pdu)
+        let request = Modbus::WriteMultipleCoils {
+            address,
+            quantity: u16::try_from(values.len()).expect("at most 1968 coils"),
+            values: &bytes,
+        };
+        self.answer_to_write(unit, &request)
     }
 
     /// FC01: `n` coils.
     pub fn read_coils(&mut self, unit: u8, address: u16, n: u16) -> Result<Vec<bool>, Exception> {
-        let [a0, a1] = address.to_be_bytes();
-        let [n0, n1] = n.to_be_bytes();
-        match self.request(unit, &[0x01, a0, a1, n0, n1]) {
-            Answer::Data(data) => Ok((0..usize::from(n))
-                .map(|i| data[1 + i / 8] >> (i % 8) & 1 != 0)
-                .collect()),
+        let request = Modbus::ReadCoils {
+            address,
+            quantity: n,
+        };
+        match self.request(unit, &request) {
+            Answer::Data(body) => Ok(client::bits(&body, usize::from(n)).collect()),
             Answer::Exception(e) => Err(e),
             Answer::Silence => panic!("no answer to FC01 at unit {unit}"),
         }
     }
 
-    fn answer_to_write(&mut self, unit: u8, pdu: &[u8]) -> Result<(), Exception> {
-        match self.request(unit, pdu) {
+    fn answer_to_write(&mut self, unit: u8, request: &Modbus<'_>) -> Result<(), Exception> {
+        match self.request(unit, request) {
             Answer::Data(_) => Ok(()),
             Answer::Exception(e) => Err(e),
             Answer::Silence if unit == 0 => Ok(()),
-            Answer::Silence => panic!("no answer to FC{:02X} at unit {unit}", pdu[0]),
+            Answer::Silence => panic!("no answer to {request:?} at unit {unit}"),
         }
     }
 }

@@ -251,7 +251,13 @@ fn invalid_requests_get_exceptions_and_never_reach_the_bus() {
     );
     // A request to a unit that is not served is ignored by the slave: no answer.
     assert_eq!(
-        h.request(unit(5), &[0x03, 0x90, 0x00, 0x00, 0x01]),
+        h.request(
+            unit(5),
+            &protocol::modbus::Request::ReadHoldingRegisters {
+                address: PNOW,
+                quantity: 1
+            }
+        ),
         Answer::Silence
     );
     h.run_until(h.now + 200 * MS);

@@ -72,6 +72,7 @@
 
 pub mod adu;
 pub mod bits;
+pub mod client;
 pub mod crc;
 pub mod pdu;
 pub mod rtu;
