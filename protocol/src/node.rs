@@ -222,9 +222,11 @@ impl Node {
         let handled = self
             .slave
             .poll(&mut self.receiver, now, &mut model, &mut self.reply);
-        if let Some(Ok(handled @ (Handled::Reply(_) | Handled::Broadcast))) = handled {
+        if let Some(Ok(handled @ (Handled::Reply(_) | Handled::Broadcast | Handled::Silent))) =
+            handled
+        {
             // Any valid request to the gateway or its axes is the PLC's sign of life, whether
-            // it reads, writes, asks for an echo or gets an exception.
+            // it reads, writes, asks for an echo, gets an exception or no answer (Listen Only).
             self.gateway.plc_activity(now);
             self.dirty = true;
             if let Handled::Reply(_) = handled {

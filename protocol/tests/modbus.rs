@@ -401,10 +401,14 @@ fn exception_01_illegal_function() {
     let mut model = Memory::new(1000);
     // FC07 (Read Exception Status) is not supported.
     assert_exchange(&mut model, "11 07 4C 22", "11 87 01 83 F5");
-    // FC08 sub-functions other than 0000.
-    assert_exchange(&mut model, "11 08 00 01 00 00 B3 5B", "11 88 01 86 05");
+    // FC08 sub-functions this slave does not have (0003 is for ASCII mode).
+    let (_, reply) = exchange(&mut model, &with_crc("11 08 00 03 00 00"));
+    assert_eq!(reply, with_crc("11 88 01"));
+    // FC2B with another MEI type than 0E.
+    let (_, reply) = exchange(&mut model, &with_crc("11 2B 0D 01 00"));
+    assert_eq!(reply, with_crc("11 AB 01"));
     // Any other code below 0x80.
-    for function in [0x09, 0x11, 0x16, 0x17, 0x2B, 0x7F] {
+    for function in [0x09, 0x16, 0x17, 0x7F] {
         let (_, reply) = exchange(
             &mut model,
             &with_crc(&format!("11 {function:02X} 00 00 00 01")),

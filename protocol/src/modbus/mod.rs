@@ -74,12 +74,16 @@ pub mod adu;
 pub mod bits;
 pub mod client;
 pub mod crc;
+pub mod diag;
+pub mod ident;
 pub mod pdu;
 pub mod rtu;
 pub mod slave;
 
 pub use adu::{Adu, FrameError, MAX_ADU_LEN, MAX_PDU_LEN};
 pub use bits::{Bits, BitsMut};
+pub use diag::Diagnostic;
+pub use ident::{Identity, ReadDevId};
 pub use pdu::{PduError, Request};
 pub use rtu::{t1_5, t3_5, Receiver, ReceiverCounters};
 pub use slave::{Handled, ReplyBuffer, Slave, SlaveCounters};
@@ -123,6 +127,21 @@ pub trait DataModel {
     fn write_bits(&mut self, unit: u8, address: u16, values: Bits<'_>) -> Result<(), Exception>;
     /// FC06/FC10: write holding registers. Validate everything before applying anything.
     fn write_registers(&mut self, unit: u8, address: u16, values: &[u16]) -> Result<(), Exception>;
+
+    /// FC08 sub-function 02: the unit's diagnostic register (device-specific bits).
+    fn diagnostic_register(&self, _unit: u8) -> u16 {
+        0
+    }
+
+    /// FC2B/0E and FC11: who the unit is; `None` answers both with exception 01.
+    fn identity(&self, _unit: u8) -> Option<Identity> {
+        None
+    }
+
+    /// FC11's run indicator: whether the unit is running (ON) or not (OFF).
+    fn running(&self, _unit: u8) -> bool {
+        true
+    }
 }
 
 /// The single-bit tables (Application Protocol §4.3).

@@ -9,6 +9,8 @@
 use core::fmt;
 
 use super::adu::{Writer, MAX_PDU_LEN};
+use super::diag::Diagnostic;
+use super::ident::{ReadDevId, MEI_READ_DEVICE_ID};
 use super::Exception;
 
 /// FC01 Read Coils (§6.1).
@@ -23,12 +25,16 @@ pub const READ_INPUT_REGISTERS: u8 = 0x04;
 pub const WRITE_SINGLE_COIL: u8 = 0x05;
 /// FC06 Write Single Register (§6.6).
 pub const WRITE_SINGLE_REGISTER: u8 = 0x06;
-/// FC08 Diagnostics (§6.8); only sub-function 0000, Return Query Data, is supported.
+/// FC08 Diagnostics (§6.8; Serial Line §6.1): the sub-functions of [`Diagnostic`].
 pub const DIAGNOSTICS: u8 = 0x08;
 /// FC15 (0x0F) Write Multiple Coils (§6.11).
 pub const WRITE_MULTIPLE_COILS: u8 = 0x0F;
 /// FC16 (0x10) Write Multiple Registers (§6.12).
 pub const WRITE_MULTIPLE_REGISTERS: u8 = 0x10;
+/// FC17 (0x11) Report Server ID (§6.13; serial line only).
+pub const REPORT_SERVER_ID: u8 = 0x11;
+/// FC43 (0x2B) Encapsulated Interface Transport (§6.19); MEI type 0x0E only (§6.21).
+pub const ENCAPSULATED_INTERFACE: u8 = 0x2B;
 
 /// The most bits FC01/FC02 may read (0x07D0).
 pub const MAX_READ_BITS: u16 = 2000;
@@ -110,6 +116,22 @@ pub enum Request<'a> {
     ReturnQueryData {
         /// Whatever followed the sub-function (0..=250 bytes).
         data: &'a [u8],
+    },
+    /// FC08, another sub-function, with its (checked) two-byte data field.
+    Diagnostic {
+        /// The sub-function.
+        sub: Diagnostic,
+        /// Its data field.
+        data: u16,
+    },
+    /// FC11: the server's id, run indicator and description.
+    ReportServerId,
+    /// FC2B/0E: the device identification objects.
+    ReadDeviceId {
+        /// Which objects.
+        code: ReadDevId,
+        /// The first object (or the one, for [`ReadDevId::Individual`]).
+        object: u8,
     },
 }
 
@@ -265,11 +287,37 @@ impl<'a> Request<'a> {
                 if pdu.len() < 3 {
                     return Err(Exception::IllegalDataValue.into());
                 }
-                if field(pdu, 1) != RETURN_QUERY_DATA {
+                let code = field(pdu, 1);
+                if code == RETURN_QUERY_DATA {
+                    Request::ReturnQueryData {
+                        data: pdu.get(3..).unwrap_or(&[]),
+                    }
+                } else {
+                    let sub = Diagnostic::from_code(code).ok_or(Exception::IllegalFunction)?;
+                    expect_len(pdu, 5)?;
+                    let data = field(pdu, 3);
+                    if !sub.accepts(data) {
+                        return Err(Exception::IllegalDataValue.into());
+                    }
+                    Request::Diagnostic { sub, data }
+                }
+            }
+            REPORT_SERVER_ID => {
+                expect_len(pdu, 1)?;
+                Request::ReportServerId
+            }
+            ENCAPSULATED_INTERFACE => {
+                if pdu.get(1) != Some(&MEI_READ_DEVICE_ID) {
                     return Err(Exception::IllegalFunction.into());
                 }
-                Request::ReturnQueryData {
-                    data: pdu.get(3..).unwrap_or(&[]),
+                expect_len(pdu, 4)?;
+                let code = pdu
+                    .get(2)
+                    .and_then(|&c| ReadDevId::from_code(c))
+                    .ok_or(Exception::IllegalDataValue)?;
+                Request::ReadDeviceId {
+                    code,
+                    object: pdu.get(3).copied().unwrap_or(0),
                 }
             }
             _ => return Err(Exception::IllegalFunction.into()),
@@ -288,7 +336,9 @@ impl<'a> Request<'a> {
             Request::WriteSingleRegister { .. } => WRITE_SINGLE_REGISTER,
             Request::WriteMultipleCoils { .. } => WRITE_MULTIPLE_COILS,
             Request::WriteMultipleRegisters { .. } => WRITE_MULTIPLE_REGISTERS,
-            Request::ReturnQueryData { .. } => DIAGNOSTICS,
+            Request::ReturnQueryData { .. } | Request::Diagnostic { .. } => DIAGNOSTICS,
+            Request::ReportServerId => REPORT_SERVER_ID,
+            Request::ReadDeviceId { .. } => ENCAPSULATED_INTERFACE,
         }
     }
 
@@ -340,6 +390,16 @@ impl<'a> Request<'a> {
             Request::ReturnQueryData { data } => {
                 w.u16(RETURN_QUERY_DATA)?;
                 w.bytes(data)?;
+            }
+            Request::Diagnostic { sub, data } => {
+                w.u16(sub.code())?;
+                w.u16(data)?;
+            }
+            Request::ReportServerId => {}
+            Request::ReadDeviceId { code, object } => {
+                w.byte(MEI_READ_DEVICE_ID)?;
+                w.byte(code.code())?;
+                w.byte(object)?;
             }
         }
         w.finish()

@@ -7,6 +7,8 @@
 //! - A unit the model does not [serve](DataModel::serves) is ignored: the frame is another
 //!   slave's request, or another slave's reply.
 //! - A PDU that is not a request at all (function code 0 or 0x80 and above) is not answered.
+//! - In Listen Only mode (FC08 sub-function 04) nothing is answered or carried out, only
+//!   counted, until FC08 sub-function 01 (Serial Line §6.1, [`diag`](super::diag)).
 //! - Everything else gets exactly one reply: the normal one, or the function code with bit 7 set
 //!   and an [`Exception`] code.
 //!
@@ -21,6 +23,8 @@
 
 use super::adu::{Adu, FrameError, Writer, MAX_ADU_LEN};
 use super::bits::{Bits, BitsMut};
+use super::diag::{Diagnostic, LineCounts};
+use super::ident::{self, RUN_OFF, RUN_ON};
 use super::pdu::{self, PduError, Request, MAX_READ_BITS, MAX_READ_REGISTERS};
 use super::rtu::Receiver;
 use super::{BitTable, DataModel, Exception, RegisterTable, BROADCAST};
@@ -38,6 +42,9 @@ pub enum Handled {
     Ignored,
     /// Not a request (function code 0 or 0x80 and above); no reply.
     Malformed,
+    /// A request to a unit served, deliberately not answered (Listen Only mode, or the request
+    /// that enters or leaves it).
+    Silent,
 }
 
 /// What the slave has counted (wrapping counters).
@@ -54,7 +61,8 @@ pub struct SlaveCounters {
     pub too_long: u32,
     /// Bursts broken by a t1.5 gap seen by [`Slave::poll`].
     pub bad_gaps: u32,
-    /// Frames for other units, and broadcasts that are not writes.
+    /// Frames for other units, and broadcasts that are not writes. Every frame is ignored,
+    /// answered ([`replies`](Self::replies)) or [`unanswered`](Self::unanswered).
     pub ignored: u32,
     /// Broadcast writes (applied or refused).
     pub broadcasts: u32,
@@ -72,6 +80,11 @@ pub struct SlaveCounters {
     pub replies: u32,
     /// PDUs that are not requests (to a served unit or broadcast).
     pub malformed: u32,
+    /// Frames to a unit served, or broadcast (FC08's server message count).
+    pub served: u32,
+    /// Of those, frames not answered: broadcasts, malformed, Listen Only (FC08's server no
+    /// response count).
+    pub unanswered: u32,
 }
 
 impl SlaveCounters {
@@ -144,6 +157,10 @@ pub struct Slave {
     bits: [u8; MAX_READ_BITS.div_ceil(8) as usize],
     registers: [u16; MAX_READ_REGISTERS as usize],
     counters: SlaveCounters,
+    /// The serial-line counts at the last restart or clear: FC08 counts from here.
+    cleared: LineCounts,
+    /// FC08 sub-function 04 is in force.
+    listen_only: bool,
 }
 
 impl Default for Slave {
@@ -173,8 +190,17 @@ impl Slave {
                 server_device_failure: 0,
                 replies: 0,
                 malformed: 0,
+                served: 0,
+                unanswered: 0,
             },
+            cleared: LineCounts::ZERO,
+            listen_only: false,
         }
+    }
+
+    /// Whether Listen Only mode is in force (FC08 sub-function 04, left with 01).
+    pub fn listen_only(&self) -> bool {
+        self.listen_only
     }
 
     /// What has been counted since the slave was made.
@@ -216,25 +242,53 @@ impl Slave {
         bump(&mut self.counters.frames);
         reply.len = 0;
         let unit = adu.unit();
-        if unit != BROADCAST && !model.serves(unit) {
+        let served = if unit == BROADCAST {
+            // Only writes are broadcast; any other request to unit 0 is nobody's business (a
+            // frame that is no request at all is counted as malformed below).
+            pdu::is_write_function(adu.function()) || !(1..0x80).contains(&adu.function())
+        } else {
+            model.serves(unit)
+        };
+        if !served {
             bump(&mut self.counters.ignored);
             return Handled::Ignored;
         }
+        bump(&mut self.counters.served);
         let request = match Request::parse(adu.pdu()) {
             Err(PduError::NotARequest) => {
                 bump(&mut self.counters.malformed);
+                bump(&mut self.counters.unanswered);
                 return Handled::Malformed;
             }
             Err(PduError::Exception(exception)) => Err(exception),
             Ok(request) => Ok(request),
         };
+        if self.listen_only {
+            // Monitored and counted; only a restart is carried out (and not answered).
+            bump(&mut self.counters.unanswered);
+            if let (Ok(Request::Diagnostic { sub, .. }), false) = (request, unit == BROADCAST) {
+                if sub == Diagnostic::RestartCommunications {
+                    self.restart();
+                }
+            }
+            return Handled::Silent;
+        }
         if unit == BROADCAST {
-            return self.broadcast(adu.function(), request, model);
+            bump(&mut self.counters.unanswered);
+            return self.broadcast(request, model);
+        }
+        if let Ok(Request::Diagnostic {
+            sub: Diagnostic::ForceListenOnly,
+            ..
+        }) = request
+        {
+            self.listen_only = true;
+            bump(&mut self.counters.unanswered);
+            return Handled::Silent;
         }
         let result = request.and_then(|request| {
             self.execute(unit, &request, model)?;
-            self.encode(unit, &request, &mut reply.bytes)
-                .ok_or(Exception::ServerDeviceFailure)
+            self.encode(unit, &request, model, &mut reply.bytes)
         });
         let len = match result {
             Ok(len) => len,
@@ -246,20 +300,37 @@ impl Slave {
         };
         reply.len = len;
         bump(&mut self.counters.replies);
+        // A restart or a clear takes effect after its own reply, which it echoes.
+        match request {
+            Ok(Request::Diagnostic {
+                sub: Diagnostic::RestartCommunications,
+                ..
+            }) => self.restart(),
+            Ok(Request::Diagnostic {
+                sub: Diagnostic::ClearCounters,
+                ..
+            }) => self.cleared = LineCounts::of(&self.counters),
+            Ok(Request::Diagnostic {
+                sub: Diagnostic::ClearOverrunCounter,
+                ..
+            }) => self.cleared.overruns = self.counters.too_long,
+            _ => {}
+        }
         Handled::Reply(len)
+    }
+
+    /// FC08 sub-function 01: the port starts afresh (counters cleared, Listen Only left).
+    fn restart(&mut self) {
+        self.listen_only = false;
+        self.cleared = LineCounts::of(&self.counters);
     }
 
     /// A request to unit 0: writes are applied, nothing is answered.
     fn broadcast(
         &mut self,
-        function: u8,
         request: Result<Request<'_>, Exception>,
         model: &mut impl DataModel,
     ) -> Handled {
-        if !pdu::is_write_function(function) {
-            bump(&mut self.counters.ignored);
-            return Handled::Ignored;
-        }
         bump(&mut self.counters.broadcasts);
         if request
             .and_then(|request| self.execute(BROADCAST, &request, model))
@@ -322,7 +393,11 @@ impl Slave {
                 }
                 model.write_registers(unit, address, registers)
             }
-            Request::ReturnQueryData { .. } => Ok(()),
+            // Answered from the slave's own state or the model's identity.
+            Request::ReturnQueryData { .. }
+            | Request::Diagnostic { .. }
+            | Request::ReportServerId
+            | Request::ReadDeviceId { .. } => Ok(()),
         }
     }
 
@@ -341,9 +416,63 @@ impl Slave {
         Ok(registers)
     }
 
-    /// The normal reply to a carried-out request (Application Protocol §6); its length.
-    fn encode(&self, unit: u8, request: &Request<'_>, out: &mut [u8]) -> Option<usize> {
+    /// The normal reply to a carried-out request (Application Protocol §6); its length, or
+    /// the exception to answer instead (04 if it does not fit, which cannot happen).
+    fn encode(
+        &self,
+        unit: u8,
+        request: &Request<'_>,
+        model: &impl DataModel,
+        out: &mut [u8],
+    ) -> Result<usize, Exception> {
         let mut w = Writer::new(out);
+        let body = match *request {
+            Request::Diagnostic { sub, data } => {
+                let value = match sub {
+                    Diagnostic::DiagnosticRegister => model.diagnostic_register(unit),
+                    _ => LineCounts::of(&self.counters)
+                        .value(&self.cleared, sub)
+                        .unwrap_or(data),
+                };
+                w.byte(unit)
+                    .and_then(|()| w.byte(request.function()))
+                    .and_then(|()| w.u16(sub.code()))
+                    .and_then(|()| w.u16(value))
+            }
+            Request::ReportServerId => {
+                // Server ID (the unit), run indicator, then "<product code> <revision>".
+                let identity = model.identity(unit).ok_or(Exception::IllegalFunction)?;
+                let (code, revision) = (identity.product_code, identity.revision);
+                let count = u8::try_from(code.len() + revision.len() + 3).ok();
+                let run = if model.running(unit) { RUN_ON } else { RUN_OFF };
+                w.byte(unit)
+                    .and_then(|()| w.byte(request.function()))
+                    .and_then(|()| w.byte(count?))
+                    .and_then(|()| w.byte(unit))
+                    .and_then(|()| w.byte(run))
+                    .and_then(|()| w.bytes(code.as_bytes()))
+                    .and_then(|()| w.byte(b' '))
+                    .and_then(|()| w.bytes(revision.as_bytes()))
+            }
+            Request::ReadDeviceId { code, object } => {
+                let identity = model.identity(unit).ok_or(Exception::IllegalFunction)?;
+                match w.byte(unit).and_then(|()| w.byte(request.function())) {
+                    Some(()) => ident::write_device_id(&mut w, &identity, code, object)?,
+                    None => None,
+                }
+            }
+            _ => {
+                return self
+                    .encode_data(unit, request, w)
+                    .ok_or(Exception::ServerDeviceFailure)
+            }
+        };
+        body.and_then(|()| w.finish())
+            .ok_or(Exception::ServerDeviceFailure)
+    }
+
+    /// The normal reply to a request on the data tables (or an echo).
+    fn encode_data(&self, unit: u8, request: &Request<'_>, mut w: Writer<'_>) -> Option<usize> {
         w.byte(unit)?;
         w.byte(request.function())?;
         match *request {
@@ -382,6 +511,9 @@ impl Slave {
             Request::ReturnQueryData { data } => {
                 w.u16(0)?;
                 w.bytes(data)?;
+            }
+            Request::Diagnostic { .. } | Request::ReportServerId | Request::ReadDeviceId { .. } => {
+                return None
             }
         }
         w.finish()

@@ -2,9 +2,20 @@
 
 use crate::axes::{AxisMap, AxisSet};
 use crate::engine::Config;
+use crate::modbus::Identity;
 use crate::time::Duration;
 use crate::units::{Complement, Lead, Length, Scale};
 use crate::{Axis, HomeDirection};
+
+/// Who the gateway is unless the firmware says otherwise (it names its board in `model_name`).
+pub const IDENTITY: Identity = Identity {
+    vendor_name: "rc-gateway project",
+    product_code: "RC-GW",
+    revision: env!("CARGO_PKG_VERSION"),
+    vendor_url: "",
+    product_name: "Robo Cylinder Modbus gateway",
+    model_name: "host",
+};
 
 /// The gateway's own Modbus unit id by default: 63, as IAI's RGW-SIO gateway mode uses.
 pub const DEFAULT_GATEWAY_UNIT: u8 = 63;
@@ -107,8 +118,8 @@ pub struct GatewayConfig {
     pub watchdog_action: WatchdogAction,
     /// The axis the discrete I/O (PIO) drives, if any.
     pub pio_axis: Option<Axis>,
-    /// Firmware version reported in VERSION: (major, minor, patch).
-    pub version: (u8, u8, u16),
+    /// Who the gateway is (FC2B/0E, FC11), and its firmware version (VERSION).
+    pub identity: Identity,
 }
 
 impl GatewayConfig {
@@ -125,7 +136,7 @@ impl GatewayConfig {
             watchdog: Duration::from_millis(DEFAULT_WATCHDOG_MS as u64),
             watchdog_action: WatchdogAction::StopAll,
             pio_axis: None,
-            version: (0, 1, 0),
+            identity: IDENTITY,
         }
     }
 

@@ -55,7 +55,7 @@ impl Gateway {
         address: u16,
         link: &SlaveCounters,
     ) -> Result<u16, Exception> {
-        let (major, minor, patch) = self.config.version;
+        let (major, minor, patch) = self.config.identity.version();
         let uptime = u32::try_from(self.now.0 / 1_000_000).unwrap_or(u32::MAX);
         let sync = &self.sync;
         match address {

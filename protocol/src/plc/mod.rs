@@ -37,9 +37,9 @@ pub mod table;
 
 pub use config::{
     AxisConfig, GatewayConfig, Parity, PlcLine, WatchdogAction, DEFAULT_GATEWAY_UNIT,
-    DEFAULT_WATCHDOG_MS,
+    DEFAULT_WATCHDOG_MS, IDENTITY,
 };
 pub use failsafe::{CAUSE_STOP_INPUT, CAUSE_WATCHDOG};
 pub use gateway::{CommandState, Gateway, Reason};
-pub use model::Registers;
+pub use model::{diagnostic, Registers};
 pub use points::CACHED_ROWS;

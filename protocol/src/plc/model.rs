@@ -11,7 +11,8 @@ use super::map::{COIL_STOP, COIL_STP, DRG1, DRG1_EMG, DRG1_STP, DRG1_SUPPORTED, 
 use super::table;
 use crate::engine::JobKind;
 use crate::modbus::{
-    BitTable, Bits, BitsMut, DataModel, Exception, RegisterTable, SlaveCounters, BROADCAST,
+    BitTable, Bits, BitsMut, DataModel, Exception, Identity, RegisterTable, SlaveCounters,
+    BROADCAST,
 };
 use crate::time::Instant;
 
@@ -34,7 +35,76 @@ impl Gateway {
     }
 }
 
+/// FC08 sub-function 02, the diagnostic register: bits that say what needs attention.
+pub mod diagnostic {
+    /// FAILSAFE bit 0: the PLC watchdog tripped (latched).
+    pub const WATCHDOG: u16 = 1 << 0;
+    /// FAILSAFE bit 1: the stop input was activated (latched).
+    pub const STOP_INPUT: u16 = 1 << 1;
+    /// An axis (the unit's own, or any for the gateway unit) is offline.
+    pub const OFFLINE: u16 = 1 << 2;
+    /// An axis (the unit's own, or any) is in alarm.
+    pub const ALARM: u16 = 1 << 3;
+    /// The communication establishment (§6-1) is running.
+    pub const ESTABLISHING: u16 = 1 << 4;
+    /// The stop input is active now.
+    pub const STOPPED: u16 = 1 << 5;
+}
+
+impl Registers<'_> {
+    /// The axes a unit speaks for: its own, or all for the gateway unit.
+    fn axes_of(&self, unit: u8) -> crate::AxisSet {
+        let config = &self.gateway.config;
+        match config.axis_of_unit(unit) {
+            Some(axis) => crate::AxisSet::EMPTY.with(axis),
+            None => config.bus.axes,
+        }
+    }
+}
+
 impl DataModel for Registers<'_> {
+    fn diagnostic_register(&self, unit: u8) -> u16 {
+        let gateway = &*self.gateway;
+        let engine = gateway.engine();
+        let axes = self.axes_of(unit);
+        let any = |f: &dyn Fn(crate::Axis) -> bool| axes.iter().any(f);
+        let bit = |on: bool, mask: u16| if on { mask } else { 0 };
+        gateway.failsafe.latched() & (diagnostic::WATCHDOG | diagnostic::STOP_INPUT)
+            | bit(
+                any(&|a| engine.axis(a).link == crate::engine::Link::Offline),
+                diagnostic::OFFLINE,
+            )
+            | bit(
+                any(&|a| {
+                    engine
+                        .axis(a)
+                        .report
+                        .is_some_and(|r| r.outputs.alarm_active())
+                }),
+                diagnostic::ALARM,
+            )
+            | bit(engine.establishing(), diagnostic::ESTABLISHING)
+            | bit(gateway.failsafe.stop_input(), diagnostic::STOPPED)
+    }
+
+    fn identity(&self, _unit: u8) -> Option<Identity> {
+        Some(self.gateway.config.identity)
+    }
+
+    /// The gateway unit runs unless the fail-safe is latched; an axis unit while its axis
+    /// answers and is not in alarm.
+    fn running(&self, unit: u8) -> bool {
+        let gateway = &*self.gateway;
+        match gateway.config.axis_of_unit(unit) {
+            Some(axis) => {
+                let state = gateway.engine().axis(axis);
+                state.link == crate::engine::Link::Online
+                    && !state.report.is_some_and(|r| r.outputs.alarm_active())
+            }
+            None => gateway.failsafe.latched() == 0,
+        }
+    }
+
     fn serves(&self, unit: u8) -> bool {
         let config = &self.gateway.config;
         unit == config.unit || config.axis_of_unit(unit).is_some()

@@ -1,0 +1,168 @@
+//! FC08 Diagnostics on a serial line (Serial Line §6.1, Application Protocol §6.8): the
+//! sub-functions, and the serial-line counters they return.
+//!
+//! The gateway is one device on the PLC line, whatever unit id a request carries (its own or an
+//! axis'): every unit it serves answers FC08, and all of them report the same port counters.
+//! The counters count from power-up or the last Restart Communications / Clear Counters, as
+//! 16-bit values that wrap (the reply has 16 bits). They are kept as differences from a
+//! snapshot of the slave's own (never cleared) [`SlaveCounters`], which the gateway's PLCLINK
+//! registers show as they are: one set of counts, two views.
+//!
+//! | Sub | Name | Counts |
+//! |---|---|---|
+//! | 0x00 | Return Query Data | (echo) |
+//! | 0x01 | Restart Communications Option | clears the counters, leaves Listen Only mode |
+//! | 0x02 | Return Diagnostic Register | the unit's status word ([`DataModel::diagnostic_register`](super::DataModel::diagnostic_register)) |
+//! | 0x04 | Force Listen Only Mode | no reply; nothing is answered or carried out until 0x01 |
+//! | 0x0A | Clear Counters and Diagnostic Register | (the register is live status: nothing to clear) |
+//! | 0x0B | Return Bus Message Count | frames with a good CRC, any unit |
+//! | 0x0C | Return Bus Communication Error Count | bursts with a bad CRC |
+//! | 0x0D | Return Bus Exception Error Count | exception replies sent |
+//! | 0x0E | Return Server Message Count | frames to a unit served, or broadcast |
+//! | 0x0F | Return Server No Response Count | of those, frames not answered (broadcasts, Listen Only) |
+//! | 0x10 | Return Server NAK Count | 0: the gateway never answers NAK (07) |
+//! | 0x11 | Return Server Busy Count | 0: busy is exception 04 here, never 06 |
+//! | 0x12 | Return Bus Character Overrun Count | bursts longer than a frame (the receive buffer overran) |
+//! | 0x14 | Clear Overrun Counter and Flag | |
+//!
+//! 0x03 (Change ASCII Input Delimiter) is for ASCII mode: like any other sub-function it
+//! answers 01. The data field of every sub-function but 0x00 is two bytes: 0x0000, or for 0x01
+//! 0x0000 / 0xFF00 (also clear the event log, which this slave does not keep); anything else
+//! answers 03.
+
+use super::slave::SlaveCounters;
+
+/// An FC08 sub-function other than Return Query Data.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Diagnostic {
+    /// 0x01: clear the counters and leave Listen Only mode (answered first, unless in it).
+    RestartCommunications,
+    /// 0x02: the diagnostic register.
+    DiagnosticRegister,
+    /// 0x04: stop answering until [`Diagnostic::RestartCommunications`].
+    ForceListenOnly,
+    /// 0x0A: clear the counters.
+    ClearCounters,
+    /// 0x0B.
+    BusMessageCount,
+    /// 0x0C.
+    BusCommunicationErrorCount,
+    /// 0x0D.
+    BusExceptionErrorCount,
+    /// 0x0E.
+    ServerMessageCount,
+    /// 0x0F.
+    ServerNoResponseCount,
+    /// 0x10.
+    ServerNakCount,
+    /// 0x11.
+    ServerBusyCount,
+    /// 0x12.
+    BusCharacterOverrunCount,
+    /// 0x14.
+    ClearOverrunCounter,
+}
+
+impl Diagnostic {
+    /// Every supported sub-function.
+    pub const ALL: [Diagnostic; 13] = [
+        Diagnostic::RestartCommunications,
+        Diagnostic::DiagnosticRegister,
+        Diagnostic::ForceListenOnly,
+        Diagnostic::ClearCounters,
+        Diagnostic::BusMessageCount,
+        Diagnostic::BusCommunicationErrorCount,
+        Diagnostic::BusExceptionErrorCount,
+        Diagnostic::ServerMessageCount,
+        Diagnostic::ServerNoResponseCount,
+        Diagnostic::ServerNakCount,
+        Diagnostic::ServerBusyCount,
+        Diagnostic::BusCharacterOverrunCount,
+        Diagnostic::ClearOverrunCounter,
+    ];
+
+    /// The sub-function code.
+    pub const fn code(self) -> u16 {
+        match self {
+            Diagnostic::RestartCommunications => 0x01,
+            Diagnostic::DiagnosticRegister => 0x02,
+            Diagnostic::ForceListenOnly => 0x04,
+            Diagnostic::ClearCounters => 0x0A,
+            Diagnostic::BusMessageCount => 0x0B,
+            Diagnostic::BusCommunicationErrorCount => 0x0C,
+            Diagnostic::BusExceptionErrorCount => 0x0D,
+            Diagnostic::ServerMessageCount => 0x0E,
+            Diagnostic::ServerNoResponseCount => 0x0F,
+            Diagnostic::ServerNakCount => 0x10,
+            Diagnostic::ServerBusyCount => 0x11,
+            Diagnostic::BusCharacterOverrunCount => 0x12,
+            Diagnostic::ClearOverrunCounter => 0x14,
+        }
+    }
+
+    /// The sub-function with this code, if supported.
+    pub fn from_code(code: u16) -> Option<Diagnostic> {
+        Diagnostic::ALL.into_iter().find(|d| d.code() == code)
+    }
+
+    /// Whether `data` is an allowed data field for it.
+    pub const fn accepts(self, data: u16) -> bool {
+        match self {
+            Diagnostic::RestartCommunications => data == 0x0000 || data == 0xFF00,
+            _ => data == 0x0000,
+        }
+    }
+}
+
+/// The serial-line counters of Serial Line §6.1 at one moment, from the slave's counts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(super) struct LineCounts {
+    pub(super) bus_messages: u32,
+    pub(super) bus_errors: u32,
+    pub(super) exceptions: u32,
+    pub(super) server_messages: u32,
+    pub(super) no_response: u32,
+    pub(super) overruns: u32,
+}
+
+impl LineCounts {
+    pub(super) const ZERO: LineCounts = LineCounts {
+        bus_messages: 0,
+        bus_errors: 0,
+        exceptions: 0,
+        server_messages: 0,
+        no_response: 0,
+        overruns: 0,
+    };
+
+    pub(super) fn of(c: &SlaveCounters) -> LineCounts {
+        LineCounts {
+            bus_messages: c.frames,
+            bus_errors: c.crc_errors,
+            exceptions: c
+                .illegal_function
+                .wrapping_add(c.illegal_data_address)
+                .wrapping_add(c.illegal_data_value)
+                .wrapping_add(c.server_device_failure),
+            server_messages: c.served,
+            no_response: c.unanswered,
+            overruns: c.too_long,
+        }
+    }
+
+    /// The counter a sub-function returns, counted since `since`.
+    pub(super) fn value(&self, since: &LineCounts, sub: Diagnostic) -> Option<u16> {
+        let count = |now: u32, then: u32| (now.wrapping_sub(then) & 0xFFFF) as u16;
+        Some(match sub {
+            Diagnostic::BusMessageCount => count(self.bus_messages, since.bus_messages),
+            Diagnostic::BusCommunicationErrorCount => count(self.bus_errors, since.bus_errors),
+            Diagnostic::BusExceptionErrorCount => count(self.exceptions, since.exceptions),
+            Diagnostic::ServerMessageCount => count(self.server_messages, since.server_messages),
+            Diagnostic::ServerNoResponseCount => count(self.no_response, since.no_response),
+            Diagnostic::ServerNakCount | Diagnostic::ServerBusyCount => 0,
+            Diagnostic::BusCharacterOverrunCount => count(self.overruns, since.overruns),
+            _ => return None,
+        })
+    }
+}
