@@ -30,6 +30,9 @@
 //!   flushed (a rate change mid-byte garbles it); [`LineAction::BreakStart`] holds the bus' TX
 //!   low (the driver enabled) until [`LineAction::BreakEnd`]; [`LineAction::CommChange`] writes
 //!   [`COMM_CHANGE`](crate::frame::COMM_CHANGE) (nobody answers).
+//! - **[`Action::PlcLine`]**: flush the reply before, then switch the PLC UART's rate and parity.
+//! - **[`Action::Store`]**: write the settings record to flash (or erase it, or restart) when
+//!   asked, never otherwise; report a save with [`Node::stored`].
 //! - **Inputs** are sampled every millisecond or so ([`sample_inputs`](Node::sample_inputs));
 //!   the PIO's debounce and settle times count in the samples' times. The outputs are valid at
 //!   any time ([`outputs`](Node::outputs)), and all OFF (the safe state: *ALM OFF shows an
@@ -43,7 +46,7 @@
 //! use protocol::node::{Action, Node};
 //! use protocol::line::LineAction;
 //! use protocol::pio::PioInputs;
-//! use protocol::plc::GatewayConfig;
+//! use protocol::plc::{GatewayConfig, Store};
 //! use protocol::time::Instant;
 //! use protocol::AxisSet;
 //!
@@ -60,6 +63,9 @@
 //!     fn set_bus_baud(&mut self, _bps: u32) {}
 //!     fn hold_bus_tx_low(&mut self, low: bool) { self.break_held = low }
 //!     fn write_output_pins(&mut self, _bits: u16) {}
+//!     fn set_plc_line(&mut self, _bps: u32) {}
+//!     fn write_settings(&mut self, _record: &[u8]) -> Result<u32, ()> { Ok(1) }
+//!     fn restart(&mut self) {}
 //!     fn sleep_until(&mut self, deadline: Option<Instant>) {
 //!         self.now = deadline.map_or(self.now + 1_000, |t| t.0.max(self.now)).min(self.now + 1_000);
 //!     }
@@ -90,6 +96,12 @@
 //!             Action::Line(LineAction::CommChange) => {
 //!                 board.bus_write_and_flush(&protocol::frame::COMM_CHANGE)
 //!             }
+//!             Action::PlcLine(line) => board.set_plc_line(line.baud),
+//!             Action::Store(Store::Save(record)) => {
+//!                 let saved = board.write_settings(&record);
+//!                 node.stored(saved);
+//!             }
+//!             Action::Store(Store::FactoryReset | Store::Restart) => board.restart(),
 //!         }
 //!     }
 //!     board.write_output_pins(node.outputs().bits());
@@ -105,7 +117,7 @@ use crate::frame::FRAME_LEN;
 use crate::line::LineAction;
 use crate::modbus::{Handled, Receiver, ReceiverCounters, ReplyBuffer, Slave, SlaveCounters};
 use crate::pio::{self, Pio, PioInputs, PioOutputs};
-use crate::plc::{Gateway, GatewayConfig};
+use crate::plc::{Gateway, GatewayConfig, PlcLine, Store};
 use crate::time::{earliest, Instant};
 
 /// The most the whole node may take on a microcontroller: 12 KiB for 16 axes (an STM32F103C8
@@ -125,6 +137,12 @@ pub enum Action<'a> {
     Line(LineAction),
     /// Transmit this Modbus reply on the PLC line, then flush.
     Reply(&'a [u8]),
+    /// Switch the PLC line to these settings (APPLY changed them; the reply that asked for it
+    /// has been handed out before, at the old settings: flush it first).
+    PlcLine(PlcLine),
+    /// Do this with the flash (SAVE, FACTORY, RESTART), then report a save with
+    /// [`Node::stored`]. A factory reset and a restart end with the board restarting.
+    Store(Store),
 }
 
 /// The state of the indicator LEDs (besides a run LED the firmware blinks itself).
@@ -233,6 +251,13 @@ impl Node {
                 return Some(Action::Reply(self.reply.as_bytes()));
             }
         }
+        if let Some(line) = self.gateway.take_plc_line() {
+            self.receiver = Receiver::new(line.baud).without_gap_check();
+            return Some(Action::PlcLine(line));
+        }
+        if let Some(store) = self.gateway.take_store() {
+            return Some(Action::Store(store));
+        }
         match self.gateway.poll(now) {
             Output::Transmit(frame) => Some(Action::Bus(frame.to_bytes())),
             Output::Line(action) => Some(Action::Line(action)),
@@ -242,6 +267,12 @@ impl Node {
                 None
             }
         }
+    }
+
+    /// How the save asked for by [`Action::Store`] went: the new save count, or a failure
+    /// (SAVESTAT shows it).
+    pub fn stored(&mut self, result: Result<u32, ()>) {
+        self.gateway.stored(result);
     }
 
     /// The earliest moment anything is due: the bus engine's next deadline, the PLC watchdog,

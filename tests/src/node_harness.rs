@@ -43,6 +43,10 @@ pub struct NodeHarness {
     pub inputs: Option<PioInputs>,
     /// The PIO outputs as of the last sample.
     pub outputs: PioOutputs,
+    /// PLC line changes the node asked for, with their time.
+    pub plc_lines: Vec<(u64, protocol::plc::PlcLine)>,
+    /// Flash requests (each save succeeds), with their time.
+    pub stores: Vec<(u64, protocol::plc::Store)>,
     /// Modbus replies not yet taken, with the time they were sent.
     replies: Vec<(u64, Vec<u8>)>,
     /// The next input sample is due then.
@@ -60,6 +64,8 @@ impl NodeHarness {
             sent: Vec::new(),
             inputs: None,
             outputs: PioOutputs::SAFE,
+            plc_lines: Vec::new(),
+            stores: Vec::new(),
             replies: Vec::new(),
             next_sample: 0,
         }
@@ -91,6 +97,14 @@ impl NodeHarness {
                     self.bus.host_send(self.now, &COMM_CHANGE);
                 }
                 Some(Action::Reply(bytes)) => self.replies.push((self.now, bytes.to_vec())),
+                Some(Action::PlcLine(line)) => self.plc_lines.push((self.now, line)),
+                Some(Action::Store(store)) => {
+                    if let protocol::plc::Store::Save(_) = store {
+                        let saves = self.stores.len() as u32 + 1;
+                        self.node.stored(Ok(saves));
+                    }
+                    self.stores.push((self.now, store));
+                }
             }
         }
         panic!("the node never went idle at {} µs", self.now);

@@ -65,7 +65,7 @@ use rejoin::Rejoin;
 use run::Active;
 use schedule::Schedule;
 
-use crate::axes::AxisMap;
+use crate::axes::{AxisMap, AxisSet};
 use crate::line::{Baud, LineAction};
 use crate::memory::PNOW;
 use crate::time::{Duration, Instant};
@@ -263,9 +263,10 @@ impl Engine {
             || self.queue.iter().any(|(j, _)| *j == id)
     }
 
-    /// Move the bus to another rate and RTIM: the establishment procedure runs with them
-    /// (a break first, so every axis takes them).
-    pub fn reconfigure(&mut self, baud: Baud, rtim: crate::Rtim) {
+    /// Move the bus to another set of axes, rate and RTIM: the establishment procedure runs
+    /// with them (a break first, so every axis takes them).
+    pub fn reconfigure(&mut self, axes: AxisSet, baud: Baud, rtim: crate::Rtim) {
+        self.config.axes = axes;
         self.config.baud = baud;
         self.config.rtim = rtim;
         self.config.establish = true;

@@ -1,5 +1,6 @@
 //! What the gateway is set up with.
 
+use super::persist::Boot;
 use crate::axes::{AxisMap, AxisSet};
 use crate::engine::Config;
 use crate::modbus::Identity;
@@ -120,6 +121,8 @@ pub struct GatewayConfig {
     pub pio_axis: Option<Axis>,
     /// Who the gateway is (FC2B/0E, FC11), and its firmware version (VERSION).
     pub identity: Identity,
+    /// What the firmware knows about this start (settings source, saves, reset cause).
+    pub boot: Boot,
 }
 
 impl GatewayConfig {
@@ -137,6 +140,7 @@ impl GatewayConfig {
             watchdog_action: WatchdogAction::StopAll,
             pio_axis: None,
             identity: IDENTITY,
+            boot: Boot::DEFAULT,
         }
     }
 

@@ -12,16 +12,16 @@ use super::axis_unit::{Motion, PlcAxis};
 use super::channel::Channel;
 use super::config::GatewayConfig;
 use super::failsafe::{FailSafe, Trip};
+use super::persist::{Persist, Store};
 use super::points::PointCache;
 use super::sync::{SyncEnd, SyncStart};
 use crate::axes::{AxisMap, AxisSet};
 use crate::engine::{
     Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Link, Output, SubmitError,
 };
-use crate::line::Baud;
 use crate::modbus::Exception;
 use crate::time::{earliest, Duration, Instant};
-use crate::{Axis, Rtim};
+use crate::Axis;
 
 /// The fate of an axis' last command, as CMST shows it.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -103,8 +103,10 @@ pub struct Gateway {
     pub(super) sync: SyncStart,
     pub(super) channel: Channel,
     pub(super) points: PointCache,
-    /// BUSBAUD and BUSRTIM as written, taken on APPLY.
-    pub(super) bus_line: (Baud, Rtim),
+    /// The settings taken on APPLY or at the next start, and SAVE.
+    pub(super) persist: Persist,
+    /// APPLY changed the PLC line: the firmware switches after the reply.
+    pub(super) plc_line_changed: bool,
     /// The latest time the gateway was given (UPTIME).
     pub(super) now: Instant,
     /// The engine's lost-event count when the gateway last looked.
@@ -122,7 +124,8 @@ impl Gateway {
             sync: SyncStart::new(),
             channel: Channel::new(),
             points: PointCache::new(),
-            bus_line: (config.bus.baud, config.bus.rtim),
+            persist: Persist::new(&config),
+            plc_line_changed: false,
             now: Instant::ZERO,
             events_lost: 0,
         }
@@ -190,6 +193,22 @@ impl Gateway {
             Output::Idle(until) => Output::Idle(earliest(until, self.watchdog_deadline())),
             other => other,
         }
+    }
+
+    /// What the firmware is asked to do with the flash (SAVE, a factory reset, RESTART), once.
+    pub fn take_store(&mut self) -> Option<Store> {
+        self.persist.request.take()
+    }
+
+    /// The firmware's answer to a save: the new save count, or a failure (SAVESTAT).
+    pub fn stored(&mut self, result: Result<u32, ()>) {
+        self.persist.saved(result);
+    }
+
+    /// The PLC line, if APPLY changed it since the last call: the firmware switches its UART
+    /// (after the reply to the APPLY has gone out at the old settings).
+    pub fn take_plc_line(&mut self) -> Option<super::PlcLine> {
+        core::mem::take(&mut self.plc_line_changed).then_some(self.config.plc)
     }
 
     /// When the PLC watchdog trips if the PLC stays silent.

@@ -6,10 +6,12 @@
 
 use super::axis_unit::{link_code, nth};
 use super::channel::Channel;
-use super::config::WatchdogAction;
+use super::config::{Parity, WatchdogAction};
 use super::gateway::Gateway;
 use super::map::{self, *};
+use super::persist::Store;
 use super::registers::{join, split};
+use super::settings::PLC_BAUDS;
 use crate::axes::AxisSet;
 use crate::engine::LinkError;
 use crate::line::Baud;
@@ -68,8 +70,22 @@ impl Gateway {
             G_WATCHDOG => {
                 Ok(u16::try_from(self.config.watchdog.as_micros() / 1000).unwrap_or(u16::MAX))
             }
-            G_BUS_BAUD => Ok(u16::try_from(self.bus_line.0.bits_per_second() / 100).unwrap_or(0)),
-            G_BUS_RTIM => Ok(u16::from(self.bus_line.1.get())),
+            G_BUS_BAUD => Ok(u16::try_from(self.persist.baud.bits_per_second() / 100).unwrap_or(0)),
+            G_BUS_RTIM => Ok(u16::from(self.persist.rtim.get())),
+            G_PLC_BAUD => Ok(u16::try_from(self.persist.plc.baud / 100).unwrap_or(0)),
+            G_PLC_PARITY => Ok(match self.persist.plc.parity {
+                Parity::None => 0,
+                Parity::Odd => 1,
+                Parity::Even => 2,
+            }),
+            G_UNIT_ID => Ok(u16::from(self.persist.unit)),
+            G_SAVE | G_FACTORY | G_RESTART => Ok(0),
+            G_SAVE_STATUS => Ok(self.persist.status as u16),
+            G_SAVE_COUNT => Ok(split(self.persist.saves)[0]),
+            0x0016 => Ok(split(self.persist.saves)[1]),
+            G_CONFIG_SOURCE => Ok(self.config.boot.source as u16),
+            G_CONFIG_ERRORS => Ok(self.config.boot.load_errors),
+            G_RESET_CAUSE => Ok(self.config.boot.reset as u16),
             G_RETRIES => Ok(u16::from(self.engine.config().retries)),
             G_APPLY | G_SYNC_START => Ok(0),
             G_WD_ACTION => Ok(match self.config.watchdog_action {
@@ -146,7 +162,7 @@ impl Gateway {
         let c = self.config.axes[axis];
         let stroke = split(u32::try_from(c.stroke.0).unwrap_or(0));
         match field {
-            axis_cfg::ENABLED => u16::from(self.config.bus.axes.contains(axis)),
+            axis_cfg::ENABLED => u16::from(self.persist.axes.contains(axis)),
             axis_cfg::LEAD => c.scale.lead.hundredths(),
             axis_cfg::HOME => u16::from(c.scale.home.code()),
             axis_cfg::PULSES => c.scale.pulses_per_rev.get(),
@@ -185,6 +201,19 @@ impl Gateway {
             G_WATCHDOG => value == 0 || (50..=60_000).contains(&value),
             G_BUS_BAUD => Baud::from_bits_per_second(u32::from(value) * 100).is_some(),
             G_BUS_RTIM => u8::try_from(value).ok().and_then(Rtim::new).is_some(),
+            G_PLC_BAUD => PLC_BAUDS.contains(&(u32::from(value) * 100)),
+            G_PLC_PARITY => value <= 2,
+            // Not the unit of an axis that is (or will be) on the bus.
+            G_UNIT_ID => {
+                let axes = AxisSet(self.config.bus.axes.0 | self.persist.axes.0);
+                (1..=247).contains(&value)
+                    && u8::try_from(value - 1)
+                        .ok()
+                        .and_then(Axis::new)
+                        .is_none_or(|a| !axes.contains(a))
+            }
+            G_SAVE | G_RESTART => value <= 1,
+            G_FACTORY => value == 0 || value == FACTORY_KEY,
             G_RETRIES => value <= 3,
             G_APPLY => value == 0 || (value == 1 && self.bus_idle()),
             G_WD_ACTION => value <= 1,
@@ -194,7 +223,10 @@ impl Gateway {
             a if Channel::is_request(a) => true,
             a => match per_axis(a, G_AXIS_CONFIG, G_AXIS_CONFIG_LEN) {
                 Some((axis, field)) => match field {
-                    axis_cfg::ENABLED => value == u16::from(self.config.bus.axes.contains(axis)),
+                    // An axis whose unit is the gateway's cannot be enabled.
+                    axis_cfg::ENABLED => {
+                        value == 0 || (value == 1 && axis.get() + 1 != self.persist.unit)
+                    }
                     axis_cfg::LEAD | axis_cfg::PULSES => value > 0,
                     axis_cfg::HOME => value == 7 || value == 8,
                     // The stroke's high word: strokes above i32::MAX (0.01 mm) make no sense.
@@ -220,20 +252,37 @@ impl Gateway {
             G_WATCHDOG => self.config.watchdog = Duration::from_millis(u64::from(value)),
             G_BUS_BAUD => {
                 if let Some(baud) = Baud::from_bits_per_second(u32::from(value) * 100) {
-                    self.bus_line.0 = baud;
+                    self.persist.baud = baud;
                 }
             }
             G_BUS_RTIM => {
                 if let Some(rtim) = u8::try_from(value).ok().and_then(Rtim::new) {
-                    self.bus_line.1 = rtim;
+                    self.persist.rtim = rtim;
                 }
             }
+            G_PLC_BAUD => self.persist.plc.baud = u32::from(value) * 100,
+            G_PLC_PARITY => {
+                self.persist.plc.parity = match value {
+                    1 => Parity::Odd,
+                    2 => Parity::Even,
+                    _ => Parity::None,
+                }
+            }
+            G_UNIT_ID => self.persist.unit = u8::try_from(value).unwrap_or(self.persist.unit),
+            G_SAVE if value == 1 => self.persist.save(&self.config),
+            G_FACTORY if value == FACTORY_KEY => self.persist.request = Some(Store::FactoryReset),
+            G_RESTART if value == 1 => self.persist.request = Some(Store::Restart),
             G_RETRIES => self.engine.set_retries(u8::try_from(value).unwrap_or(3)),
             G_APPLY if value == 1 => {
-                let (baud, rtim) = self.bus_line;
-                self.config.bus.baud = baud;
-                self.config.bus.rtim = rtim;
-                self.engine.reconfigure(baud, rtim);
+                let pending = self.persist.pending(&self.config);
+                self.plc_line_changed |= pending.plc != self.config.plc;
+                self.config.plc = pending.plc;
+                self.config.unit = pending.unit;
+                self.config.bus.axes = pending.bus.axes;
+                self.config.bus.baud = pending.bus.baud;
+                self.config.bus.rtim = pending.bus.rtim;
+                self.engine
+                    .reconfigure(pending.bus.axes, pending.bus.baud, pending.bus.rtim);
             }
             G_WD_ACTION => {
                 self.config.watchdog_action = if value == 0 {
@@ -248,6 +297,14 @@ impl Gateway {
                 let Some((axis, field)) = per_axis(a, G_AXIS_CONFIG, G_AXIS_CONFIG_LEN) else {
                     return;
                 };
+                if field == axis_cfg::ENABLED {
+                    self.persist.axes = if value == 1 {
+                        self.persist.axes.with(axis)
+                    } else {
+                        self.persist.axes.without(axis)
+                    };
+                    return;
+                }
                 let c = &mut self.config.axes[axis];
                 match field {
                     axis_cfg::LEAD => {

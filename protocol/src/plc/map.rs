@@ -147,6 +147,31 @@ pub const G_APPLY: u16 = 0x000A;
 pub const G_WD_ACTION: u16 = 0x000E;
 /// The axis the discrete I/O drives (0-15; 0xFFFF none).
 pub const G_PIO_AXIS: u16 = 0x000F;
+/// PLC line rate in 100 bit/s (12 24 48 96 192 384 576 1152); taken on APPLY or at the next start.
+pub const G_PLC_BAUD: u16 = 0x0010;
+/// PLC line parity: 0 none, 1 odd, 2 even; taken on APPLY or at the next start.
+pub const G_PLC_PARITY: u16 = 0x0011;
+/// The gateway's own unit id (1-247, not an axis' unit); taken on APPLY or at the next start.
+pub const G_UNIT_ID: u16 = 0x0012;
+/// Write 1: store the settings in flash.
+pub const G_SAVE: u16 = 0x0013;
+/// The last save: 0 none, 1 saving, 2 saved, 3 failed.
+pub const G_SAVE_STATUS: u16 = 0x0014;
+/// Saves so far, u32.
+pub const G_SAVE_COUNT: u16 = 0x0015;
+/// Write 0xFAC7: erase the stored settings and restart with the defaults.
+pub const G_FACTORY: u16 = 0x0017;
+/// Where the running settings came from: 0 defaults, 1 flash, 2 defaults (stored ones unreadable).
+pub const G_CONFIG_SOURCE: u16 = 0x0018;
+/// Stored settings found unreadable at a start, so far.
+pub const G_CONFIG_ERRORS: u16 = 0x0019;
+/// Why the board last started: 0 power-on, 1 watchdog, 2 software, 3 reset pin, 4 other.
+pub const G_RESET_CAUSE: u16 = 0x001A;
+/// Write 1: restart the gateway (the saved settings take effect).
+pub const G_RESTART: u16 = 0x001B;
+/// The value G_FACTORY wants, so that no stray write erases the settings.
+pub const FACTORY_KEY: u16 = 0xFAC7;
+
 /// Synchronized start: axis mask (bit n = axis n).
 pub const G_SYNC_MASK: u16 = 0x000B;
 /// Synchronized start: write 1 to move every axis of the mask to its POSR together.
@@ -253,16 +278,27 @@ pub const MAP: &[Entry] = &[
     e(Unit::Gateway, Holding, G_FAILSAFE, 1, "FAILSAFE", "bits", "write 0", true, "Latched fail-safe: b0 PLC watchdog, b1 stop input; write 0 to clear", Gateway),
     e(Unit::Gateway, Status, G_FAILSAFE_COUNT, 1, "FSCOUNT", "count", "", false, "Fail-safe trips", Gateway),
     e(Unit::Gateway, Holding, G_WATCHDOG, 1, "WATCHDOG", "ms", "0, 50-60000", true, "PLC silence that stops every moving axis (0 = off)", Gateway),
-    e(Unit::Gateway, Holding, G_BUS_BAUD, 1, "BUSBAUD", "100 bit/s", "96 144 192 288 384 576 768 1152", true, "RS485 line rate, taken on APPLY", Gateway),
-    e(Unit::Gateway, Holding, G_BUS_RTIM, 1, "BUSRTIM", "ms", "3-255", true, "Controllers' minimum response delay, taken on APPLY", Gateway),
+    e(Unit::Gateway, Holding, G_BUS_BAUD, 1, "BUSBAUD", "100 bit/s", "96 144 192 288 384 576 768 1152", true, "RS485 line rate, taken on APPLY or at the next start", Gateway),
+    e(Unit::Gateway, Holding, G_BUS_RTIM, 1, "BUSRTIM", "ms", "3-255", true, "Controllers' minimum response delay, taken on APPLY or at the next start", Gateway),
     e(Unit::Gateway, Holding, G_RETRIES, 1, "RETRIES", "", "0-3", true, "Resends after a time-out (complete edition §5 Nrt), in force at once", Gateway),
-    e(Unit::Gateway, Holding, G_APPLY, 1, "APPLY", "", "1", true, "Write 1: break and communication establishment with BUSBAUD/BUSRTIM (all axes stop answering for about 1 s per axis); refused (03) unless nothing moves, runs or waits", Gateway),
+    e(Unit::Gateway, Holding, G_APPLY, 1, "APPLY", "", "1", true, "Write 1: the pending settings take effect: PLCBAUD/PLCPARITY/UNITID after the reply, then a break and communication establishment with BUSBAUD/BUSRTIM and the enabled axes (all axes stop answering for about 1 s per axis); refused (03) unless nothing moves, runs or waits", Gateway),
     e(Unit::Gateway, Holding, G_WD_ACTION, 1, "WDACTION", "", "0-1", true, "Watchdog action: 0 stop every axis, 1 latch only", Gateway),
     e(Unit::Gateway, Holding, G_PIO_AXIS, 1, "PIOAXIS", "axis", "0-15, 0xFFFF", true, "The axis the discrete I/O drives (0xFFFF: none)", Gateway),
+    e(Unit::Gateway, Holding, G_PLC_BAUD, 1, "PLCBAUD", "100 bit/s", "12 24 48 96 192 384 576 1152", true, "PLC line rate, taken on APPLY or at the next start", Gateway),
+    e(Unit::Gateway, Holding, G_PLC_PARITY, 1, "PLCPARITY", "", "0-2", true, "PLC line parity: 0 none, 1 odd, 2 even (8 data bits, 1 stop bit), taken on APPLY or at the next start", Gateway),
+    e(Unit::Gateway, Holding, G_UNIT_ID, 1, "UNITID", "unit", "1-247", true, "The gateway's own unit id (not an enabled axis' unit), taken on APPLY or at the next start", Gateway),
+    e(Unit::Gateway, Holding, G_SAVE, 1, "SAVE", "", "1", true, "Write 1: store every setting (with the pending ones) in flash; SAVESTAT says when it is done", Gateway),
+    e(Unit::Gateway, Status, G_SAVE_STATUS, 1, "SAVESTAT", "", "0-3", false, "The last save: 0 none, 1 saving, 2 saved, 3 failed", Gateway),
+    e(Unit::Gateway, Status, G_SAVE_COUNT, 2, "SAVECOUNT", "count", "uint32", false, "Saves so far (flash wear: about 10,000 erases per page, spread over the settings pages)", Gateway),
+    e(Unit::Gateway, Holding, G_FACTORY, 1, "FACTORY", "", "0xFAC7", true, "Write 0xFAC7: erase the stored settings and restart with the defaults", Gateway),
+    e(Unit::Gateway, Status, G_CONFIG_SOURCE, 1, "CFGSOURCE", "", "0-2", false, "The running settings came from: 0 the defaults (nothing stored), 1 flash, 2 the defaults because the stored ones were unreadable", Gateway),
+    e(Unit::Gateway, Status, G_CONFIG_ERRORS, 1, "CFGERRORS", "count", "", false, "Starts that found the stored settings unreadable", Gateway),
+    e(Unit::Gateway, Status, G_RESET_CAUSE, 1, "RESETCAUSE", "", "0-4", false, "Why the board last started: 0 power-on, 1 hardware watchdog, 2 software (RESTART, factory reset, a fault), 3 reset pin, 4 other", Gateway),
+    e(Unit::Gateway, Holding, G_RESTART, 1, "RESTART", "", "1", true, "Write 1: restart after the reply (the saved settings take effect)", Gateway),
     e(Unit::Gateway, Holding, G_SYNC_MASK, 1, "SYNCMASK", "bits", "", true, "Axes of the synchronized start (bit n = axis n)", Gateway),
     e(Unit::Gateway, Holding, G_SYNC_START, 1, "SYNCSTART", "", "1", true, "Write 1: every axis of SYNCMASK moves to its POSR at the same instant (h, then one t)", Gateway),
     e(Unit::Gateway, Status, G_SYNC_STATUS, 1, "SYNCSTAT", "", "0-3", false, "0 idle, 1 running, 2 done (every axis started; each axis' CMST follows its move to the end), 3 failed", Gateway),
-    e(Unit::Gateway, Holding, G_AXIS_CONFIG, 128, "AXISCFG", "", "", true, "Per axis n at 0x0100+8n: enabled, lead (0.01 mm), home (7 motor/8 far end), pulses/rev, stroke (2, 0.01 mm), complement (1/2)", Gateway),
+    e(Unit::Gateway, Holding, G_AXIS_CONFIG, 128, "AXISCFG", "", "", true, "Per axis n at 0x0100+8n: enabled (taken on APPLY or at the next start), lead (0.01 mm), home (7 motor/8 far end), pulses/rev, stroke (2, 0.01 mm), complement (1/2)", Gateway),
     e(Unit::Gateway, Holding, G_REQUEST, 6, "REQ", "", "", true, "Command channel request: code (1 read field, 2 write field), axis, point, field (offset from 0x400), value high, value low", Gateway),
     e(Unit::Gateway, Status, G_RESPONSE, 5, "RESP", "", "", false, "Command channel response: code (|0x8000 on error), error (as CMER), value high, value low, V5 write count (0xFFFF: value already stored, nothing written)", Gateway),
     e(Unit::Gateway, Status, G_DIAG, 256, "DIAG", "count", "", false, "Per axis n at 0x0400+16n: frames sent, replies, time-outs, BCC errors, bad replies, retries, rejections (u32 each), link, last error", Gateway),

@@ -18,7 +18,8 @@
 //! | `gateway` | [`Gateway`]: commands and their fate, events, the held SON |
 //! | `model` | [`Registers`]: which unit, which addresses exist |
 //! | `axis_unit`, `gateway_unit` | The registers of an axis unit and of the gateway unit |
-//! | `failsafe`, `sync`, `channel`, `points` | The parts with state of their own |
+//! | `failsafe`, `sync`, `channel`, `points`, `persist` | The parts with state of their own |
+//! | [`settings`] | What survives a power cycle, as stored bytes |
 //! | [`map`], `registers`, [`table`] | The register map as data; status words; table rows |
 //! | `config` | [`GatewayConfig`] |
 
@@ -30,8 +31,10 @@ mod gateway;
 mod gateway_unit;
 pub mod map;
 mod model;
+mod persist;
 mod points;
 mod registers;
+pub mod settings;
 mod sync;
 pub mod table;
 
@@ -42,4 +45,5 @@ pub use config::{
 pub use failsafe::{CAUSE_STOP_INPUT, CAUSE_WATCHDOG};
 pub use gateway::{CommandState, Gateway, Reason};
 pub use model::{diagnostic, Registers};
+pub use persist::{Boot, ConfigSource, ResetCause, Store};
 pub use points::CACHED_ROWS;

@@ -315,6 +315,10 @@ pub struct Rig {
     pub sent: Vec<(u64, Request)>,
     /// Line actions, with their time.
     pub lines: Vec<(u64, LineAction)>,
+    /// PLC line changes, with their time.
+    pub plc_lines: Vec<(u64, protocol::plc::PlcLine)>,
+    /// Flash requests (each save succeeds), with their time.
+    pub stores: Vec<(u64, protocol::plc::Store)>,
     replies: Vec<Vec<u8>>,
 }
 
@@ -326,6 +330,8 @@ impl Rig {
             now: 0,
             sent: Vec::new(),
             lines: Vec::new(),
+            plc_lines: Vec::new(),
+            stores: Vec::new(),
             replies: Vec::new(),
         }
     }
@@ -370,6 +376,14 @@ impl Rig {
                 }
                 Some(Action::Line(action)) => self.lines.push((self.now, action)),
                 Some(Action::Reply(bytes)) => self.replies.push(bytes.to_vec()),
+                Some(Action::PlcLine(line)) => self.plc_lines.push((self.now, line)),
+                Some(Action::Store(store)) => {
+                    if let protocol::plc::Store::Save(_) = store {
+                        let saves = self.stores.len() as u32 + 1;
+                        self.node.stored(Ok(saves));
+                    }
+                    self.stores.push((self.now, store));
+                }
             }
         }
         panic!("the node never went idle");

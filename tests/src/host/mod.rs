@@ -186,6 +186,8 @@ pub struct Host {
     log: Log,
     /// The bytes of the Modbus burst in progress, for the log.
     burst: Vec<u8>,
+    /// Saves asked for (a PC has no settings flash).
+    saves: u32,
     /// The node's receiver counters when a burst was last logged.
     seen_receiver: protocol::modbus::ReceiverCounters,
     started: StdInstant,
@@ -356,6 +358,7 @@ impl Host {
             log: Log::new(options.log),
             burst: Vec::new(),
             seen_receiver: protocol::modbus::ReceiverCounters::default(),
+            saves: 0,
             started: StdInstant::now(),
             last_bus_rx: 0,
             control: options.control.then(Vec::new),
@@ -485,6 +488,20 @@ impl Host {
                     self.burst.clear();
                 }
                 Some(Action::Line(action)) => self.line(now, action)?,
+                Some(Action::PlcLine(line)) => {
+                    self.plc.drain()?;
+                    self.plc.set_rate(line.baud)?;
+                    self.log.note(now, &format!("PLC line: {line:?}"));
+                }
+                Some(Action::Store(store)) => {
+                    // A PC has no settings flash: a save is kept for the run (and counted), a
+                    // restart or factory reset is only logged.
+                    if let protocol::plc::Store::Save(_) = store {
+                        self.saves += 1;
+                        self.node.stored(Ok(self.saves));
+                    }
+                    self.log.note(now, &format!("store: {store:?}"));
+                }
                 None => {
                     if self.node.receiver_counters() != self.seen_receiver {
                         // A burst ended without a reply (a broadcast, another unit, noise).

@@ -1,0 +1,154 @@
+//! What survives a power cycle, as the PLC sees it: the settings that take effect only on APPLY
+//! or at the next start (the lines and the axes on the bus), SAVE and factory reset, and what
+//! the firmware says about the start itself.
+//!
+//! The gateway never writes flash by itself: a SAVE (or a factory reset) becomes a [`Store`]
+//! request the firmware carries out ([`Node`](crate::node::Node) hands it over as an action)
+//! and reports back, as IAI's controllers write their parameters to flash only on request.
+
+use super::config::{GatewayConfig, PlcLine};
+use super::settings::{Settings, RECORD_LEN};
+use crate::axes::AxisSet;
+use crate::line::Baud;
+use crate::Rtim;
+
+/// Where the running settings came from (CFGSOURCE).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ConfigSource {
+    /// The defaults: nothing stored yet (first start, or after a factory reset).
+    #[default]
+    Defaults = 0,
+    /// The stored settings.
+    Flash = 1,
+    /// The defaults, because the stored settings could not be read (damaged, or written by an
+    /// incompatible firmware): counted in [`Boot::load_errors`].
+    Damaged = 2,
+}
+
+/// Why the board last started (RESETCAUSE), as the firmware read it from the chip.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ResetCause {
+    /// Power-on (or brown-out).
+    #[default]
+    PowerOn = 0,
+    /// The independent hardware watchdog: the gateway task stopped making progress.
+    Watchdog = 1,
+    /// A software reset (RESTART, a factory reset, a panic).
+    Software = 2,
+    /// The reset pin.
+    Pin = 3,
+    /// Anything else (low power, option bytes, ...).
+    Other = 4,
+}
+
+/// What the firmware knows about this start.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Boot {
+    /// Where the settings came from.
+    pub source: ConfigSource,
+    /// Stored settings found unreadable so far (kept in flash apart from the settings).
+    pub load_errors: u16,
+    /// Saves so far (kept in flash with the settings).
+    pub save_count: u32,
+    /// Why the board started.
+    pub reset: ResetCause,
+}
+
+impl Boot {
+    /// A start with nothing known (the PC gateway, tests).
+    pub const DEFAULT: Boot = Boot {
+        source: ConfigSource::Defaults,
+        load_errors: 0,
+        save_count: 0,
+        reset: ResetCause::PowerOn,
+    };
+}
+
+/// What the firmware is asked to do with the flash.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Store {
+    /// Store this record ([`Settings::encode`]) as the settings.
+    Save([u8; RECORD_LEN]),
+    /// Erase the stored settings, then restart (with the defaults).
+    FactoryReset,
+    /// Restart (the saved settings take effect).
+    Restart,
+}
+
+/// SAVESTAT.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[repr(u16)]
+pub(super) enum SaveStatus {
+    #[default]
+    Idle = 0,
+    Saving = 1,
+    Saved = 2,
+    Failed = 3,
+}
+
+/// The settings written but not in force yet (they take effect on APPLY or at the next
+/// start), and the state of a save.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Persist {
+    /// BUSBAUD, BUSRTIM.
+    pub(super) baud: Baud,
+    pub(super) rtim: Rtim,
+    /// PLCBAUD, PLCPARITY.
+    pub(super) plc: PlcLine,
+    /// UNITID.
+    pub(super) unit: u8,
+    /// AXISCFG's "enabled" bits.
+    pub(super) axes: AxisSet,
+    pub(super) status: SaveStatus,
+    pub(super) saves: u32,
+    /// A request for the firmware, not taken yet.
+    pub(super) request: Option<Store>,
+}
+
+impl Persist {
+    pub(super) const fn new(config: &GatewayConfig) -> Persist {
+        Persist {
+            baud: config.bus.baud,
+            rtim: config.bus.rtim,
+            plc: config.plc,
+            unit: config.unit,
+            axes: config.bus.axes,
+            status: SaveStatus::Idle,
+            saves: config.boot.save_count,
+            request: None,
+        }
+    }
+
+    /// `config` with the pending settings in force: what SAVE stores and APPLY applies.
+    pub(super) fn pending(&self, config: &GatewayConfig) -> GatewayConfig {
+        let mut config = *config;
+        config.bus.baud = self.baud;
+        config.bus.rtim = self.rtim;
+        config.plc = self.plc;
+        config.unit = self.unit;
+        config.bus.axes = self.axes;
+        config
+    }
+
+    /// SAVE: ask the firmware to store the settings of `config` (with the pending ones).
+    pub(super) fn save(&mut self, config: &GatewayConfig) {
+        let record = Settings::of(&self.pending(config)).encode();
+        self.request = Some(Store::Save(record));
+        self.status = SaveStatus::Saving;
+    }
+
+    /// The firmware's answer to a save: the new save count, or a failure.
+    pub(super) fn saved(&mut self, result: Result<u32, ()>) {
+        match result {
+            Ok(count) => {
+                self.saves = count;
+                self.status = SaveStatus::Saved;
+            }
+            Err(()) => self.status = SaveStatus::Failed,
+        }
+    }
+}

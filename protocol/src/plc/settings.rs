@@ -1,0 +1,291 @@
+//! The settings that survive a power cycle, as the bytes stored in flash.
+//!
+//! What is stored: the gateway unit's id, the PLC line (rate, parity), the PLC watchdog and its
+//! action, the bus (rate, RTIM, resends), the PIO axis, the axes on the bus and every axis'
+//! configuration. What is not: anything the gateway learns at run time (links, positions,
+//! counters) or knows by itself (its identity, the board).
+//!
+//! # Format
+//! One record of [`RECORD_LEN`] bytes, little endian:
+//!
+//! | Bytes | Field |
+//! |---|---|
+//! | 0 | format version ([`FORMAT`]) |
+//! | 1 | gateway unit id |
+//! | 2-5 | PLC line rate, bit/s |
+//! | 6 | PLC parity: 0 none, 1 odd, 2 even |
+//! | 7-8 | watchdog, ms |
+//! | 9 | watchdog action: 0 stop all, 1 latch only |
+//! | 10 | bus rate (BRSL code, complete edition §7-2-1) |
+//! | 11 | RTIM, ms |
+//! | 12 | resends |
+//! | 13 | PIO axis (0xFF: none) |
+//! | 14-15 | axes on the bus (bit n = axis n) |
+//! | 16 + 10 n | axis n: lead (0.01 mm, 2), pulses/rev (2), home end (1: 7 or 8), complement (1: 1 or 2), stroke (0.01 mm, 4) |
+//! | 176-177 | CRC-16/MODBUS of bytes 0-175 |
+//!
+//! [`Settings::decode`] accepts a record only if its version, length, CRC and every field's
+//! range are right: a record that is not exactly what [`Settings::encode`] writes is refused
+//! as a whole, never applied in part.
+
+use super::config::{AxisConfig, GatewayConfig, Parity, PlcLine, WatchdogAction};
+use crate::axes::AxisSet;
+use crate::line::Baud;
+use crate::modbus::crc;
+use crate::time::Duration;
+use crate::units::{Complement, Lead, Length};
+use crate::{Axis, HomeDirection, Rtim};
+
+/// The format version this code writes and reads.
+pub const FORMAT: u8 = 1;
+/// Bytes of one axis' configuration.
+const AXIS_LEN: usize = 10;
+/// Where the axes start.
+const AXES_AT: usize = 16;
+/// The record's length, CRC included.
+pub const RECORD_LEN: usize = AXES_AT + 16 * AXIS_LEN + 2;
+
+/// PLC line rates the gateway accepts, bit/s.
+pub const PLC_BAUDS: [u32; 8] = [1_200, 2_400, 4_800, 9_600, 19_200, 38_400, 57_600, 115_200];
+
+/// Why a stored record is not used.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SettingsError {
+    /// Not [`RECORD_LEN`] bytes.
+    Length,
+    /// Another format version.
+    Version,
+    /// The CRC does not match: the record is damaged.
+    Crc,
+    /// A field is out of its range (named by its byte offset).
+    Field(u8),
+}
+
+/// The stored settings: the part of a [`GatewayConfig`] that survives a power cycle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Settings {
+    /// Gateway unit id.
+    pub unit: u8,
+    /// PLC line.
+    pub plc: PlcLine,
+    /// PLC watchdog.
+    pub watchdog: Duration,
+    /// What the watchdog does.
+    pub watchdog_action: WatchdogAction,
+    /// Bus rate.
+    pub baud: Baud,
+    /// RTIM.
+    pub rtim: Rtim,
+    /// Resends.
+    pub retries: u8,
+    /// PIO axis.
+    pub pio_axis: Option<Axis>,
+    /// Axes on the bus.
+    pub axes: AxisSet,
+    /// Every axis' configuration.
+    pub axis_config: crate::AxisMap<AxisConfig>,
+}
+
+impl Settings {
+    /// The settings of `config`.
+    pub fn of(config: &GatewayConfig) -> Settings {
+        Settings {
+            unit: config.unit,
+            plc: config.plc,
+            watchdog: config.watchdog,
+            watchdog_action: config.watchdog_action,
+            baud: config.bus.baud,
+            rtim: config.bus.rtim,
+            retries: config.bus.retries,
+            pio_axis: config.pio_axis,
+            axes: config.bus.axes,
+            axis_config: config.axes,
+        }
+    }
+
+    /// `config` with these settings in force.
+    #[must_use]
+    pub fn apply(&self, mut config: GatewayConfig) -> GatewayConfig {
+        config.unit = self.unit;
+        config.plc = self.plc;
+        config.watchdog = self.watchdog;
+        config.watchdog_action = self.watchdog_action;
+        config.bus.baud = self.baud;
+        config.bus.rtim = self.rtim;
+        config.bus.retries = self.retries;
+        config.pio_axis = self.pio_axis;
+        config.bus.axes = self.axes;
+        config.axes = self.axis_config;
+        config
+    }
+
+    /// The record, as stored.
+    pub fn encode(&self) -> [u8; RECORD_LEN] {
+        let mut out = [0u8; RECORD_LEN];
+        let mut w = Fields(&mut out, 0);
+        w.u8(FORMAT);
+        w.u8(self.unit);
+        w.bytes(&self.plc.baud.to_le_bytes());
+        w.u8(match self.plc.parity {
+            Parity::None => 0,
+            Parity::Odd => 1,
+            Parity::Even => 2,
+        });
+        let ms = u16::try_from(self.watchdog.as_micros() / 1000).unwrap_or(u16::MAX);
+        w.bytes(&ms.to_le_bytes());
+        w.u8(match self.watchdog_action {
+            WatchdogAction::StopAll => 0,
+            WatchdogAction::LatchOnly => 1,
+        });
+        w.u8(self.baud.brsl());
+        w.u8(self.rtim.get());
+        w.u8(self.retries);
+        w.u8(self.pio_axis.map_or(0xFF, Axis::get));
+        w.bytes(&self.axes.0.to_le_bytes());
+        for (_, c) in self.axis_config.iter() {
+            w.bytes(&c.scale.lead.hundredths().to_le_bytes());
+            w.bytes(&c.scale.pulses_per_rev.get().to_le_bytes());
+            w.u8(c.scale.home.code());
+            w.u8(match c.scale.complement {
+                Complement::Ones => 1,
+                Complement::Twos => 2,
+            });
+            w.bytes(&c.stroke.0.to_le_bytes());
+        }
+        let sum = crc::checksum(out.get(..RECORD_LEN - 2).unwrap_or(&[]));
+        if let Some(tail) = out.get_mut(RECORD_LEN - 2..) {
+            tail.copy_from_slice(&sum.to_le_bytes());
+        }
+        out
+    }
+
+    /// The settings of a stored record, if it is a whole, valid one.
+    pub fn decode(record: &[u8]) -> Result<Settings, SettingsError> {
+        if record.len() != RECORD_LEN {
+            return Err(SettingsError::Length);
+        }
+        if record.first() != Some(&FORMAT) {
+            return Err(SettingsError::Version);
+        }
+        let (body, tail) = record.split_at(RECORD_LEN - 2);
+        if tail != crc::checksum(body).to_le_bytes() {
+            return Err(SettingsError::Crc);
+        }
+        let r = Reader(body);
+        let bad = |at: usize| SettingsError::Field(u8::try_from(at).unwrap_or(u8::MAX));
+        let unit = r.u8(1).filter(|u| (1..=247).contains(u)).ok_or(bad(1))?;
+        let baud = r.u32(2).filter(|b| PLC_BAUDS.contains(b)).ok_or(bad(2))?;
+        let parity = match r.u8(6) {
+            Some(0) => Parity::None,
+            Some(1) => Parity::Odd,
+            Some(2) => Parity::Even,
+            _ => return Err(bad(6)),
+        };
+        let ms = r
+            .u16(7)
+            .filter(|&ms| ms == 0 || (50..=60_000).contains(&ms))
+            .ok_or(bad(7))?;
+        let watchdog_action = match r.u8(9) {
+            Some(0) => WatchdogAction::StopAll,
+            Some(1) => WatchdogAction::LatchOnly,
+            _ => return Err(bad(9)),
+        };
+        let bus_baud = r
+            .u8(10)
+            .and_then(|code| Baud::from_brsl(code.into()))
+            .ok_or(bad(10))?;
+        let rtim = r.u8(11).and_then(Rtim::new).ok_or(bad(11))?;
+        let retries = r.u8(12).filter(|&n| n <= 3).ok_or(bad(12))?;
+        let pio_axis = match r.u8(13) {
+            Some(0xFF) => None,
+            Some(a) => Some(Axis::new(a).ok_or(bad(13))?),
+            None => return Err(bad(13)),
+        };
+        let axes = AxisSet(r.u16(14).ok_or(bad(14))?);
+        let mut axis_config = crate::AxisMap::new(AxisConfig::DEFAULT);
+        for (axis, slot) in axis_config.iter_mut() {
+            let at = AXES_AT + AXIS_LEN * usize::from(axis.get());
+            let lead = r.u16(at).and_then(Lead::from_hundredths).ok_or(bad(at))?;
+            let pulses = r
+                .u16(at + 2)
+                .and_then(core::num::NonZeroU16::new)
+                .ok_or(bad(at + 2))?;
+            let home = match r.u8(at + 4) {
+                Some(7) => HomeDirection::MotorEnd,
+                Some(8) => HomeDirection::NonMotorEnd,
+                _ => return Err(bad(at + 4)),
+            };
+            let complement = match r.u8(at + 5) {
+                Some(1) => Complement::Ones,
+                Some(2) => Complement::Twos,
+                _ => return Err(bad(at + 5)),
+            };
+            let stroke = r.i32(at + 6).filter(|&s| s > 0).ok_or(bad(at + 6))?;
+            slot.scale.lead = lead;
+            slot.scale.pulses_per_rev = pulses;
+            slot.scale.home = home;
+            slot.scale.complement = complement;
+            slot.stroke = Length(stroke);
+        }
+        let settings = Settings {
+            unit,
+            plc: PlcLine { baud, parity },
+            watchdog: Duration::from_millis(u64::from(ms)),
+            watchdog_action,
+            baud: bus_baud,
+            rtim,
+            retries,
+            pio_axis,
+            axes,
+            axis_config,
+        };
+        // The gateway unit must not be one of the axes' units (axis n is unit n + 1).
+        if settings.unit <= 16 && axes.contains(Axis::new(settings.unit - 1).ok_or(bad(1))?) {
+            return Err(bad(1));
+        }
+        Ok(settings)
+    }
+}
+
+/// Writes fields one after the other (the record is sized for all of them).
+struct Fields<'a>(&'a mut [u8], usize);
+
+impl Fields<'_> {
+    fn bytes(&mut self, bytes: &[u8]) {
+        if let Some(slot) = self.0.get_mut(self.1..self.1 + bytes.len()) {
+            slot.copy_from_slice(bytes);
+        }
+        self.1 += bytes.len();
+    }
+
+    fn u8(&mut self, value: u8) {
+        self.bytes(&[value]);
+    }
+}
+
+/// Reads fields at their offsets.
+struct Reader<'a>(&'a [u8]);
+
+impl Reader<'_> {
+    fn array<const N: usize>(&self, at: usize) -> Option<[u8; N]> {
+        self.0.get(at..at + N)?.try_into().ok()
+    }
+
+    fn u8(&self, at: usize) -> Option<u8> {
+        self.0.get(at).copied()
+    }
+
+    fn u16(&self, at: usize) -> Option<u16> {
+        self.array(at).map(u16::from_le_bytes)
+    }
+
+    fn u32(&self, at: usize) -> Option<u32> {
+        self.array(at).map(u32::from_le_bytes)
+    }
+
+    fn i32(&self, at: usize) -> Option<i32> {
+        self.array(at).map(i32::from_le_bytes)
+    }
+}

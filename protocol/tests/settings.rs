@@ -1,0 +1,276 @@
+//! Settings that survive a power cycle: the stored record (round trip, and a damaged or
+//! incompatible one refused whole), and the PLC's side of it (pending settings, SAVE, APPLY,
+//! factory reset, restart, what a start reports).
+#![allow(clippy::inconsistent_digit_grouping)]
+
+mod support;
+
+use proptest::prelude::*;
+use protocol::modbus::Exception;
+use protocol::plc::map::*;
+use protocol::plc::settings::{Settings, SettingsError, RECORD_LEN};
+use protocol::plc::{Boot, ConfigSource, GatewayConfig, Parity, ResetCause, Store};
+use protocol::units::Lead;
+use protocol::AxisSet;
+use support::*;
+
+fn config() -> GatewayConfig {
+    let mut c = GatewayConfig::new(AxisSet::first(3));
+    c.axes[axis(2)].scale.lead = Lead::from_hundredths(1200).unwrap();
+    c.axes[axis(2)].stroke = protocol::units::Length(350_00);
+    c.pio_axis = Some(axis(1));
+    c
+}
+
+#[test]
+fn a_record_round_trips() {
+    let settings = Settings::of(&config());
+    let record = settings.encode();
+    assert_eq!(Settings::decode(&record), Ok(settings));
+    let applied = settings.apply(GatewayConfig::new(AxisSet::EMPTY));
+    assert_eq!(Settings::of(&applied), settings);
+    assert_eq!(applied.axes[axis(2)].scale.lead.hundredths(), 1200);
+}
+
+#[test]
+fn a_damaged_record_is_refused_whole() {
+    let record = Settings::of(&config()).encode();
+    // Every single-bit flip is caught (the CRC, or the version byte).
+    for i in 0..RECORD_LEN {
+        for bit in 0..8 {
+            let mut bad = record;
+            bad[i] ^= 1 << bit;
+            assert!(Settings::decode(&bad).is_err(), "byte {i} bit {bit}");
+        }
+    }
+    assert_eq!(
+        Settings::decode(&record[..RECORD_LEN - 1]),
+        Err(SettingsError::Length)
+    );
+    let mut other = record;
+    other[0] = 2;
+    assert_eq!(Settings::decode(&other), Err(SettingsError::Version));
+    assert_eq!(
+        Settings::decode(&[0xFF; RECORD_LEN]),
+        Err(SettingsError::Version)
+    );
+}
+
+/// A record with a valid CRC but a field out of range (written by a buggy or newer firmware)
+/// is refused too, naming the field.
+#[test]
+fn a_field_out_of_range_is_refused() {
+    let record = Settings::of(&config()).encode();
+    let with = |at: usize, bytes: &[u8]| {
+        let mut r = record;
+        r[at..at + bytes.len()].copy_from_slice(bytes);
+        let sum = protocol::modbus::crc::checksum(&r[..RECORD_LEN - 2]);
+        r[RECORD_LEN - 2..].copy_from_slice(&sum.to_le_bytes());
+        Settings::decode(&r)
+    };
+    let cases: [(usize, &[u8]); 12] = [
+        (1, &[0]),                   // unit 0
+        (1, &[248]),                 // unit past 247
+        (1, &[2]),                   // unit 2 = axis 1's, which is on the bus
+        (2, &1234u32.to_le_bytes()), // PLC rate
+        (6, &[3]),                   // parity
+        (7, &10u16.to_le_bytes()),   // watchdog below 50 ms
+        (9, &[2]),                   // watchdog action
+        (10, &[0x15]),               // BRSL
+        (11, &[2]),                  // RTIM below 3
+        (12, &[4]),                  // resends
+        (16, &0u16.to_le_bytes()),   // axis 0 lead 0
+        (16 + 4, &[9]),              // axis 0 home end
+    ];
+    for (at, bytes) in cases {
+        assert_eq!(
+            with(at, bytes),
+            Err(SettingsError::Field(at as u8)),
+            "byte {at} = {bytes:?}"
+        );
+    }
+}
+
+fn settings() -> impl Strategy<Value = Settings> {
+    (
+        any::<u16>(),
+        0u8..=3,
+        prop_oneof![Just(0u16), 50u16..=60_000],
+        3u8..=255,
+        proptest::sample::select(vec![1_200u32, 9_600, 19_200, 115_200]),
+        any::<[(u16, u16, bool, bool, u16); 16]>(),
+    )
+        .prop_map(|(axes, retries, wd, rtim, plc_baud, per_axis)| {
+            let mut c = GatewayConfig::new(AxisSet(axes & 0x7FFF));
+            c.unit = 63;
+            c.bus.retries = retries;
+            c.watchdog = protocol::time::Duration::from_millis(wd.into());
+            c.bus.rtim = protocol::Rtim::new(rtim).unwrap();
+            c.plc.baud = plc_baud;
+            c.plc.parity = Parity::Even;
+            for (axis, (lead, ppr, home, twos, stroke)) in protocol::Axis::all().zip(per_axis) {
+                let a = &mut c.axes[axis];
+                a.scale.lead = Lead::from_hundredths(lead.max(1)).unwrap();
+                a.scale.pulses_per_rev = std::num::NonZeroU16::new(ppr.max(1)).unwrap();
+                a.scale.home = if home {
+                    protocol::HomeDirection::MotorEnd
+                } else {
+                    protocol::HomeDirection::NonMotorEnd
+                };
+                a.scale.complement = if twos {
+                    protocol::units::Complement::Twos
+                } else {
+                    protocol::units::Complement::Ones
+                };
+                a.stroke = protocol::units::Length(i32::from(stroke) + 1);
+            }
+            Settings::of(&c)
+        })
+}
+
+proptest! {
+    #[test]
+    fn any_settings_round_trip(s in settings()) {
+        prop_assert_eq!(Settings::decode(&s.encode()), Ok(s));
+    }
+
+    #[test]
+    fn decoding_any_bytes_never_panics(bytes in proptest::collection::vec(any::<u8>(), 0..200)) {
+        let _ = Settings::decode(&bytes);
+    }
+}
+
+// ---------------------------------------------------------------- the PLC's side
+
+#[test]
+fn save_stores_the_settings_with_the_pending_ones() {
+    let mut rig = Rig::ready(2, |_| {});
+    rig.write(63, G_PLC_BAUD, &[192]).unwrap();
+    rig.write(63, G_PLC_PARITY, &[2]).unwrap();
+    rig.write(63, G_UNIT_ID, &[100]).unwrap();
+    rig.write(63, G_WATCHDOG, &[500]).unwrap();
+    // Pending: read back as written, not in force (unit 63 still answers).
+    assert_eq!(rig.read(63, G_PLC_BAUD, 3), Ok(vec![192, 2, 100]));
+    assert_eq!(rig.read(63, G_SAVE_STATUS, 3), Ok(vec![0, 0, 0]));
+    rig.write(63, G_SAVE, &[1]).unwrap();
+    rig.run_for(10 * MS);
+    let record = match rig.stores.as_slice() {
+        [(_, Store::Save(record))] => *record,
+        other => panic!("one save expected: {other:?}"),
+    };
+    let saved = Settings::decode(&record).unwrap();
+    assert_eq!(
+        (saved.plc.baud, saved.plc.parity, saved.unit),
+        (19_200, Parity::Even, 100)
+    );
+    assert_eq!(saved.watchdog, protocol::time::Duration::from_millis(500));
+    assert_eq!(saved.axes, AxisSet::first(2));
+    // The rig's flash said "saved, 1 so far".
+    assert_eq!(rig.read(63, G_SAVE_STATUS, 3), Ok(vec![2, 0, 1]));
+    // Invalid values are refused and change nothing.
+    for (address, value) in [
+        (G_PLC_BAUD, 1000),
+        (G_PLC_PARITY, 3),
+        (G_UNIT_ID, 0),
+        (G_UNIT_ID, 2), // axis 1's unit
+        (G_UNIT_ID, 248),
+        (G_SAVE, 2),
+        (G_FACTORY, 1),
+        (G_RESTART, 2),
+    ] {
+        assert_eq!(
+            rig.write(63, address, &[value]),
+            Err(Exception::IllegalDataValue),
+            "{address:#06X} = {value}"
+        );
+    }
+    assert_eq!(rig.stores.len(), 1, "nothing else asked of the flash");
+}
+
+#[test]
+fn apply_switches_the_plc_line_after_its_reply_and_the_unit_at_once() {
+    let mut rig = Rig::ready(1, |_| {});
+    rig.write(63, G_PLC_BAUD, &[384]).unwrap();
+    rig.write(63, G_UNIT_ID, &[50]).unwrap();
+    rig.write(63, G_APPLY, &[1]).unwrap();
+    assert_eq!(rig.plc_lines.len(), 1);
+    assert_eq!(rig.plc_lines[0].1.baud, 38_400);
+    // Unit 63 is gone, 50 answers; the bus is being established again.
+    assert_eq!(
+        rig.modbus(
+            63,
+            &protocol::modbus::Request::ReadHoldingRegisters {
+                address: G_VERSION,
+                quantity: 1
+            }
+        ),
+        None
+    );
+    assert!(rig.read(50, G_VERSION, 1).is_ok());
+    rig.run_for(300 * MS);
+    assert!(
+        rig.lines
+            .iter()
+            .any(|(_, a)| *a == protocol::line::LineAction::BreakStart),
+        "{:?}",
+        rig.lines
+    );
+}
+
+#[test]
+fn factory_reset_and_restart_need_their_keys() {
+    let mut rig = Rig::ready(1, |_| {});
+    rig.write(63, G_RESTART, &[1]).unwrap();
+    rig.run_for(MS);
+    rig.write(63, G_FACTORY, &[FACTORY_KEY]).unwrap();
+    rig.run_for(MS);
+    let asked: Vec<Store> = rig.stores.iter().map(|(_, s)| *s).collect();
+    assert_eq!(asked, [Store::Restart, Store::FactoryReset]);
+    // Writing 0 is harmless.
+    rig.write(63, G_FACTORY, &[0]).unwrap();
+    rig.write(63, G_RESTART, &[0]).unwrap();
+    rig.run_for(MS);
+    assert_eq!(rig.stores.len(), 2);
+}
+
+#[test]
+fn a_start_reports_where_its_settings_came_from_and_why() {
+    let rig = |boot: Boot| {
+        let mut rig = Rig::ready(1, |c| c.boot = boot);
+        rig.read(63, G_SAVE_COUNT, 6).unwrap()
+    };
+    let damaged = Boot {
+        source: ConfigSource::Damaged,
+        load_errors: 3,
+        save_count: 70_000,
+        reset: ResetCause::Watchdog,
+    };
+    // SAVECOUNT (2), FACTORY (reads 0), CFGSOURCE, CFGERRORS, RESETCAUSE
+    assert_eq!(
+        rig(damaged),
+        vec![1, (70_000u32 - 65_536) as u16, 0, 2, 3, 1]
+    );
+    assert_eq!(rig(Boot::DEFAULT), vec![0, 0, 0, 0, 0, 0]);
+}
+
+#[test]
+fn enabling_an_axis_takes_effect_on_apply() {
+    // The scripted controllers answer at once whatever the rate and RTIM (they do not model
+    // the establishment's 9.6 kbit/s and 255 ms): no earliest-answer bound.
+    let mut rig = Rig::ready(2, |c| c.bus.wire_timing = false);
+    let enabled = G_AXIS_CONFIG + 8 * 2;
+    assert_eq!(rig.read(63, enabled, 1), Ok(vec![0]));
+    rig.write(63, enabled, &[1]).unwrap();
+    assert_eq!(rig.read(63, enabled, 1), Ok(vec![1]), "pending");
+    let link = protocol::modbus::Request::ReadHoldingRegisters {
+        address: LINK,
+        quantity: 1,
+    };
+    assert_eq!(rig.modbus(3, &link), None, "unit 3 is not served yet");
+    rig.bus.axes.insert(2, Fake::default());
+    rig.write(63, G_APPLY, &[1]).unwrap();
+    rig.run_for(3 * S);
+    for unit in 1..=3 {
+        assert_eq!(rig.read(unit, LINK, 1), Ok(vec![1]), "unit {unit}");
+    }
+}
