@@ -19,6 +19,7 @@ emu=$root/target/emu
 patch_file=$root/emu/embassy-stm32-0.6.0-qemu.patch
 
 rustup toolchain install >/dev/null 2>&1 || rustup toolchain install
+lock_before=$(sha256sum Cargo.lock)
 cargo fetch --locked --target "$target" >/dev/null
 
 # 1. The patched embassy-stm32, rebuilt from the registry copy whenever the patch changes.
@@ -52,6 +53,11 @@ cd "$ws"
 CARGO_TARGET_DIR=$emu/target cargo build --quiet --profile "$profile" -p rc-gateway --target "$target" \
     --no-default-features --features emulator \
     --config "patch.crates-io.embassy-stm32.path=\"$patched\""
+cd "$root"
+if [[ $(sha256sum Cargo.lock) != "$lock_before" ]]; then
+    echo "emu-build: Cargo.lock changed; the emulator build must leave it alone" >&2
+    exit 1
+fi
 dir=$profile
 [[ $profile == dev ]] && dir=debug
 echo "$emu/target/$target/$dir/rc-gateway"

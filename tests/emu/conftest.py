@@ -71,6 +71,23 @@ def wait_for(predicate, timeout, what, interval=0.01):
         time.sleep(interval)
 
 
+def connect(address, family=socket.AF_INET, timeout=20):
+    """A connected socket; retried while QEMU is still setting up its listening sockets (a unix
+    socket's file appears at bind, a moment before listen)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        sock = socket.socket(family)
+        sock.settimeout(10)
+        try:
+            sock.connect(address)
+            return sock
+        except (ConnectionRefusedError, FileNotFoundError):
+            sock.close()
+            if time.monotonic() >= deadline:
+                raise
+            time.sleep(0.02)
+
+
 def free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -81,9 +98,7 @@ class Qtest:
     """QEMU's qtest line protocol: one command per line, answered `OK ...` or `FAIL ...`."""
 
     def __init__(self, path):
-        self.sock = socket.socket(socket.AF_UNIX)
-        self.sock.settimeout(10)
-        self.sock.connect(str(path))
+        self.sock = connect(str(path), socket.AF_UNIX)
         self.buf = b""
         self.lock = threading.Lock()
 
@@ -119,9 +134,7 @@ class Qtest:
 
 class Qmp:
     def __init__(self, path):
-        self.sock = socket.socket(socket.AF_UNIX)
-        self.sock.settimeout(10)
-        self.sock.connect(str(path))
+        self.sock = connect(str(path), socket.AF_UNIX)
         self.file = self.sock.makefile("rwb")
         json.loads(self.file.readline())  # greeting
         self.execute("qmp_capabilities")
@@ -195,7 +208,7 @@ class Emulator:
         self._check_alive("starting")
         self.qtest = Qtest(qtest_path)
         self.qmp = Qmp(qmp_path)
-        self.plc = socket.create_connection(("127.0.0.1", plc_port), timeout=10)
+        self.plc = connect(("127.0.0.1", plc_port))
         self.plc.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.plc.setblocking(False)
         self._paint_stack()
