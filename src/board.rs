@@ -52,15 +52,13 @@
 //! its GPIO pin, so a break shows only as the pins' mode and output registers.
 
 use embassy_stm32::gpio::{Input, Level, Output, Pin, Pull, Speed};
-use embassy_stm32::pac;
-use embassy_stm32::pac::gpio::vals::Moder;
 use embassy_stm32::peripherals::{UART4, USART2};
 use embassy_stm32::usart::{self, BufferedInterruptHandler, BufferedUart, ConfigError};
 use embassy_stm32::{bind_interrupts, Peri, Peripherals};
-use masks::PortMasks;
 use static_cell::ConstStaticCell;
 
 use crate::discrete::{opposite, Inputs, Leds, Outputs};
+use crate::pins::{self, LineBreak, PinId};
 use crate::serial::Rs485;
 
 /// System clock: HSI16 through the PLL (no crystal needed), the STM32L475's maximum.
@@ -168,11 +166,8 @@ impl Board {
             INPUT_ON,
         );
 
-        let line_break = LineBreak {
-            tx: PinId::of(&*p.PA0),
-            de: PinId::of(&*p.PA15),
-        };
-        SAFE.release(PinId::of(&*p.PA15));
+        let line_break = LineBreak::new(PinId::of(&*p.PA0), PinId::of(&*p.PA15));
+        pins::on_fault_release(PinId::of(&*p.PA15));
         let bus = BufferedUart::new_with_de(
             p.UART4,
             p.PA1,
@@ -183,7 +178,7 @@ impl Board {
             BUS_RX.take(),
             rs485_config(BUS_INITIAL_BAUD),
         )?;
-        SAFE.release(PinId::of(&*p.PD4));
+        pins::on_fault_release(PinId::of(&*p.PD4));
         let plc = BufferedUart::new_with_de(
             p.USART2,
             p.PD6,
@@ -222,13 +217,13 @@ fn rs485_config(baud: u32) -> usart::Config {
 
 /// A PIO output, OFF, registered to be forced OFF on a fault.
 fn output(pin: Peri<'static, impl Pin>) -> Output<'static> {
-    SAFE.force_off(PinId::of(&*pin));
+    pins::on_fault_drive(PinId::of(&*pin), OUTPUT_ON == Level::Low);
     Output::new(pin, opposite(OUTPUT_ON), Speed::Low)
 }
 
 /// An LED that a fault turns on (the alarm LED).
 fn indicator_on_fault(pin: Peri<'static, impl Pin>) -> Output<'static> {
-    SAFE.force_high(PinId::of(&*pin));
+    pins::on_fault_drive(PinId::of(&*pin), true);
     Output::new(pin, Level::Low, Speed::Low)
 }
 
@@ -264,189 +259,5 @@ impl Watchdog {
     pub fn pet(&mut self) {
         #[cfg(feature = "hw")]
         self.iwdg.pet();
-    }
-}
-
-// ---------------------------------------------------------------------------------------------
-// Pins below the HAL: the fail-safe path and the bus break.
-//
-// On a panic or a HardFault the HAL's pin objects belong to a task that will never run again, and
-// during a break the bus TX and DE pins belong to the UART driver. Both cases write the GPIO
-// registers directly, through the register block (safe code: the PAC's accessors are volatile
-// register reads and writes). Each pin is recorded when the HAL object is made from it, so this
-// part repeats no pin choice.
-
-/// A pin as (port, number): port 0 = GPIOA.
-#[derive(Clone, Copy)]
-pub struct PinId {
-    port: u8,
-    pin: u8,
-}
-
-impl PinId {
-    fn of(pin: &impl Pin) -> PinId {
-        PinId {
-            port: pin.port(),
-            pin: pin.pin(),
-        }
-    }
-
-    fn block(self) -> Option<pac::gpio::Gpio> {
-        Some(match self.port {
-            0 => pac::GPIOA,
-            1 => pac::GPIOB,
-            2 => pac::GPIOC,
-            3 => pac::GPIOD,
-            4 => pac::GPIOE,
-            5 => pac::GPIOF,
-            6 => pac::GPIOG,
-            7 => pac::GPIOH,
-            _ => return None,
-        })
-    }
-
-    fn set_level(self, high: bool) {
-        if let Some(gpio) = self.block() {
-            let n = usize::from(self.pin);
-            gpio.bsrr().write(|w| {
-                if high {
-                    w.set_bs(n, true)
-                } else {
-                    w.set_br(n, true)
-                }
-            });
-        }
-    }
-
-    fn set_mode(self, mode: Moder) {
-        if let Some(gpio) = self.block() {
-            let n = usize::from(self.pin);
-            critical_section::with(|_| gpio.moder().modify(|w| w.set_moder(n, mode)));
-        }
-    }
-}
-
-/// Holds the bus low for a break: TX as a GPIO output at 0 and DE as a GPIO output at 1 (the
-/// transceiver must drive the low level onto the pair), then hands both back to the UART.
-/// embassy's `send_break` sends one break character only; §6-1 wants 200 ms.
-pub struct LineBreak {
-    tx: PinId,
-    de: PinId,
-}
-
-impl LineBreak {
-    /// Starts holding the line low. Call only when the UART has finished transmitting.
-    pub fn hold(&self) {
-        self.tx.set_level(false);
-        self.de.set_level(true);
-        self.de.set_mode(Moder::OUTPUT);
-        self.tx.set_mode(Moder::OUTPUT);
-    }
-
-    /// Back to the UART: TX idles high (mark), DE follows the UART (released when idle).
-    pub fn release(&self) {
-        self.tx.set_mode(Moder::ALTERNATE);
-        self.de.set_mode(Moder::ALTERNATE);
-    }
-}
-
-mod masks {
-    //! Per-port pin masks in atomics (no lock: read in fault handlers).
-    use core::sync::atomic::{AtomicU16, Ordering};
-
-    /// GPIOA..GPIOH.
-    pub const PORTS: usize = 8;
-
-    pub struct PortMasks([AtomicU16; PORTS]);
-
-    impl PortMasks {
-        pub const fn new() -> PortMasks {
-            PortMasks([const { AtomicU16::new(0) }; PORTS])
-        }
-
-        pub fn add(&self, port: u8, pin: u8) {
-            if let Some(mask) = self.0.get(usize::from(port)) {
-                mask.fetch_or(1 << (pin & 15), Ordering::Relaxed);
-            }
-        }
-
-        pub fn get(&self, port: usize) -> u16 {
-            self.0.get(port).map_or(0, |m| m.load(Ordering::Relaxed))
-        }
-    }
-}
-
-/// The pins a fault puts into their safe state.
-struct SafeState {
-    /// Driven low: the PIO outputs (OFF), the run and link LEDs.
-    low: PortMasks,
-    /// Driven high: the alarm LED.
-    high: PortMasks,
-    /// Taken from the UART and driven low: the driver enables (transmitters off).
-    release: PortMasks,
-}
-
-static SAFE: SafeState = SafeState {
-    low: PortMasks::new(),
-    high: PortMasks::new(),
-    release: PortMasks::new(),
-};
-
-impl SafeState {
-    fn force_off(&self, pin: PinId) {
-        match OUTPUT_ON {
-            Level::High => self.low.add(pin.port, pin.pin),
-            Level::Low => self.high.add(pin.port, pin.pin),
-        }
-    }
-
-    fn force_high(&self, pin: PinId) {
-        self.high.add(pin.port, pin.pin);
-    }
-
-    fn release(&self, pin: PinId) {
-        self.release.add(pin.port, pin.pin);
-    }
-}
-
-/// Every output OFF, alarm LED on, RS485 drivers disabled. For the panic and HardFault handlers:
-/// touches only registers, takes no lock, and may run at any moment (before the pins are set up
-/// it changes nothing: after reset every pin is an input, which is OFF for the 24 V stages).
-pub fn force_safe() {
-    for port in 0..masks::PORTS {
-        let (low, high, release) = (
-            SAFE.low.get(port),
-            SAFE.high.get(port),
-            SAFE.release.get(port),
-        );
-        if low | high | release == 0 {
-            continue;
-        }
-        let Some(gpio) = (PinId {
-            port: port as u8,
-            pin: 0,
-        })
-        .block() else {
-            continue;
-        };
-        let low = low | release;
-        gpio.bsrr().write(|w| {
-            for n in 0..16 {
-                if low & (1 << n) != 0 {
-                    w.set_br(n, true);
-                } else if high & (1 << n) != 0 {
-                    w.set_bs(n, true);
-                }
-            }
-        });
-        if release != 0 {
-            gpio.moder().modify(|w| {
-                for n in 0..16 {
-                    if release & (1 << n) != 0 {
-                        w.set_moder(n, Moder::OUTPUT);
-                    }
-                }
-            });
-        }
     }
 }

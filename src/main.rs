@@ -9,7 +9,8 @@
 //!
 //! | Module | What it answers |
 //! |---|---|
-//! | [`board`] | Which pin and peripheral is which signal; the fail-safe pin states; the bus break |
+//! | [`board`] | Which pin and peripheral is which signal (the only board-specific module) |
+//! | [`pins`] | GPIO below the HAL: the fail-safe pin states, the bus break |
 //! | [`serial`] | An RS485 line: send-then-flush, rate change, break |
 //! | [`discrete`] | PIO inputs and outputs as pins; LEDs |
 //! | [`node`] | The contract with the protocol node |
@@ -37,6 +38,7 @@ mod bringup;
 mod discrete;
 mod gateway;
 mod node;
+mod pins;
 #[allow(unsafe_code)]
 mod rt;
 mod serial;

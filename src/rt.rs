@@ -12,7 +12,7 @@ use cortex_m_rt::{exception, ExceptionFrame};
 use embassy_executor::{raw, Spawner};
 use static_cell::StaticCell;
 
-use crate::board;
+use crate::pins;
 
 /// Set by a waker (from a task or an interrupt): the executor has work.
 static WORK: AtomicBool = AtomicBool::new(false);
@@ -46,7 +46,7 @@ pub fn run(init: impl FnOnce(Spawner)) -> ! {
 /// Outputs safe first, then the message, then stop (see [`halt`]).
 #[panic_handler]
 fn panic(info: &PanicInfo) -> ! {
-    board::force_safe();
+    pins::force_safe();
     // The location only: formatting the message would pull `core::fmt` into the board's flash.
     match info.location() {
         Some(at) => error!("panic at {}:{}", at.file(), at.line()),
@@ -59,7 +59,7 @@ fn panic(info: &PanicInfo) -> ! {
 /// report where, then reset (board) or end the emulator with a failure status.
 #[exception]
 unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
-    board::force_safe();
+    pins::force_safe();
     error!("HardFault at pc {}", frame.pc());
     #[cfg(feature = "emulator")]
     cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);

@@ -4,7 +4,7 @@
 use embassy_stm32::usart::BufferedUart;
 use embedded_io_async::{Read, ReadReady, Write};
 
-use crate::board::LineBreak;
+use crate::pins::LineBreak;
 
 /// One RS485 line. Receiving continues in the UART's ring buffer while the task awaits a send.
 pub struct Rs485 {
