@@ -45,8 +45,9 @@
 //! table assumes non-inverting stages (3.3 V high = signal ON), hence `INPUT_ON` / `OUTPUT_ON`.
 //!
 //! # Emulator
-//! QEMU's `b-l475e-iot01a` connects `-serial` #0..#4 to USART1, USART2, USART3, UART4, UART5.
-//! The harness gives #1 (PLC) and #3 (bus) host endpoints and `null` to the others; it drives
+//! QEMU's `b-l475e-iot01a` connects `-serial` #0..#4 to USART1, USART2, USART3, UART4, UART5
+//! (#1 and #3 are proven by the emulator tests). The harness gives #1 (PLC) and #3 (bus) host
+//! endpoints and `null` to the others; it drives
 //! input pins with qtest `set_irq_in /machine/soc/gpioX unnamed-gpio-in N level` and reads
 //! outputs from the GPIO registers. QEMU ignores DE (CR3.DEM) and does not wire USART TX to
 //! its GPIO pin, so a break shows only as the pins' mode and output registers.
