@@ -68,7 +68,10 @@ with open(elf_path, "rb") as f:
 
 try:
     lines = [line.split() for line in open(hwm_path) if line.strip()]
-    stack, deepest = max((int(n), name) for n, name in lines)
+    stack = max(int(n) for n, _ in lines)
+    deepest = [name for n, name in lines if int(n) == stack]
+    deepest = (f"in all {len(lines)} tests" if len(deepest) == len(lines)
+               else f"deepest in {', '.join(deepest[:3])}")
 except (OSError, ValueError):
     sys.exit(f"no stack measurement in {hwm_path}: did scripts/emu-test.sh run?")
 
@@ -81,7 +84,7 @@ print(f"rc-gateway (hw build): {elf_path}")
 print(f"  flash        {kib(flash_total)}  ({', '.join(f'{k} {v}' for k, v in flash.items())})"
       f"  budget {kib(FLASH_BUDGET)}")
 print(f"  static RAM   {kib(static_ram)}  ({', '.join(f'{k} {v}' for k, v in ram.items())})")
-print(f"  stack HWM    {kib(stack)}  ({stack} B, deepest in {deepest}; emulator build, an upper bound)")
+print(f"  stack HWM    {kib(stack)}  ({stack} B, {deepest}; emulator build, an upper bound)")
 print(f"  RAM + stack  {kib(static_ram + stack)}  budget {kib(RAM_BUDGET)}")
 print(f"  largest symbols:")
 from itertools import islice
