@@ -1,59 +1,87 @@
 //! `rc-gateway` firmware: lets a PLC drive IAI Robo Cylinder actuators over an RS485 bus.
 //!
 //! Target: STM32L475VG (Cortex-M4F), as on the B-L475E-IOT01A board that QEMU's `b-l475e-iot01a`
-//! machine models. Runtime: embassy (async executor, HAL, timers); logging: defmt over RTT.
+//! machine models. Runtime: embassy (async executor, HAL, timers).
 //!
-//! All protocol logic (Robo Cylinder frames, the bus-master state machine, the PLC-side interface)
-//! lives in the host-testable `protocol` crate. This binary only initialises the hardware and moves
-//! bytes between the peripherals and those state machines; it holds no protocol decisions itself.
+//! All protocol logic lives in the host-tested `protocol` crate; this binary only moves bytes,
+//! pin levels and time between the peripherals and the protocol's node, and carries out what the
+//! node asks. Modules:
 //!
-//! For now this is the skeleton that the bus-master work will fill in: it brings the chip up, logs
-//! the firmware version, and blinks a heartbeat LED so a board (or an emulator trace) shows that the
-//! executor and the time driver are running.
+//! | Module | What it answers |
+//! |---|---|
+//! | [`board`] | Which pin and peripheral is which signal (the only board-specific module) |
+//! | [`pins`] | GPIO below the HAL: the fail-safe pin states, the bus break |
+//! | [`serial`] | An RS485 line: send-then-flush, rate change, break |
+//! | [`discrete`] | PIO inputs and outputs as pins; LEDs |
+//! | [`node`] | The contract with the protocol node |
+//! | [`gateway`] | The one task that owns the node |
+//! | [`bringup`] | The stand-in node until `protocol::node::Node` is wired in |
+//! | [`rt`] | Executor loop, panic and HardFault handlers (all the `unsafe`) |
+//! | `systick` | The emulator's time driver |
+//!
+//! Two builds (Cargo features): `hw` (default) for the board, `emulator` for QEMU
+//! (`scripts/emu-build.sh`). They differ in the time driver, the log channel and the watchdog.
 
 #![no_std]
 #![no_main]
 #![deny(unsafe_code)]
 
-use defmt::{error, info};
-use embassy_executor::Spawner;
-use embassy_stm32::gpio::{Level, Output, Speed};
-use embassy_time::Timer;
-use {defmt_rtt as _, panic_probe as _};
+#[cfg(all(feature = "hw", feature = "emulator"))]
+compile_error!("the features `hw` and `emulator` exclude each other: build the emulator with `--no-default-features --features emulator`");
+#[cfg(not(any(feature = "hw", feature = "emulator")))]
+compile_error!("choose a build: feature `hw` (the default) or `emulator`");
 
-// Links the protocol crate into the firmware already, before any of its API is used here.
-use protocol as _;
+#[macro_use]
+mod log;
+mod board;
+mod bringup;
+mod discrete;
+mod gateway;
+mod node;
+mod pins;
+#[allow(unsafe_code)]
+mod rt;
+mod serial;
+#[cfg(feature = "emulator")]
+mod systick;
+
+#[cfg(feature = "hw")]
+use defmt_rtt as _;
+use embassy_executor::Spawner;
+use static_cell::ConstStaticCell;
 
 /// Firmware version, from `Cargo.toml`.
 const VERSION: &str = env!("CARGO_PKG_VERSION");
 
-/// Half period of the heartbeat blink: the LED toggles this often (1 Hz blink).
-const HEARTBEAT_HALF_PERIOD_MS: u64 = 500;
+/// The protocol node: large, so in a static, never on a task's stack.
+static NODE: ConstStaticCell<node::ActiveNode> = ConstStaticCell::new(node::new_node());
 
-#[embassy_executor::main]
-async fn main(spawner: Spawner) {
-    // Default clock config: the 4 MHz MSI the chip resets to. No external crystal is needed.
-    let p = embassy_stm32::init(Default::default());
-    info!("rc-gateway {=str} starting", VERSION);
-
-    // B-L475E-IOT01A: LED2 (green) is on PB14, active high.
-    let led = Output::new(p.PB14, Level::Low, Speed::Low);
-    // Creating the task fails only if its single instance already runs: log it, keep going
-    // (the heartbeat is a diagnostic, not a reason to stop the gateway).
-    match heartbeat(led) {
-        Ok(token) => spawner.spawn(token),
-        Err(e) => error!("heartbeat task not started: {}", e),
-    }
-
-    info!("init done");
-    // Returning ends only this task; the executor keeps running the spawned ones.
+#[cortex_m_rt::entry]
+fn main() -> ! {
+    rt::run(start)
 }
 
-/// Toggles the heartbeat LED forever.
-#[embassy_executor::task]
-async fn heartbeat(mut led: Output<'static>) {
-    loop {
-        led.toggle();
-        Timer::after_millis(HEARTBEAT_HALF_PERIOD_MS).await;
+/// Brings the chip up and spawns the gateway task.
+fn start(spawner: Spawner) {
+    let p = embassy_stm32::init(board::clock_config());
+    #[cfg(feature = "emulator")]
+    if let Some(core) = cortex_m::Peripherals::take() {
+        systick::init(core.SYST, board::SYSCLK_HZ);
     }
+    info!("rc-gateway {} starting", VERSION);
+
+    let board = match board::Board::new(p) {
+        Ok(board) => board,
+        Err(_) => {
+            // Only a baud rate the kernel clock cannot make: a build error, not a field fault.
+            error!("UART configuration refused");
+            return;
+        }
+    };
+    match gateway::run(board, NODE.take()) {
+        Ok(token) => spawner.spawn(token),
+        Err(_) => error!("gateway task not started"),
+    }
+    // The harness waits for this line: both UARTs receive from now on.
+    info!("ready");
 }

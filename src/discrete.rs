@@ -1,0 +1,107 @@
+//! The 24 V discrete I/O as pins: PIO inputs sampled into a [`PioInputs`] word, the stop input,
+//! [`PioOutputs`] written to pins, and the three LEDs. Which pin is which bit is the board's choice.
+
+use embassy_stm32::gpio::{Input, Level, Output};
+use embassy_time::{Duration, Instant};
+
+use crate::node::{PioInputs, PioOutputs};
+
+/// The PIO inputs (bit number, pin) and the stop input.
+pub struct Inputs {
+    pins: [(u8, Input<'static>); 11],
+    stop: Input<'static>,
+    on: Level,
+}
+
+impl Inputs {
+    /// `on` is the pin level of a signal that is ON.
+    pub fn new(pins: [(u8, Input<'static>); 11], stop: Input<'static>, on: Level) -> Inputs {
+        Inputs { pins, stop, on }
+    }
+
+    /// The inputs now, bit n = port INn.
+    pub fn sample(&self) -> PioInputs {
+        let bits = self
+            .pins
+            .iter()
+            .filter(|(_, pin)| pin.get_level() == self.on)
+            .fold(0u16, |bits, (bit, _)| bits | 1 << (bit & 15));
+        PioInputs::from_bits(bits)
+    }
+
+    /// Whether the stop is requested: the stop input is OFF (so a broken wire stops too).
+    pub fn stop_active(&self) -> bool {
+        self.stop.get_level() != self.on
+    }
+}
+
+/// The PIO outputs (bit number, pin).
+pub struct Outputs {
+    pins: [(u8, Output<'static>); 11],
+    on: Level,
+    shown: Option<PioOutputs>,
+}
+
+impl Outputs {
+    /// `on` is the pin level of a signal that is ON. The pins must be OFF already.
+    pub fn new(pins: [(u8, Output<'static>); 11], on: Level) -> Outputs {
+        Outputs {
+            pins,
+            on,
+            shown: Some(PioOutputs::SAFE),
+        }
+    }
+
+    /// Drives the pins to `outputs` (bit n = port OUTn).
+    pub fn write(&mut self, outputs: PioOutputs) {
+        if self.shown == Some(outputs) {
+            return;
+        }
+        for (bit, pin) in &mut self.pins {
+            let on = outputs.bits() & (1 << (*bit & 15)) != 0;
+            pin.set_level(if on { self.on } else { opposite(self.on) });
+        }
+        self.shown = Some(outputs);
+    }
+}
+
+/// The other level.
+pub const fn opposite(level: Level) -> Level {
+    match level {
+        Level::High => Level::Low,
+        Level::Low => Level::High,
+    }
+}
+
+/// Half period of the run LED's blink.
+const RUN_BLINK: Duration = Duration::from_millis(500);
+
+/// Run (blinks while the gateway task makes progress), bus link and alarm LEDs, active high.
+pub struct Leds {
+    run: Output<'static>,
+    link: Output<'static>,
+    alarm: Output<'static>,
+    next_blink: Instant,
+}
+
+impl Leds {
+    /// The LEDs, all off.
+    pub fn new(run: Output<'static>, link: Output<'static>, alarm: Output<'static>) -> Leds {
+        Leds {
+            run,
+            link,
+            alarm,
+            next_blink: Instant::from_ticks(0),
+        }
+    }
+
+    /// Shows (bus link good, alarm) and blinks the run LED.
+    pub fn show(&mut self, now: Instant, (link, alarm): (bool, bool)) {
+        self.link.set_level(Level::from(link));
+        self.alarm.set_level(Level::from(alarm));
+        if now >= self.next_blink {
+            self.run.toggle();
+            self.next_blink = now + RUN_BLINK;
+        }
+    }
+}

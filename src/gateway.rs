@@ -1,0 +1,102 @@
+//! The gateway task: the only owner of the protocol [`Node`] and of the lines and pins around it.
+//!
+//! One loop, no locks (every node call is synchronous and short):
+//! wait for bus bytes, PLC bytes, the 1 ms input tick or the node's own deadline; feed what came
+//! and everything else already waiting (ingress before egress); then carry out the node's actions
+//! until it has none; show outputs and LEDs; feed the watchdog.
+
+use embassy_futures::select::{select4, Either4};
+use embassy_time::{Duration, Ticker, Timer};
+
+use crate::board::Board;
+use crate::node::{Action, ActiveNode, Instant, LineAction, Node};
+
+/// The PIO inputs are sampled this often (the node debounces them).
+const SAMPLE_PERIOD: Duration = Duration::from_millis(1);
+
+/// Now, as the protocol counts time (µs since boot).
+fn now() -> Instant {
+    Instant(embassy_time::Instant::now().as_micros())
+}
+
+/// Sleeps until the node's deadline (forever if it has none).
+async fn deadline(at: Option<Instant>) {
+    match at {
+        Some(Instant(us)) => Timer::at(embassy_time::Instant::from_micros(us)).await,
+        None => core::future::pending().await,
+    }
+}
+
+/// Runs the gateway forever.
+#[embassy_executor::task]
+pub async fn run(mut board: Board, node: &'static mut ActiveNode) -> ! {
+    let mut bus_buf = [0u8; 64];
+    let mut plc_buf = [0u8; 64];
+    let mut ticker = Ticker::every(SAMPLE_PERIOD);
+    let mut stop = board.inputs.stop_active();
+    node.set_stop_input(now(), stop);
+    node.sample_inputs(now(), board.inputs.sample());
+
+    loop {
+        let event = select4(
+            board.bus.read(&mut bus_buf),
+            board.plc.read(&mut plc_buf),
+            ticker.next(),
+            deadline(node.poll_at()),
+        )
+        .await;
+        match event {
+            Either4::First(n) => node.bus_received(now(), bytes(&bus_buf, n)),
+            Either4::Second(n) => node.plc_received(now(), bytes(&plc_buf, n)),
+            Either4::Third(()) => {
+                let active = board.inputs.stop_active();
+                if active != stop {
+                    stop = active;
+                    node.set_stop_input(now(), stop);
+                }
+                node.sample_inputs(now(), board.inputs.sample());
+            }
+            Either4::Fourth(()) => {}
+        }
+        // Whatever else has arrived meanwhile goes in before anything goes out.
+        loop {
+            let n = board.bus.read_ready(&mut bus_buf).await;
+            if n > 0 {
+                node.bus_received(now(), bytes(&bus_buf, n));
+            }
+            let m = board.plc.read_ready(&mut plc_buf).await;
+            if m > 0 {
+                node.plc_received(now(), bytes(&plc_buf, m));
+            }
+            if n == 0 && m == 0 {
+                break;
+            }
+        }
+
+        while let Some(action) = node.poll(now()) {
+            match action {
+                Action::Bus(frame) => board.bus.send(&frame).await,
+                Action::Reply(reply) => board.plc.send(reply).await,
+                Action::Line(LineAction::SetBaud(baud)) => {
+                    board.bus.set_baud(baud.bits_per_second()).await
+                }
+                Action::Line(LineAction::BreakStart) => board.bus.break_start().await,
+                Action::Line(LineAction::BreakEnd) => board.bus.break_end().await,
+                Action::Line(LineAction::CommChange) => {
+                    board.bus.send(&protocol::frame::COMM_CHANGE).await
+                }
+            }
+        }
+
+        board.outputs.write(node.outputs());
+        board
+            .leds
+            .show(embassy_time::Instant::now(), node.indicators());
+        board.watchdog.pet();
+    }
+}
+
+/// The first `n` bytes of `buf` (all of it if `n` is larger, which a UART never reports).
+fn bytes(buf: &[u8], n: usize) -> &[u8] {
+    buf.get(..n).unwrap_or(buf)
+}

@@ -1,0 +1,83 @@
+//! The runtime glue that needs `unsafe`, all of it here: the executor loop, the panic handler
+//! and the HardFault handler.
+//!
+//! The executor is embassy's raw executor polled from thread mode, sleeping with WFI between
+//! polls. (embassy's thread executor sleeps with WFE; under QEMU that busy-waits and starves the
+//! SysTick time driver. WFI is as good on silicon, so both builds use this loop.)
+
+use core::panic::PanicInfo;
+use core::sync::atomic::{AtomicBool, Ordering};
+
+use cortex_m_rt::{exception, ExceptionFrame};
+use embassy_executor::{raw, Spawner};
+use static_cell::StaticCell;
+
+use crate::pins;
+
+/// Set by a waker (from a task or an interrupt): the executor has work.
+static WORK: AtomicBool = AtomicBool::new(false);
+static EXECUTOR: StaticCell<raw::Executor> = StaticCell::new();
+
+/// Called by embassy when a task of the executor is woken.
+#[unsafe(no_mangle)]
+fn __pender(_context: *mut ()) {
+    WORK.store(true, Ordering::Release);
+}
+
+/// Runs `init` to spawn the tasks, then the executor, forever.
+pub fn run(init: impl FnOnce(Spawner)) -> ! {
+    let executor: &'static raw::Executor = EXECUTOR.init(raw::Executor::new(core::ptr::null_mut()));
+    init(executor.spawner());
+    loop {
+        WORK.store(false, Ordering::Release);
+        // SAFETY: `poll` is called only here, in thread mode, never re-entrantly; the executor is
+        // 'static and every task was spawned on it through its own spawner.
+        unsafe { executor.poll() };
+        // Sleep unless something was woken meanwhile. Interrupts are masked for the check, so a
+        // wake between the check and WFI leaves the interrupt pending, and WFI returns at once.
+        cortex_m::interrupt::free(|_| {
+            if !WORK.load(Ordering::Acquire) {
+                cortex_m::asm::wfi();
+            }
+        });
+    }
+}
+
+/// Outputs safe first, then the message, then stop (see [`halt`]).
+#[panic_handler]
+fn panic(info: &PanicInfo) -> ! {
+    pins::force_safe();
+    // The location only: formatting the message would pull `core::fmt` into the board's flash.
+    match info.location() {
+        Some(at) => error!("panic at {}:{}", at.file(), at.line()),
+        None => error!("panic"),
+    }
+    halt()
+}
+
+/// A bus fault, an undefined instruction, a stack overflow into the vector table...: outputs safe,
+/// report where, then reset (board) or end the emulator with a failure status.
+#[exception]
+unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
+    pins::force_safe();
+    error!("HardFault at pc {}", frame.pc());
+    #[cfg(feature = "emulator")]
+    cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// After a panic. On the board: an undefined instruction, which a debug probe (`probe-rs run`)
+/// stops at, showing the log above; without a probe it is a HardFault, which resets the chip
+/// (outputs stay OFF through the reset). In the emulator: stay halted with interrupts masked,
+/// so that the harness can read the pins.
+fn halt() -> ! {
+    #[cfg(feature = "hw")]
+    cortex_m::asm::udf();
+    #[cfg(feature = "emulator")]
+    {
+        cortex_m::interrupt::disable();
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+}

@@ -1,0 +1,74 @@
+//! An embassy time driver on the Cortex-M SysTick, for the emulator: QEMU's `b-l475e-iot01a`
+//! models no TIM peripheral, which embassy-stm32's time drivers need.
+//!
+//! SysTick interrupts every millisecond; `now()` adds the counter's progress within the current
+//! millisecond, so time has microsecond resolution. Timers are checked on each interrupt: they
+//! fire at most 1 ms late, which the emulator tests (generous time-outs) do not notice.
+
+use core::cell::{Cell, RefCell};
+use core::task::Waker;
+
+use cortex_m::peripheral::syst::SystClkSource;
+use cortex_m::peripheral::{SCB, SYST};
+use cortex_m_rt::exception;
+use critical_section::Mutex;
+use embassy_time_driver::Driver;
+use embassy_time_queue_utils::Queue;
+
+const TICKS_PER_MS: u64 = embassy_time_driver::TICK_HZ / 1000;
+
+struct SysTickDriver {
+    /// Milliseconds counted by the interrupt.
+    ms: Mutex<Cell<u64>>,
+    queue: Mutex<RefCell<Queue>>,
+}
+
+embassy_time_driver::time_driver_impl!(static DRIVER: SysTickDriver = SysTickDriver {
+    ms: Mutex::new(Cell::new(0)),
+    queue: Mutex::new(RefCell::new(Queue::new())),
+});
+
+/// Starts the 1 ms interrupt; `core_hz` is the processor clock.
+pub fn init(mut syst: SYST, core_hz: u32) {
+    syst.set_clock_source(SystClkSource::Core);
+    syst.set_reload(core_hz / 1000 - 1);
+    syst.clear_current();
+    syst.enable_interrupt();
+    syst.enable_counter();
+}
+
+impl Driver for SysTickDriver {
+    fn now(&self) -> u64 {
+        critical_section::with(|cs| {
+            let mut ms = self.ms.borrow(cs).get();
+            let mut current = SYST::get_current();
+            // The counter wrapped but the interrupt has not run yet (it is masked here): count
+            // that millisecond, and read the counter again so it belongs to the new one.
+            if SCB::is_pendst_pending() {
+                ms += 1;
+                current = SYST::get_current();
+            }
+            let reload = u64::from(SYST::get_reload()) + 1;
+            let within = (reload - 1 - u64::from(current)) * TICKS_PER_MS / reload;
+            ms * TICKS_PER_MS + within
+        })
+    }
+
+    fn schedule_wake(&self, at: u64, waker: &Waker) {
+        critical_section::with(|cs| {
+            self.queue.borrow_ref_mut(cs).schedule_wake(at, waker);
+        });
+    }
+}
+
+#[exception]
+fn SysTick() {
+    critical_section::with(|cs| {
+        let ms = DRIVER.ms.borrow(cs).get() + 1;
+        DRIVER.ms.borrow(cs).set(ms);
+        DRIVER
+            .queue
+            .borrow_ref_mut(cs)
+            .next_expiration(ms * TICKS_PER_MS);
+    });
+}
