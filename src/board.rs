@@ -62,12 +62,12 @@ use crate::discrete::{opposite, Inputs, Leds, Outputs};
 use crate::pins::{self, LineBreak, PinId};
 use crate::serial::Rs485;
 
+/// The board, as the gateway names it to the PLC (device identification).
+pub const MODEL_NAME: &str = "B-L475E-IOT01A (STM32L475VG)";
 /// System clock: HSI16 through the PLL (no crystal needed), the STM32L475's maximum.
 pub const SYSCLK_HZ: u32 = 80_000_000;
 /// The bus starts at the rate every controller has after a break (complete edition §7-2-1).
 pub const BUS_INITIAL_BAUD: u32 = protocol::line::BAUD_AFTER_BREAK.bits_per_second();
-/// The PLC line (8N1).
-pub const PLC_BAUD: u32 = 115_200;
 /// Driver-enable lead and lag, in sample times (1/16 bit): half a bit either side of the
 /// characters, ample for RS485 transceivers (enable times of a few hundred ns). Assertion and
 /// de-assertion are equal because embassy-stm32 0.6.0 programs DEDT from the assertion time.
@@ -130,7 +130,7 @@ pub fn clock_config() -> embassy_stm32::Config {
 
 impl Board {
     /// Takes the peripherals this board uses. Fails only if a UART rejects its configuration.
-    pub fn new(p: Peripherals) -> Result<Board, ConfigError> {
+    pub fn new(p: Peripherals, plc_line: protocol::plc::PlcLine) -> Result<Board, ConfigError> {
         // Outputs first, driven OFF, so that nothing is ever ON before the gateway says so.
         let outputs = Outputs::new(
             [
@@ -188,7 +188,7 @@ impl Board {
             Irqs,
             PLC_TX.take(),
             PLC_RX.take(),
-            rs485_config(PLC_BAUD),
+            line_config(plc_line.baud, plc_line.parity),
         )?;
 
         Ok(Board {
@@ -204,6 +204,17 @@ impl Board {
 
 const BUS_TX_CAPACITY: usize = 32;
 const PLC_TX_CAPACITY: usize = 256;
+
+/// An RS485 line's UART settings: `baud`, 8 data bits, `parity`, one stop bit.
+pub fn line_config(baud: u32, parity: protocol::plc::Parity) -> usart::Config {
+    let mut config = rs485_config(baud);
+    config.parity = match parity {
+        protocol::plc::Parity::None => usart::Parity::ParityNone,
+        protocol::plc::Parity::Even => usart::Parity::ParityEven,
+        protocol::plc::Parity::Odd => usart::Parity::ParityOdd,
+    };
+    config
+}
 
 fn rs485_config(baud: u32) -> usart::Config {
     let mut config = usart::Config::default();

@@ -4,7 +4,7 @@
 use embassy_stm32::gpio::{Input, Level, Output};
 use embassy_time::{Duration, Instant};
 
-use crate::node::{PioInputs, PioOutputs};
+use protocol::pio::{PioInputs, PioOutputs};
 
 /// The PIO inputs (bit number, pin) and the stop input.
 pub struct Inputs {
@@ -96,9 +96,9 @@ impl Leds {
     }
 
     /// Shows (bus link good, alarm) and blinks the run LED.
-    pub fn show(&mut self, now: Instant, (link, alarm): (bool, bool)) {
-        self.link.set_level(Level::from(link));
-        self.alarm.set_level(Level::from(alarm));
+    pub fn show(&mut self, now: Instant, indicators: protocol::node::Indicators) {
+        self.link.set_level(Level::from(indicators.link));
+        self.alarm.set_level(Level::from(indicators.alarm));
         if now >= self.next_blink {
             self.run.toggle();
             self.next_blink = now + RUN_BLINK;

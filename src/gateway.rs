@@ -9,7 +9,9 @@ use embassy_futures::select::{select4, Either4};
 use embassy_time::{Duration, Ticker, Timer};
 
 use crate::board::Board;
-use crate::node::{Action, ActiveNode, Instant, LineAction, Node};
+use crate::node::{Action, Instant, Node};
+use protocol::line::LineAction;
+use protocol::plc::Store;
 
 /// The PIO inputs are sampled this often (the node debounces them).
 const SAMPLE_PERIOD: Duration = Duration::from_millis(1);
@@ -29,10 +31,13 @@ async fn deadline(at: Option<Instant>) {
 
 /// Runs the gateway forever.
 #[embassy_executor::task]
-pub async fn run(mut board: Board, node: &'static mut ActiveNode) -> ! {
+pub async fn run(mut board: Board, node: &'static mut Node) -> ! {
     let mut bus_buf = [0u8; 64];
     let mut plc_buf = [0u8; 64];
     let mut ticker = Ticker::every(SAMPLE_PERIOD);
+    // The bus UART starts at the rate the node starts at.
+    let baud = node.gateway().engine().line_baud();
+    board.bus.set_baud(baud.bits_per_second()).await;
     let mut stop = board.inputs.stop_active();
     node.set_stop_input(now(), stop);
     node.sample_inputs(now(), board.inputs.sample());
@@ -84,6 +89,18 @@ pub async fn run(mut board: Board, node: &'static mut ActiveNode) -> ! {
                 Action::Line(LineAction::BreakEnd) => board.bus.break_end().await,
                 Action::Line(LineAction::CommChange) => {
                     board.bus.send(&protocol::frame::COMM_CHANGE).await
+                }
+                Action::PlcLine(line) => {
+                    let config = crate::board::line_config(line.baud, line.parity);
+                    board.plc.set_config(&config).await
+                }
+                Action::Store(Store::Save(_)) => {
+                    // No settings flash on this build yet: the save fails (SAVESTAT 3).
+                    node.stored(Err(()));
+                }
+                Action::Store(Store::FactoryReset | Store::Restart) => {
+                    board.plc.flush().await;
+                    cortex_m::peripheral::SCB::sys_reset();
                 }
             }
         }

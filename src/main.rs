@@ -13,9 +13,8 @@
 //! | [`pins`] | GPIO below the HAL: the fail-safe pin states, the bus break |
 //! | [`serial`] | An RS485 line: send-then-flush, rate change, break |
 //! | [`discrete`] | PIO inputs and outputs as pins; LEDs |
-//! | [`node`] | The contract with the protocol node |
+//! | [`node`] | The protocol node and the settings it starts with |
 //! | [`gateway`] | The one task that owns the node |
-//! | [`bringup`] | The stand-in node until `protocol::node::Node` is wired in |
 //! | [`rt`] | Executor loop, panic and HardFault handlers (all the `unsafe`) |
 //! | `systick` | The emulator's time driver |
 //!
@@ -34,7 +33,6 @@ compile_error!("choose a build: feature `hw` (the default) or `emulator`");
 #[macro_use]
 mod log;
 mod board;
-mod bringup;
 mod discrete;
 mod gateway;
 mod node;
@@ -48,13 +46,15 @@ mod systick;
 #[cfg(feature = "hw")]
 use defmt_rtt as _;
 use embassy_executor::Spawner;
-use static_cell::ConstStaticCell;
+use static_cell::StaticCell;
 
 /// Firmware version, from `Cargo.toml`.
 const VERSION: &str = env!("CARGO_PKG_VERSION");
 
-/// The protocol node: large, so in a static, never on a task's stack.
-static NODE: ConstStaticCell<node::ActiveNode> = ConstStaticCell::new(node::new_node());
+/// The protocol node: large (about 10 KB), so in a static, never on a task's stack. Built at
+/// start-up into the static's own (zeroed, .bss) memory: a `const` initialiser would put its
+/// whole image in .data, costing as much flash again.
+static NODE: StaticCell<node::Node> = StaticCell::new();
 
 #[cortex_m_rt::entry]
 fn main() -> ! {
@@ -70,7 +70,8 @@ fn start(spawner: Spawner) {
     }
     info!("rc-gateway {} starting", VERSION);
 
-    let board = match board::Board::new(p) {
+    let node = NODE.init_with(node::new_node);
+    let board = match board::Board::new(p, node.gateway().config().plc) {
         Ok(board) => board,
         Err(_) => {
             // Only a baud rate the kernel clock cannot make: a build error, not a field fault.
@@ -78,7 +79,7 @@ fn start(spawner: Spawner) {
             return;
         }
     };
-    match gateway::run(board, NODE.take()) {
+    match gateway::run(board, node) {
         Ok(token) => spawner.spawn(token),
         Err(_) => error!("gateway task not started"),
     }

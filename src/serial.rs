@@ -78,6 +78,18 @@ impl Rs485 {
         }
     }
 
+    /// Changes rate and framing after any transmission in progress has completed.
+    pub async fn set_config(&mut self, config: &embassy_stm32::usart::Config) {
+        if self.uart.flush().await.is_err() || self.uart.set_config(config).is_err() {
+            error!("uart: configuration refused");
+        }
+    }
+
+    /// Waits until everything written has left the line.
+    pub async fn flush(&mut self) {
+        let _ = self.uart.flush().await;
+    }
+
     /// Starts holding the line low (driver enabled), after any transmission has completed.
     pub async fn break_start(&mut self) {
         let _ = self.uart.flush().await;

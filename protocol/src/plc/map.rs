@@ -226,9 +226,47 @@ const fn e(
     }
 }
 
-/// The entry of `unit` that holds `address`, if any.
-pub fn find(unit: Unit, address: u16) -> Option<&'static Entry> {
-    MAP.iter().find(|e| {
+/// What the gateway needs of an entry at run time: where it is and whether it can be written.
+/// Kept apart from [`Entry`] so that the documentation texts stay out of the firmware.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Access {
+    /// Unit.
+    pub unit: Unit,
+    /// First address.
+    pub address: u16,
+    /// Number of registers or coils.
+    pub count: u16,
+    /// Whether it can be written.
+    pub writable: bool,
+}
+
+/// [`MAP`] without its texts, computed at compile time (an index out of range here would be a
+/// build error, never a run-time panic).
+#[allow(clippy::indexing_slicing)]
+const ACCESS: [Access; MAP.len()] = {
+    let mut out = [Access {
+        unit: Unit::Axis,
+        address: 0,
+        count: 0,
+        writable: false,
+    }; MAP.len()];
+    let mut i = 0;
+    while i < MAP.len() {
+        let e = &MAP[i];
+        out[i] = Access {
+            unit: e.unit,
+            address: e.address,
+            count: e.count,
+            writable: e.writable,
+        };
+        i += 1;
+    }
+    out
+};
+
+/// Where `address` of `unit` is in the map, if anywhere.
+pub fn find(unit: Unit, address: u16) -> Option<Access> {
+    ACCESS.iter().copied().find(|e| {
         e.unit == unit
             && address
                 .checked_sub(e.address)
