@@ -248,7 +248,7 @@ impl Command {
             | Command::MoveRelative(_)
             | Command::Home(_)
             | Command::ExecuteBuffered => true,
-            Command::Buffer(b) => b.command().is_ok_and(|c| c.moves()),
+            Command::Buffer(b) => b.moves,
             _ => false,
         }
     }
@@ -258,7 +258,7 @@ impl Command {
     pub fn resendable(&self) -> bool {
         match self {
             Command::MoveRelative(_) | Command::ExecuteBuffered => false,
-            Command::Buffer(b) => b.command().is_ok_and(|c| c.resendable()),
+            Command::Buffer(b) => b.resendable,
             _ => true,
         }
     }
@@ -344,12 +344,21 @@ impl Command {
                 for slot in chars.iter_mut() {
                     *slot = r.byte()?;
                 }
-                let buffered = Buffered { chars };
+                let unchecked = Buffered {
+                    chars,
+                    moves: false,
+                    resendable: false,
+                };
                 // The inner command must itself be valid and bufferable.
-                let inner = buffered.command()?;
+                let inner = unchecked.command()?;
                 if !inner.bufferable() {
                     return Err(Field::BufferedCommand.out_of_range(inner.code().to_char()));
                 }
+                let buffered = Buffered {
+                    moves: inner.moves(),
+                    resendable: inner.resendable(),
+                    ..unchecked
+                };
                 (Command::Buffer(buffered), 0)
             }
             Code::Home => (Command::Home(HomeDirection::from_code(r.hex_u8()?)?), 8),
@@ -427,6 +436,10 @@ fn read_transfer(r: &mut Reader<'_>) -> Result<Transfer, Error> {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Buffered {
     chars: [u8; BUFFERED_LEN],
+    /// The inner command's [`Command::moves`] and [`Command::resendable`], known when it was
+    /// built, so that asking does not decode it again (and the firmware needs no decoder).
+    moves: bool,
+    resendable: bool,
 }
 
 impl Buffered {
@@ -441,7 +454,11 @@ impl Buffered {
             .iter_mut()
             .zip(info.iter())
             .for_each(|(slot, &c)| *slot = c);
-        Some(Buffered { chars })
+        Some(Buffered {
+            chars,
+            moves: command.moves(),
+            resendable: command.resendable(),
+        })
     }
 
     /// The buffered command.
