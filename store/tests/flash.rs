@@ -1,0 +1,216 @@
+//! The settings store on sequential-storage's in-memory flash, in the geometry of both boards'
+//! internal flash: first start, save and load, damaged and foreign records, factory reset,
+//! power loss at every byte of a save, and wear over many saves.
+
+use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
+use futures::executor::block_on;
+use protocol::plc::settings::{Settings, RECORD_LEN};
+use protocol::plc::{ConfigSource, GatewayConfig};
+use protocol::AxisSet;
+use sequential_storage::mock_flash::{MockFlashBase, WriteCountCheck};
+use settings_store::{Store, KEY_SETTINGS};
+
+/// STM32L475: 2 KiB pages, 64-bit words, written once per erase; two pages for the settings.
+type L4 = MockFlashBase<2, 8, 256>;
+/// STM32F103C8: 1 KiB pages, 16-bit half-words; two pages.
+type F1 = MockFlashBase<2, 2, 512>;
+
+fn l4() -> L4 {
+    L4::new(WriteCountCheck::OnceOnly, None, true)
+}
+
+fn store<const P: usize, const W: usize, const N: usize>(
+    flash: MockFlashBase<P, W, N>,
+) -> Store<MockFlashBase<P, W, N>> {
+    Store::new(flash, MockFlashBase::<P, W, N>::FULL_FLASH_RANGE).expect("a valid range")
+}
+
+fn settings(watchdog_ms: u16, axes: u8) -> Settings {
+    let mut c = GatewayConfig::new(AxisSet::first(axes));
+    c.watchdog = protocol::time::Duration::from_millis(watchdog_ms.into());
+    Settings::of(&c)
+}
+
+#[test]
+fn the_first_start_has_nothing_and_a_save_is_loaded_back() {
+    let mut s = store(l4());
+    let first = block_on(s.load());
+    assert_eq!(first.settings, None);
+    assert_eq!(first.boot.source, ConfigSource::Defaults);
+    assert_eq!((first.boot.save_count, first.boot.load_errors), (0, 0));
+    let wanted = settings(500, 3);
+    assert_eq!(block_on(s.save(&wanted.encode())), Ok(1));
+    assert_eq!(block_on(s.save(&settings(700, 2).encode())), Ok(2));
+    assert_eq!(block_on(s.save(&wanted.encode())), Ok(3));
+    // A "power cycle": a new store on the same flash.
+    let mut s = store(s.into_flash());
+    let loaded = block_on(s.load());
+    assert_eq!(loaded.settings, Some(wanted));
+    assert_eq!(loaded.boot.source, ConfigSource::Flash);
+    assert_eq!(loaded.boot.save_count, 3);
+}
+
+#[test]
+fn the_same_works_on_the_f103s_half_word_flash() {
+    let mut s = store(F1::new(WriteCountCheck::OnceOnly, None, true));
+    let wanted = settings(250, 16);
+    assert_eq!(block_on(s.save(&wanted.encode())), Ok(1));
+    let mut s = store(s.into_flash());
+    assert_eq!(block_on(s.load()).settings, Some(wanted));
+}
+
+/// A record with another format (a firmware downgrade, say) or damaged contents gives the
+/// defaults, and the start is counted, in flash too.
+#[test]
+fn an_unreadable_record_gives_the_defaults_and_is_counted() {
+    let mut s = store(l4());
+    let mut record = settings(500, 1).encode();
+    record[0] = 99; // another format version
+    assert_eq!(block_on(s.save(&record)), Ok(1));
+    let mut s = store(s.into_flash());
+    let loaded = block_on(s.load());
+    assert_eq!(loaded.settings, None);
+    assert_eq!(loaded.boot.source, ConfigSource::Damaged);
+    assert_eq!(loaded.boot.load_errors, 1);
+    let mut s = store(s.into_flash());
+    assert_eq!(
+        block_on(s.load()).boot.load_errors,
+        2,
+        "every such start counts"
+    );
+    // A good save heals it; the count stays.
+    block_on(s.save(&settings(500, 1).encode())).unwrap();
+    let mut s = store(s.into_flash());
+    let loaded = block_on(s.load());
+    assert_eq!(loaded.boot.source, ConfigSource::Flash);
+    assert_eq!(loaded.boot.load_errors, 2);
+}
+
+#[test]
+fn a_factory_reset_forgets_the_settings_and_keeps_the_counts() {
+    let mut s = store(l4());
+    block_on(s.save(&settings(500, 2).encode())).unwrap();
+    block_on(s.factory_reset()).unwrap();
+    let mut s = store(s.into_flash());
+    let loaded = block_on(s.load());
+    assert_eq!(loaded.settings, None);
+    assert_eq!(loaded.boot.source, ConfigSource::Defaults);
+    assert_eq!(loaded.boot.save_count, 1);
+}
+
+/// Power lost after every possible number of bytes written during a save: the next start finds
+/// the old settings or the new ones, never a mix, and the store keeps working.
+#[test]
+fn power_loss_during_a_save_leaves_the_old_or_the_new_settings() {
+    let old = settings(500, 2);
+    let new = settings(900, 5);
+    let mut base = store(l4());
+    // Fill the range part way, so that some saves also have to erase and move a page.
+    for i in 0..7 {
+        block_on(base.save(&settings(100 + i, 1).encode())).unwrap();
+    }
+    block_on(base.save(&old.encode())).unwrap();
+    let base = base.into_flash();
+    let mut outcomes = [0usize; 2];
+    for cut in 0..(4 * RECORD_LEN as u32) {
+        let mut flash = base.clone();
+        flash.bytes_until_shutoff = Some(cut);
+        let mut s = store(flash);
+        let _ = block_on(s.save(&new.encode()));
+        let mut flash = s.into_flash();
+        flash.bytes_until_shutoff = None;
+        let mut s = store(flash);
+        let loaded = block_on(s.load());
+        match loaded.settings {
+            Some(found) if found == old => outcomes[0] += 1,
+            Some(found) if found == new => outcomes[1] += 1,
+            other => panic!("cut after {cut} bytes: {other:?} ({:?})", loaded.boot),
+        }
+        // And a save after the power comes back works.
+        block_on(s.save(&new.encode())).expect("the store recovers");
+        let mut s = store(s.into_flash());
+        assert_eq!(
+            block_on(s.load()).settings,
+            Some(new),
+            "cut after {cut} bytes"
+        );
+    }
+    assert!(
+        outcomes[0] > 0 && outcomes[1] > 0,
+        "both ends reached: {outcomes:?}"
+    );
+}
+
+/// A flash that counts the erases of each page.
+struct Counting<F> {
+    flash: F,
+    erases: Vec<u32>,
+    page: u32,
+}
+
+impl<F: ErrorType> ErrorType for Counting<F> {
+    type Error = F::Error;
+}
+
+impl<F: ReadNorFlash> ReadNorFlash for Counting<F> {
+    const READ_SIZE: usize = F::READ_SIZE;
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        self.flash.read(offset, bytes).await
+    }
+    fn capacity(&self) -> usize {
+        self.flash.capacity()
+    }
+}
+
+impl<F: NorFlash> NorFlash for Counting<F> {
+    const WRITE_SIZE: usize = F::WRITE_SIZE;
+    const ERASE_SIZE: usize = F::ERASE_SIZE;
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        for page in from / self.page..to / self.page {
+            self.erases[page as usize] += 1;
+        }
+        self.flash.erase(from, to).await
+    }
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        self.flash.write(offset, bytes).await
+    }
+}
+
+/// Many saves wear the pages evenly: the range is written round and round, each page erased
+/// as often as the others (give or take one), and far less often than once per save.
+#[test]
+fn wear_spreads_over_the_pages() {
+    const SAVES: u32 = 2_000;
+    type Wide = MockFlashBase<4, 8, 256>;
+    let counting = Counting {
+        flash: Wide::new(WriteCountCheck::OnceOnly, None, true),
+        erases: vec![0; 4],
+        page: 2048,
+    };
+    let mut s = Store::new(counting, Wide::FULL_FLASH_RANGE).unwrap();
+    for i in 0..SAVES {
+        let wanted = settings(50 + (i % 1000) as u16, 1 + (i % 15) as u8);
+        block_on(s.save(&wanted.encode())).unwrap();
+    }
+    let counting = s.into_flash();
+    let erases = &counting.erases;
+    let (least, most) = (*erases.iter().min().unwrap(), *erases.iter().max().unwrap());
+    assert!(most - least <= 1, "uneven wear: {erases:?}");
+    // Each save appends a record and a count (about 200 bytes with headers): a 2 KiB page
+    // takes about 10 saves, so each of the 4 pages is erased about SAVES / 40 times.
+    let total: u32 = erases.iter().sum();
+    assert!(total <= SAVES / 5, "{erases:?} erases for {SAVES} saves");
+    assert!(
+        least >= SAVES / 80,
+        "{erases:?}: the range was really cycled"
+    );
+    let mut s = Store::new(counting.flash, Wide::FULL_FLASH_RANGE).unwrap();
+    let last = settings(
+        50 + ((SAVES - 1) % 1000) as u16,
+        1 + ((SAVES - 1) % 15) as u8,
+    );
+    let loaded = block_on(s.load());
+    assert_eq!(loaded.settings, Some(last));
+    assert_eq!(loaded.boot.save_count, SAVES);
+    let _ = KEY_SETTINGS;
+}
