@@ -255,15 +255,15 @@ fn stop_goes_before_another_axis_retry_and_cancels_queued_jobs() {
         reply(&mut engine, &mut now, answer(&request, &mut address));
     }
     assert!(engine.axis(axis(0)).position.is_some() && engine.axis(axis(1)).position.is_some());
+    // Axis 0's poll times out: a retry is pending when the stop for axis 1 arrives.
+    let poll0 = next_frame(&mut engine, &mut now);
+    assert_eq!(poll0.axis, axis(0));
     let home = engine
         .submit(Job {
             axis: axis(1),
             kind: JobKind::Home(HomeDirection::MotorEnd),
         })
         .unwrap();
-    // Axis 0's poll times out: a retry is pending when the stop for axis 1 arrives.
-    let poll0 = next_frame(&mut engine, &mut now);
-    assert_eq!(poll0.axis, axis(0));
     let _ = engine.poll(now + Duration::from_millis(100));
     now = now + Duration::from_millis(100);
     let stop = engine

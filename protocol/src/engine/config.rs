@@ -48,6 +48,11 @@ pub struct Config {
     /// (only with [`Config::establish`]: a controller that was power-cycled or replaced comes
     /// back at its stored settings).
     pub rejoin_interval: Duration,
+    /// Start rejoin tries while an axis moves or runs a job too. Off by default: a try holds the
+    /// bus for up to 300 ms (one transaction at 9.6 kbit/s and RTIM 255 ms), in which no moving
+    /// axis is supervised and no stop can go out; so a lost axis is tried at its power-up
+    /// settings only in a quiet moment (it is still probed at the bus' settings meanwhile).
+    pub rejoin_while_moving: bool,
 }
 
 impl Config {
@@ -64,6 +69,7 @@ impl Config {
         probe_interval: Duration::from_millis(500),
         motion_timeout: Duration::from_millis(60_000),
         rejoin_interval: Duration::from_millis(5_000),
+        rejoin_while_moving: false,
     };
 }
 
