@@ -62,6 +62,44 @@ use crate::discrete::{opposite, Inputs, Leds, Outputs};
 use crate::pins::{self, LineBreak, PinId};
 use crate::serial::Rs485;
 
+/// The flash pages `memory.x` keeps out of the program for the settings: the last four 2 KiB
+/// pages of bank 2 (offsets from the start of flash). Erasing them does not stall the program,
+/// which runs from bank 1.
+#[cfg_attr(feature = "emulator", allow(dead_code))]
+pub const SETTINGS_RANGE: core::ops::Range<u32> = 0x000F_E000..0x0010_0000;
+
+/// The flash the settings store writes, as sequential-storage wants it (async over blocking).
+#[cfg(feature = "hw")]
+pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<
+    embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>,
+>;
+/// No flash interface in QEMU.
+#[cfg(feature = "emulator")]
+pub type SettingsFlash = core::convert::Infallible;
+
+/// Why the chip last started, from RCC_CSR's reset flags, which are then cleared so that the
+/// next start reads its own.
+pub fn reset_cause() -> protocol::plc::ResetCause {
+    use protocol::plc::ResetCause;
+    let rcc = embassy_stm32::pac::RCC;
+    let csr = rcc.csr().read();
+    let cause = if csr.iwdgrstf() || csr.wwdgrstf() {
+        ResetCause::Watchdog
+    } else if csr.sftrstf() {
+        ResetCause::Software
+    } else if csr.borrstf() {
+        ResetCause::PowerOn
+    } else if csr.pinrstf() {
+        ResetCause::Pin
+    } else if csr.lpwrrstf() || csr.oblrstf() || csr.fwrstf() {
+        ResetCause::Other
+    } else {
+        ResetCause::PowerOn
+    };
+    rcc.csr().modify(|w| w.set_rmvf(true));
+    cause
+}
+
 /// The board, as the gateway names it to the PLC (device identification).
 pub const MODEL_NAME: &str = "B-L475E-IOT01A (STM32L475VG)";
 /// System clock: HSI16 through the PLL (no crystal needed), the STM32L475's maximum.
@@ -107,6 +145,8 @@ pub struct Board {
     pub leds: Leds,
     /// Fed by the gateway task's progress.
     pub watchdog: Watchdog,
+    /// The flash for the settings store, taken by the gateway task.
+    pub settings_flash: Option<SettingsFlash>,
 }
 
 /// The clock tree of [`SYSCLK_HZ`].
@@ -198,6 +238,7 @@ impl Board {
             outputs,
             leds,
             watchdog: Watchdog::new(p.IWDG),
+            settings_flash: settings_flash(p.FLASH),
         })
     }
 }
@@ -246,6 +287,22 @@ fn input(pin: Peri<'static, impl Pin>) -> Input<'static> {
         Level::Low => Pull::Up,
     };
     Input::new(pin, pull)
+}
+
+#[cfg(feature = "hw")]
+fn settings_flash(
+    flash: Peri<'static, embassy_stm32::peripherals::FLASH>,
+) -> Option<SettingsFlash> {
+    Some(embassy_embedded_hal::adapter::BlockingAsync::new(
+        embassy_stm32::flash::Flash::new_blocking(flash),
+    ))
+}
+
+#[cfg(feature = "emulator")]
+fn settings_flash(
+    _flash: Peri<'static, embassy_stm32::peripherals::FLASH>,
+) -> Option<SettingsFlash> {
+    None
 }
 
 /// The independent watchdog on the board; nothing in the emulator (QEMU has no IWDG model).

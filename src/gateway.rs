@@ -10,8 +10,10 @@ use embassy_time::{Duration, Ticker, Timer};
 
 use crate::board::Board;
 use crate::node::{Action, Instant, Node};
+use crate::settings::Settings;
 use protocol::line::LineAction;
 use protocol::plc::Store;
+use static_cell::StaticCell;
 
 /// The PIO inputs are sampled this often (the node debounces them).
 const SAMPLE_PERIOD: Duration = Duration::from_millis(1);
@@ -29,15 +31,30 @@ async fn deadline(at: Option<Instant>) {
     }
 }
 
+/// The protocol node: large (about 10 KB), so in a static, never on a task's stack. Built at
+/// start-up into the static's own (zeroed, .bss) memory: a `const` initialiser would put its
+/// whole image in .data, costing as much flash again.
+static NODE: StaticCell<Node> = StaticCell::new();
+
 /// Runs the gateway forever.
 #[embassy_executor::task]
-pub async fn run(mut board: Board, node: &'static mut Node) -> ! {
+pub async fn run(mut board: Board) -> ! {
+    let mut settings = Settings::new(board.settings_flash.take());
+    let config = settings.load(board.inputs.sample());
+    let node = NODE.init_with(|| Node::new(config));
     let mut bus_buf = [0u8; 64];
     let mut plc_buf = [0u8; 64];
     let mut ticker = Ticker::every(SAMPLE_PERIOD);
-    // The bus UART starts at the rate the node starts at.
+    // The UARTs start at the node's settings.
     let baud = node.gateway().engine().line_baud();
     board.bus.set_baud(baud.bits_per_second()).await;
+    let plc = node.gateway().config().plc;
+    board
+        .plc
+        .set_config(&crate::board::line_config(plc.baud, plc.parity))
+        .await;
+    // The harness waits for this line: both UARTs receive at their settings from now on.
+    info!("ready");
     let mut stop = board.inputs.stop_active();
     node.set_stop_input(now(), stop);
     node.sample_inputs(now(), board.inputs.sample());
@@ -94,11 +111,16 @@ pub async fn run(mut board: Board, node: &'static mut Node) -> ! {
                     let config = crate::board::line_config(line.baud, line.parity);
                     board.plc.set_config(&config).await
                 }
-                Action::Store(Store::Save(_)) => {
-                    // No settings flash on this build yet: the save fails (SAVESTAT 3).
-                    node.stored(Err(()));
+                Action::Store(Store::Save(record)) => {
+                    let saved = settings.save(&record);
+                    node.stored(saved);
                 }
-                Action::Store(Store::FactoryReset | Store::Restart) => {
+                Action::Store(Store::FactoryReset) => {
+                    settings.factory_reset();
+                    board.plc.flush().await;
+                    cortex_m::peripheral::SCB::sys_reset();
+                }
+                Action::Store(Store::Restart) => {
                     board.plc.flush().await;
                     cortex_m::peripheral::SCB::sys_reset();
                 }

@@ -15,6 +15,7 @@
 //! | [`discrete`] | PIO inputs and outputs as pins; LEDs |
 //! | [`node`] | The protocol node and the settings it starts with |
 //! | [`gateway`] | The one task that owns the node |
+//! | [`settings`] | The settings at start-up and on SAVE, factory reset, reset cause |
 //! | [`rt`] | Executor loop, panic and HardFault handlers (all the `unsafe`) |
 //! | `systick` | The emulator's time driver |
 //!
@@ -40,21 +41,16 @@ mod pins;
 #[allow(unsafe_code)]
 mod rt;
 mod serial;
+mod settings;
 #[cfg(feature = "emulator")]
 mod systick;
 
 #[cfg(feature = "hw")]
 use defmt_rtt as _;
 use embassy_executor::Spawner;
-use static_cell::StaticCell;
 
 /// Firmware version, from `Cargo.toml`.
 const VERSION: &str = env!("CARGO_PKG_VERSION");
-
-/// The protocol node: large (about 10 KB), so in a static, never on a task's stack. Built at
-/// start-up into the static's own (zeroed, .bss) memory: a `const` initialiser would put its
-/// whole image in .data, costing as much flash again.
-static NODE: StaticCell<node::Node> = StaticCell::new();
 
 #[cortex_m_rt::entry]
 fn main() -> ! {
@@ -70,8 +66,7 @@ fn start(spawner: Spawner) {
     }
     info!("rc-gateway {} starting", VERSION);
 
-    let node = NODE.init_with(node::new_node);
-    let board = match board::Board::new(p, node.gateway().config().plc) {
+    let board = match board::Board::new(p, node::default_config().plc) {
         Ok(board) => board,
         Err(_) => {
             // Only a baud rate the kernel clock cannot make: a build error, not a field fault.
@@ -79,10 +74,8 @@ fn start(spawner: Spawner) {
             return;
         }
     };
-    match gateway::run(board, node) {
+    match gateway::run(board) {
         Ok(token) => spawner.spawn(token),
         Err(_) => error!("gateway task not started"),
     }
-    // The harness waits for this line: both UARTs receive from now on.
-    info!("ready");
 }

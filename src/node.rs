@@ -26,9 +26,3 @@ pub const fn default_config() -> GatewayConfig {
     };
     config
 }
-
-/// A node with [`default_config`], built in place in a `static` (it is about 10 KB: never on a
-/// task's stack).
-pub const fn new_node() -> Node {
-    Node::new(default_config())
-}

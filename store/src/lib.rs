@@ -13,8 +13,8 @@
 //! | Key | Value |
 //! |---|---|
 //! | [`KEY_SETTINGS`] | the settings record ([`RECORD_LEN`] bytes), or empty after a factory reset |
-//! | [`KEY_SAVES`] | saves so far (u32): kept apart so that a factory reset does not clear it |
-//! | [`KEY_LOAD_ERRORS`] | starts that found the settings unreadable (u16) |
+//! | [`KEY_SAVES`] | saves so far (u32, little endian): kept apart so that a factory reset does not clear it |
+//! | [`KEY_LOAD_ERRORS`] | starts that found the settings unreadable (u16, little endian) |
 //!
 //! [sequential-storage]: https://docs.rs/sequential-storage
 
@@ -99,52 +99,60 @@ impl<F: NorFlash> Store<F> {
         self.map.destroy().0
     }
 
-    async fn fetch_u32(&mut self, key: u8) -> Result<Option<u32>, StoreError> {
+    /// The newest value of `key` (copied into `out`), as its length; every item is a byte
+    /// string, so that the firmware carries one copy of the map's fetch code, not one per type.
+    async fn get(&mut self, key: u8, out: &mut [u8]) -> Result<Option<usize>, StoreError> {
+        let value = self
+            .map
+            .fetch_item::<&[u8]>(&mut self.buffer.0, &key)
+            .await
+            .map_err(|_| StoreError::Flash)?;
+        Ok(value.map(|v| {
+            let n = v.len().min(out.len());
+            if let (Some(to), Some(from)) = (out.get_mut(..n), v.get(..n)) {
+                to.copy_from_slice(from);
+            }
+            v.len()
+        }))
+    }
+
+    /// Store `value` as the newest value of `key`.
+    async fn put(&mut self, key: u8, value: &[u8]) -> Result<(), StoreError> {
         self.map
-            .fetch_item::<u32>(&mut self.buffer.0, &key)
+            .store_item(&mut self.buffer.0, &key, &value)
             .await
             .map_err(|_| StoreError::Flash)
     }
 
-    async fn fetch_u16(&mut self, key: u8) -> Result<Option<u16>, StoreError> {
-        self.map
-            .fetch_item::<u16>(&mut self.buffer.0, &key)
-            .await
-            .map_err(|_| StoreError::Flash)
+    /// A little-endian counter of `N` bytes, 0 if absent or unreadable.
+    async fn count<const N: usize>(&mut self, key: u8) -> u32 {
+        let mut bytes = [0u8; 4];
+        match self.get(key, &mut bytes).await {
+            Ok(Some(len)) if len == N => u32::from_le_bytes(bytes),
+            _ => 0,
+        }
     }
 
     /// Read the settings at start-up. Unreadable settings (a damaged record, another format,
     /// a flash error) give the defaults and are counted, in flash too.
     pub async fn load(&mut self) -> Loaded {
-        let saves = self.fetch_u32(KEY_SAVES).await.ok().flatten().unwrap_or(0);
-        let errors = self
-            .fetch_u16(KEY_LOAD_ERRORS)
-            .await
-            .ok()
-            .flatten()
-            .unwrap_or(0);
-        let record = self
-            .map
-            .fetch_item::<&[u8]>(&mut self.buffer.0, &KEY_SETTINGS)
-            .await;
-        let (settings, source) = match record {
+        let saves = self.count::<4>(KEY_SAVES).await;
+        let errors = u16::try_from(self.count::<2>(KEY_LOAD_ERRORS).await).unwrap_or(u16::MAX);
+        let mut record = [0u8; RECORD_LEN];
+        let (settings, source) = match self.get(KEY_SETTINGS, &mut record).await {
             // Nothing stored yet, or a factory reset since.
-            Ok(None) => (None, ConfigSource::Defaults),
-            Ok(Some([])) => (None, ConfigSource::Defaults),
-            Ok(Some(record)) => match Settings::decode(record) {
+            Ok(None | Some(0)) => (None, ConfigSource::Defaults),
+            Ok(Some(RECORD_LEN)) => match Settings::decode(&record) {
                 Ok(settings) => (Some(settings), ConfigSource::Flash),
                 Err(_) => (None, ConfigSource::Damaged),
             },
-            Err(_) => (None, ConfigSource::Damaged),
+            Ok(Some(_)) | Err(_) => (None, ConfigSource::Damaged),
         };
         let mut load_errors = errors;
         if source == ConfigSource::Damaged {
             load_errors = load_errors.saturating_add(1);
             // Best effort: a flash that cannot be read may not take a write either.
-            let _ = self
-                .map
-                .store_item(&mut self.buffer.0, &KEY_LOAD_ERRORS, &load_errors)
-                .await;
+            let _ = self.put(KEY_LOAD_ERRORS, &load_errors.to_le_bytes()).await;
         }
         Loaded {
             settings,
@@ -161,25 +169,14 @@ impl<F: NorFlash> Store<F> {
     /// included. If the power fails meanwhile, the next start finds the old settings or the
     /// new ones, never a mix.
     pub async fn save(&mut self, record: &[u8; RECORD_LEN]) -> Result<u32, StoreError> {
-        let saves = self.fetch_u32(KEY_SAVES).await?.unwrap_or(0);
-        self.map
-            .store_item(&mut self.buffer.0, &KEY_SETTINGS, &record.as_slice())
-            .await
-            .map_err(|_| StoreError::Flash)?;
-        let saves = saves.wrapping_add(1);
-        self.map
-            .store_item(&mut self.buffer.0, &KEY_SAVES, &saves)
-            .await
-            .map_err(|_| StoreError::Flash)?;
+        let saves = self.count::<4>(KEY_SAVES).await.wrapping_add(1);
+        self.put(KEY_SETTINGS, record).await?;
+        self.put(KEY_SAVES, &saves.to_le_bytes()).await?;
         Ok(saves)
     }
 
     /// Forget the settings: the next start uses the defaults. The counts stay.
     pub async fn factory_reset(&mut self) -> Result<(), StoreError> {
-        let empty: &[u8] = &[];
-        self.map
-            .store_item(&mut self.buffer.0, &KEY_SETTINGS, &empty)
-            .await
-            .map_err(|_| StoreError::Flash)
+        self.put(KEY_SETTINGS, &[]).await
     }
 }

@@ -1,0 +1,104 @@
+//! The settings at start-up and on SAVE: the store in the flash pages `memory.x` reserves
+//! (`settings_store` over the chip's flash), the factory reset, and why the board started.
+//!
+//! At start-up the stored settings are loaded (the defaults on first start, after a factory
+//! reset, or when the stored ones are unreadable: counted, CFGERRORS). Holding HOME and RES ON
+//! while the board powers up is a factory reset: the stored settings are forgotten before they
+//! are loaded. The flash is written only when the PLC asks (SAVE, FACTORY), as IAI's
+//! controllers write their parameters only on request.
+//!
+//! QEMU models no flash interface: the emulator build has no store (a save fails, SAVESTAT 3).
+
+use protocol::pio::PioInputs;
+use protocol::plc::settings::RECORD_LEN;
+use protocol::plc::GatewayConfig;
+
+use crate::board::SettingsFlash;
+use crate::node::default_config;
+#[cfg(feature = "hw")]
+use embassy_futures::block_on;
+
+/// The inputs that, held ON at power-up, ask for a factory reset.
+pub const FACTORY_RESET_INPUTS: PioInputs =
+    PioInputs::from_bits(PioInputs::HOME.bits() | PioInputs::RES.bits());
+
+/// The settings store, if the board has one.
+pub struct Settings {
+    #[cfg(feature = "hw")]
+    store: Option<settings_store::Store<SettingsFlash>>,
+}
+
+impl Settings {
+    /// The store on `flash` (`None`: the board has none, or its range is not whole pages).
+    #[cfg(feature = "hw")]
+    pub fn new(flash: Option<SettingsFlash>) -> Settings {
+        let store = flash.and_then(|f| settings_store::Store::new(f, crate::board::SETTINGS_RANGE));
+        if store.is_none() {
+            warn!("settings: no store, the defaults apply");
+        }
+        Settings { store }
+    }
+
+    /// No store (the emulator).
+    #[cfg(feature = "emulator")]
+    pub fn new(_flash: Option<SettingsFlash>) -> Settings {
+        Settings {}
+    }
+
+    /// The configuration to start with: the stored settings over the defaults, or the defaults
+    /// (after a factory reset if `inputs` ask for one), and what the start found.
+    ///
+    /// The store's operations are async (sequential-storage), but over this chip's blocking
+    /// flash they never wait: each is run to completion on the spot, in a function of its own,
+    /// so that the store's code is in the firmware once rather than inlined into the gateway
+    /// task's state machine at every call.
+    #[inline(never)]
+    pub fn load(&mut self, inputs: PioInputs) -> GatewayConfig {
+        let mut config = default_config();
+        let factory = inputs.contains(FACTORY_RESET_INPUTS);
+        #[cfg(feature = "hw")]
+        if let Some(store) = self.store.as_mut() {
+            if factory {
+                warn!("settings: factory reset (HOME and RES held at power-up)");
+                if block_on(store.factory_reset()).is_err() {
+                    error!("settings: the factory reset could not be written");
+                }
+            }
+            let loaded = block_on(store.load());
+            if let Some(settings) = loaded.settings {
+                config = settings.apply(config);
+            }
+            config.boot = loaded.boot;
+        }
+        #[cfg(feature = "emulator")]
+        let _ = factory;
+        config.boot.reset = crate::board::reset_cause();
+        info!(
+            "settings: source {}, {} saves, reset cause {}",
+            config.boot.source as u8, config.boot.save_count, config.boot.reset as u8
+        );
+        config
+    }
+
+    /// SAVE: store `record`; the saves so far, or `Err` if there is no store or it failed.
+    #[inline(never)]
+    pub fn save(&mut self, record: &[u8; RECORD_LEN]) -> Result<u32, ()> {
+        #[cfg(feature = "hw")]
+        if let Some(store) = self.store.as_mut() {
+            return block_on(store.save(record)).map_err(|_| ());
+        }
+        let _ = record;
+        Err(())
+    }
+
+    /// FACTORY: forget the stored settings (the caller restarts).
+    #[inline(never)]
+    pub fn factory_reset(&mut self) {
+        #[cfg(feature = "hw")]
+        if let Some(store) = self.store.as_mut() {
+            if block_on(store.factory_reset()).is_err() {
+                error!("settings: the factory reset could not be written");
+            }
+        }
+    }
+}
