@@ -1,0 +1,312 @@
+//! Regressions from a second review: the position-table cache, APPLY, refused relative moves,
+//! the synchronized restart and the held SON.
+
+use protocol::line::Baud;
+use protocol::modbus::Exception;
+use protocol::plc::map::*;
+use protocol::plc::CommandState;
+use protocol::units::Length;
+use rc_host::node_harness::NodeHarness;
+
+use crate::{
+    axis, coil, gateway, gateway_with, home, pnow_mm100, read, scale, settle, unit, write, MS, S,
+};
+
+// ---------------------------------------------------------------- regressions from a second review
+
+const ROW3: u16 = 0x1000 + 16 * 3;
+
+/// Row registers: `pcmd` (0.01 mm), band 0.10 mm, 80 mm/s, 0.3 G.
+fn row_regs(pcmd: u32) -> [u16; 16] {
+    let mut v = [0u16; 16];
+    v[0] = (pcmd >> 16) as u16;
+    v[1] = pcmd as u16;
+    v[3] = 10;
+    v[5] = 80_00;
+    v[10] = 30;
+    v[11] = 30;
+    v
+}
+
+/// The same row in the controller's units, as a point write stores it.
+fn row_wire(pcmd: i32) -> [u32; 10] {
+    use protocol::units::{Accel, Speed};
+    let s = scale();
+    let mut r = [0u32; 10];
+    r[0] = s.position_to_wire(Length(pcmd)).unwrap().to_wire();
+    r[1] = 0xC0;
+    r[3] = s.band_to_wire(Length(10)).unwrap();
+    r[4] = s.velocity(Speed(80_00)).unwrap().get().into();
+    r[5] = s.acceleration(Accel(30)).unwrap().get().into();
+    r
+}
+
+/// Point `p`'s stored position on the controller, pulses.
+fn stored_pos(h: &NodeHarness, a: u8, p: usize) -> i32 {
+    h.bus.controller(axis(a)).unwrap().memory().nv.points[p][0] as i32
+}
+
+fn stored_mm100(pcmd: i32) -> i32 {
+    scale().position_to_wire(Length(pcmd)).unwrap().0
+}
+
+/// A table read that started before a write must not put the old row back in the cache (a
+/// later write of the old values would then be skipped).
+#[test]
+fn a_read_started_before_a_write_does_not_refill_the_cache() {
+    let mut h = gateway_with(1, 100_00, Some(row_wire(40_00)), &[]);
+    assert_eq!(
+        read(&mut h, unit(0), ROW3, 16),
+        Err(Exception::ServerDeviceFailure)
+    );
+    write(&mut h, unit(0), ROW3, &row_regs(60_00)).unwrap();
+    h.run_until(h.now + 3 * S);
+    let _ = read(&mut h, unit(0), ROW3, 16);
+    h.run_until(h.now + 300 * MS);
+    write(&mut h, unit(0), ROW3, &row_regs(40_00)).unwrap();
+    h.run_until(h.now + 3 * S);
+    assert_eq!(
+        stored_pos(&h, 0, 3),
+        stored_mm100(40_00),
+        "the PLC's last write wins"
+    );
+}
+
+/// A command-channel write the PLC abandons still invalidates the table's cached row.
+#[test]
+fn an_abandoned_channel_write_invalidates_the_cached_row() {
+    let mut h = gateway_with(1, 100_00, Some(row_wire(40_00)), &[]);
+    let _ = read(&mut h, unit(0), ROW3, 16);
+    h.run_until(h.now + 200 * MS);
+    assert!(read(&mut h, unit(0), ROW3, 16).is_ok());
+    let x = stored_mm100(60_00) as u32;
+    write(
+        &mut h,
+        63,
+        G_REQUEST,
+        &[2, 0, 3, 0, (x >> 16) as u16, x as u16],
+    )
+    .unwrap();
+    let sent0 = h.sent.len();
+    for _ in 0..200 {
+        h.run_until(h.now + MS);
+        if h.sent[sent0..]
+            .iter()
+            .any(|(_, r)| matches!(r.command, protocol::Command::WriteMemory { .. }))
+        {
+            break;
+        }
+    }
+    write(&mut h, 63, G_REQUEST, &[0]).unwrap();
+    h.run_until(h.now + 2 * S);
+    assert_eq!(
+        stored_pos(&h, 0, 3),
+        stored_mm100(60_00),
+        "the channel write happened"
+    );
+    write(&mut h, unit(0), ROW3, &row_regs(40_00)).unwrap();
+    h.run_until(h.now + 2 * S);
+    assert_eq!(
+        stored_pos(&h, 0, 3),
+        stored_mm100(40_00),
+        "not skipped against a stale row"
+    );
+}
+
+/// APPLY (a break and the whole establishment, during which no stop reaches an axis) is
+/// refused while anything moves, runs or waits, or while an establishment runs.
+#[test]
+fn apply_is_refused_unless_the_bus_is_idle() {
+    let mut h = gateway_with(2, 100_00, None, &[1]);
+    home(&mut h, 0);
+    write(&mut h, unit(0), DIRECT, &[0, 95_00, 0, 10, 0, 5_00, 30]).unwrap();
+    h.run_until(h.now + 200 * MS);
+    assert_eq!(
+        write(&mut h, 63, G_APPLY, &[1]),
+        Err(Exception::IllegalDataValue)
+    );
+    coil(&mut h, unit(0), COIL_STOP, true).unwrap();
+    h.run_until(h.now + 500 * MS);
+    write(&mut h, 63, G_BUS_BAUD, &[384]).unwrap();
+    write(&mut h, 63, G_APPLY, &[1]).unwrap();
+    h.run_until(h.now + 300 * MS);
+    assert!(h.node.gateway().engine().establishing());
+    assert_eq!(
+        write(&mut h, 63, G_APPLY, &[1]),
+        Err(Exception::IllegalDataValue),
+        "not twice"
+    );
+    for _ in 0..60 {
+        h.run_until(h.now + 100 * MS);
+        let _ = read(&mut h, 63, G_VERSION, 1);
+    }
+    assert_eq!(h.bus.controller(axis(0)).unwrap().baud(), Baud::B38400);
+    assert_eq!(read(&mut h, unit(0), LINK, 1).unwrap(), [1]);
+}
+
+/// A relative direct move is checked from where the axis is: only from rest with nothing
+/// queued (else it would run from the end of the queued move, past the stroke).
+#[test]
+fn a_relative_move_behind_another_is_refused() {
+    let mut h = gateway_with(1, 60_00, None, &[]);
+    home(&mut h, 0);
+    write(&mut h, unit(0), DIRECT, &[0, 55_00, 0, 10, 0, 50_00, 30]).unwrap();
+    let relative = [0, 40_00, 0, 10, 0, 50_00, 30, 0, 1 << 3];
+    assert_eq!(
+        write(&mut h, unit(0), DIRECT, &relative),
+        Err(Exception::ServerDeviceFailure)
+    );
+    assert_eq!(settle(&mut h, 0, 10 * S), (CommandState::Done, 0));
+    assert_eq!(
+        write(&mut h, unit(0), DIRECT, &relative),
+        Err(Exception::IllegalDataValue),
+        "55 + 40 > 60 mm"
+    );
+    assert!(pnow_mm100(&mut h, 0) <= 60_00);
+}
+
+/// Invalid reads of the table (FC04, or a range starting at an undefined address) get 02 and
+/// put nothing on the bus.
+#[test]
+fn invalid_table_reads_never_reach_the_bus() {
+    let mut h = gateway(1);
+    h.run_until(h.now + 50 * MS);
+    let before = h.sent.len();
+    assert_eq!(
+        h.read_registers(unit(0), ROW3, 16, true),
+        Err(Exception::IllegalDataAddress)
+    );
+    assert_eq!(
+        h.read(unit(0), 0x0FFF, 2),
+        Err(Exception::IllegalDataAddress)
+    );
+    h.run_until(h.now + 200 * MS);
+    let q1 = h.sent[before..]
+        .iter()
+        .filter(|(_, r)| matches!(r.command, protocol::Command::LoadToEdit(_)))
+        .count();
+    assert_eq!(q1, 0);
+}
+
+/// A failed synchronized start may leave an `h` queued behind a move; a new start is refused
+/// until it is out of the way, so it can never be taken for the new start's.
+#[test]
+fn a_sync_restart_waits_for_the_old_attempt() {
+    let mut h = gateway_with(3, 100_00, None, &[]);
+    for a in 0..3 {
+        home(&mut h, a);
+        write(&mut h, unit(a), POSR, &[3]).unwrap();
+    }
+    write(&mut h, unit(0), DIRECT, &[0, 20_00, 0, 10, 0, 5_00, 30]).unwrap();
+    write(&mut h, unit(2), DIRECT, &[0, 30_00, 0, 10, 0, 5_00, 30]).unwrap();
+    h.run_until(h.now + 100 * MS);
+    write(&mut h, 63, G_SYNC_MASK, &[0b111]).unwrap();
+    write(&mut h, 63, G_SYNC_START, &[1]).unwrap();
+    coil(&mut h, unit(1), COIL_STOP, true).unwrap();
+    h.run_until(h.now + 100 * MS);
+    assert_eq!(read(&mut h, 63, G_SYNC_STATUS, 1).unwrap(), [3]);
+    write(&mut h, 63, G_SYNC_MASK, &[0b100]).unwrap();
+    assert_eq!(
+        write(&mut h, 63, G_SYNC_START, &[1]),
+        Err(Exception::ServerDeviceFailure)
+    );
+    // Once the old `h`s are done (and cancelled), the start goes ahead for axis 2 alone.
+    let mut started = false;
+    for _ in 0..600 {
+        h.run_until(h.now + 20 * MS);
+        if !started {
+            started = write(&mut h, 63, G_SYNC_START, &[1]).is_ok();
+        }
+    }
+    assert!(started);
+    assert_eq!(read(&mut h, 63, G_SYNC_STATUS, 1).unwrap(), [2]);
+    assert_eq!(
+        pnow_mm100(&mut h, 0),
+        20_00,
+        "axis 0 (not in the mask) did not move"
+    );
+    assert_eq!(pnow_mm100(&mut h, 2), 40_00);
+}
+
+/// A table write does not take over CMST (nor unmask PEND of a starting move).
+#[test]
+fn a_table_write_leaves_the_command_status_alone() {
+    let mut h = gateway_with(1, 100_00, Some(row_wire(40_00)), &[]);
+    home(&mut h, 0);
+    write(&mut h, unit(0), POSR, &[3]).unwrap();
+    write(&mut h, unit(0), DRG1, &[DRG1_SON | DRG1_CSTR]).unwrap();
+    let before = read(&mut h, unit(0), CMST, 4).unwrap();
+    write(&mut h, unit(0), 0x1000 + 16 * 5, &row_regs(10_00)).unwrap();
+    assert_eq!(read(&mut h, unit(0), CMST, 4).unwrap(), before);
+    assert_eq!(
+        read(&mut h, unit(0), DSS1, 1).unwrap()[0] >> 3 & 1,
+        0,
+        "PEND off while starting"
+    );
+}
+
+/// SON held: the servo an alarm reset turned off comes back on, without a command in CMST.
+#[test]
+fn held_son_turns_the_servo_back_on_without_touching_cmst() {
+    let mut h = gateway(1);
+    home(&mut h, 0);
+    h.bus
+        .inject_alarm(axis(0), protocol::alarm::AlarmCode(0xC0))
+        .unwrap();
+    h.run_until(h.now + 100 * MS);
+    write(&mut h, unit(0), DRG1, &[DRG1_SON | DRG1_ALRS]).unwrap();
+    assert_eq!(settle(&mut h, 0, 2 * S), (CommandState::Done, 0));
+    let status = read(&mut h, unit(0), CMST, 4).unwrap();
+    for _ in 0..60 {
+        h.run_until(h.now + 50 * MS);
+        let _ = read(&mut h, unit(0), CMST, 1);
+    }
+    assert!(h.bus.controller(axis(0)).unwrap().servo(), "servo back on");
+    assert_eq!(
+        read(&mut h, unit(0), CMST, 4).unwrap(),
+        status,
+        "CMST/CMCT untouched"
+    );
+}
+
+/// A row read and written back unchanged costs no write (no V5), whatever the rounding.
+#[test]
+fn writing_back_a_row_as_read_writes_nothing() {
+    let mut h = gateway_with(1, 100_00, Some(row_wire(33_33)), &[]);
+    let _ = read(&mut h, unit(0), ROW3, 16);
+    h.run_until(h.now + 200 * MS);
+    let row = read(&mut h, unit(0), ROW3, 16).unwrap();
+    let sent = h.sent.len();
+    write(&mut h, unit(0), ROW3, &row).unwrap();
+    h.run_until(h.now + 500 * MS);
+    let writes = h.sent[sent..]
+        .iter()
+        .filter(|(_, r)| matches!(r.command, protocol::Command::WriteMemory { .. }))
+        .count();
+    assert_eq!(writes, 0);
+}
+
+/// Reading the table of an offline axis does not put its frames on the bus.
+#[test]
+fn the_table_of_an_offline_axis_is_not_fetched() {
+    let mut h = gateway_with(2, 100_00, None, &[1]);
+    h.run_until(2 * S);
+    let s0 = h.sent.len();
+    for _ in 0..200 {
+        h.run_until(h.now + 10 * MS);
+        assert_eq!(
+            read(&mut h, unit(1), ROW3, 16),
+            Err(Exception::ServerDeviceFailure)
+        );
+    }
+    let jobs = h.sent[s0..]
+        .iter()
+        .filter(|(_, r)| r.axis == axis(1) && r.command != protocol::Command::Status)
+        .count();
+    assert_eq!(jobs, 0, "no point-table frames to the dead axis");
+    let polls0 = h.sent[s0..]
+        .iter()
+        .filter(|(_, r)| r.axis == axis(0) && r.command == protocol::Command::Status)
+        .count();
+    assert!(polls0 > 150, "the live axis keeps its cycle: {polls0}");
+}
