@@ -1,0 +1,325 @@
+//! The §5 and §6-1 rules: round-robin polling with the host gap, time-outs, retries and
+//! offline probes, resends, stops, a full queue, rejected replies, establishment.
+
+use protocol::engine::*;
+use protocol::line::Baud;
+use protocol::memory::PointField;
+use protocol::time::{Duration, Instant};
+use protocol::*;
+
+use crate::{answer, answer_delay, axis, config, events, next_frame, ready, reply};
+
+#[test]
+fn polls_every_configured_axis_round_robin_with_host_gap() {
+    let mut engine = Engine::new(config(3));
+    let mut now = Instant(0);
+    let mut seen = vec![];
+    let mut address = 0;
+    while seen.len() < 9 {
+        let request = next_frame(&mut engine, &mut now);
+        let replied_at = now + answer_delay(&engine, request.axis);
+        reply(&mut engine, &mut now, answer(&request, &mut address));
+        assert_eq!(
+            engine.poll(now),
+            Output::Idle(Some(replied_at + timing::HOST_GAP))
+        );
+        seen.push((request.axis.get(), request.command));
+    }
+    // Status polls round-robin; each axis' position is read once after it first answers.
+    let polls: Vec<u8> = seen
+        .iter()
+        .filter(|s| s.1 == Command::Status)
+        .map(|s| s.0)
+        .collect();
+    assert_eq!(polls, [0, 1, 2, 0, 1, 2]);
+    let reads: Vec<u8> = seen
+        .iter()
+        .filter(|s| s.1 != Command::Status)
+        .map(|s| s.0)
+        .collect();
+    assert_eq!(reads, [0, 1, 2]);
+    assert!(engine.axis(axis(2)).position.is_some());
+    let online: Vec<_> = events(&mut engine)
+        .into_iter()
+        .filter(|e| matches!(e, Event::Online(_)))
+        .collect();
+    assert_eq!(online.len(), 3);
+}
+
+#[test]
+fn timeout_is_trt_and_retries_then_offline_and_probes_slowly() {
+    let mut engine = Engine::new(config(1));
+    let mut now = Instant(0);
+    let first = next_frame(&mut engine, &mut now);
+    let sent_at = now;
+    // Trt = 20 + RTIM 3 + 160/115.2 ms after the command's own 16 characters.
+    let trt = timing::frame_time(Baud::B115200).plus(timing::response_timeout(
+        Baud::B115200,
+        Rtim::MIN,
+        false,
+    ));
+    assert_eq!(engine.poll(now), Output::Idle(Some(sent_at + trt)));
+    for attempt in 1..=2 {
+        let resent = next_frame(&mut engine, &mut now);
+        assert_eq!(resent, first, "retry {attempt}");
+    }
+    let offline_at = now + trt;
+    let _ = engine.poll(offline_at);
+    assert_eq!(engine.axis(axis(0)).link, Link::Offline);
+    let c = engine.axis(axis(0)).counters;
+    assert_eq!((c.frames_sent, c.timeouts, c.retries), (3, 3, 2));
+    assert!(events(&mut engine).contains(&Event::Offline(axis(0))));
+    // Probes back off: the first after FIRST_PROBE, then twice as long each time, up to
+    // probe_interval (no retries for a probe).
+    now = offline_at;
+    let mut probes = vec![];
+    for _ in 0..7 {
+        let probe = next_frame(&mut engine, &mut now);
+        assert_eq!(probe.command, Command::Status);
+        probes.push(now);
+    }
+    let gaps: Vec<u64> = std::iter::once(probes[0].0 - offline_at.0)
+        .chain(
+            probes
+                .windows(2)
+                .map(|w| (w[1].0 - w[0].0) - trt.as_micros()),
+        )
+        .collect();
+    assert_eq!(
+        gaps,
+        [20_000, 40_000, 80_000, 160_000, 320_000, 500_000, 500_000]
+    );
+}
+
+#[test]
+fn relative_move_is_never_resent_and_position_is_reread() {
+    let mut engine = Engine::new(config(1));
+    let mut now = Instant(0);
+    let poll = next_frame(&mut engine, &mut now);
+    reply(&mut engine, &mut now, ready(&poll));
+    let id = engine
+        .submit(Job {
+            axis: axis(0),
+            kind: JobKind::MoveRelative(Pulses(800)),
+        })
+        .unwrap();
+    let m = next_frame(&mut engine, &mut now);
+    assert_eq!(m.command, Command::MoveRelative(Pulses(800)));
+    // No answer: the next frame is not another `m`.
+    let next = next_frame(&mut engine, &mut now);
+    assert_ne!(next.command, m.command);
+    assert_eq!(engine.axis(axis(0)).counters.retries, 0);
+    let done = events(&mut engine).into_iter().find_map(|e| match e {
+        Event::JobDone { id: i, result, .. } if i == id => Some(result),
+        _ => None,
+    });
+    assert_eq!(done, Some(Err(JobError::OutcomeUnknown)));
+    assert_eq!(
+        engine.axis(axis(0)).link,
+        Link::Online,
+        "one lost answer is not a dead axis"
+    );
+}
+
+#[test]
+fn w4_is_resent_after_its_t4() {
+    let mut engine = Engine::new(config(1));
+    let mut now = Instant(0);
+    let poll = next_frame(&mut engine, &mut now);
+    reply(&mut engine, &mut now, ready(&poll));
+    let point = PositionNo::new(3).unwrap();
+    let id = engine
+        .submit(Job {
+            axis: axis(0),
+            kind: JobKind::WriteField {
+                point,
+                field: PointField::Velocity,
+                value: 1000,
+            },
+        })
+        .unwrap();
+    let mut address = 0;
+    let mut sent = vec![];
+    let mut dropped_w4 = false;
+    for _ in 0..6 {
+        let request = next_frame(&mut engine, &mut now);
+        sent.push(request.command.code());
+        if matches!(request.command, Command::WriteMemory { .. }) && !dropped_w4 {
+            dropped_w4 = true; // lose the first W4's answer
+            continue;
+        }
+        reply(&mut engine, &mut now, answer(&request, &mut address));
+    }
+    assert_eq!(
+        sent,
+        [
+            Code::Transfer,
+            Code::SetWriteAddress,
+            Code::WriteMemory,
+            Code::SetWriteAddress,
+            Code::WriteMemory,
+            Code::Store
+        ]
+    );
+    assert!(events(&mut engine).iter().any(|e| matches!(e,
+        Event::JobDone { id: i, result: Ok(JobOutput::Value(1)), .. } if *i == id)));
+}
+
+#[test]
+fn stop_goes_before_another_axis_retry_and_cancels_queued_jobs() {
+    let mut engine = Engine::new(config(2));
+    let mut now = Instant(0);
+    let mut address = 0;
+    // Both axes answer their first poll and their position read.
+    for _ in 0..4 {
+        let request = next_frame(&mut engine, &mut now);
+        reply(&mut engine, &mut now, answer(&request, &mut address));
+    }
+    assert!(engine.axis(axis(0)).position.is_some() && engine.axis(axis(1)).position.is_some());
+    // Axis 0's poll times out: a retry is pending when the stop for axis 1 arrives.
+    let poll0 = next_frame(&mut engine, &mut now);
+    assert_eq!(poll0.axis, axis(0));
+    let home = engine
+        .submit(Job {
+            axis: axis(1),
+            kind: JobKind::Home(HomeDirection::MotorEnd),
+        })
+        .unwrap();
+    let _ = engine.poll(now + Duration::from_millis(100));
+    now = now + Duration::from_millis(100);
+    let stop = engine
+        .submit(Job {
+            axis: axis(1),
+            kind: JobKind::Stop,
+        })
+        .unwrap();
+    let d = next_frame(&mut engine, &mut now);
+    assert_eq!((d.axis, d.command), (axis(1), Command::CancelMotion));
+    reply(&mut engine, &mut now, ready(&d));
+    let retry = next_frame(&mut engine, &mut now);
+    assert_eq!((retry.axis, retry.command), (axis(0), Command::Status));
+    let evs = events(&mut engine);
+    assert!(evs.iter().any(|e| matches!(e,
+        Event::JobDone { id, result: Err(JobError::Cancelled), .. } if *id == home)));
+    assert!(evs.iter().any(|e| matches!(e,
+        Event::JobDone { id, result: Ok(_), .. } if *id == stop)));
+}
+
+#[test]
+fn full_queue_is_reported_not_dropped() {
+    // One axis' share first: a full share refuses, other axes still get room.
+    let mut engine = Engine::new(config(16));
+    let job = |a: u8| Job {
+        axis: axis(a),
+        kind: JobKind::Servo(true),
+    };
+    for _ in 0..WAITING_PER_AXIS {
+        engine.submit(job(0)).unwrap();
+    }
+    assert_eq!(engine.room(axis(0)), 0);
+    assert_eq!(engine.submit(job(0)), Err(SubmitError::QueueFull));
+    assert_eq!(engine.bus_counters().queue_full, 1);
+    // Then the whole queue.
+    let mut a = 1;
+    while engine.queued() < QUEUE_LEN {
+        engine.submit(job(a)).unwrap();
+        if engine.room(axis(a)) == 0 {
+            a += 1;
+        }
+    }
+    assert_eq!(engine.room(axis(15)), 0);
+    assert_eq!(engine.submit(job(15)), Err(SubmitError::QueueFull));
+    assert_eq!(engine.bus_counters().queue_full, 2);
+    let mut engine = Engine::new(config(1));
+    assert_eq!(
+        engine.submit(Job {
+            axis: axis(5),
+            kind: JobKind::Servo(true)
+        }),
+        Err(SubmitError::AxisDisabled)
+    );
+}
+
+#[test]
+fn wrong_axis_and_bad_bcc_are_never_accepted() {
+    let mut engine = Engine::new(config(2));
+    let mut now = Instant(0);
+    let poll = next_frame(&mut engine, &mut now);
+    assert_eq!(poll.axis, axis(0));
+    // Axis 1 answers instead of axis 0, then a corrupted answer.
+    let wrong = ready(&Request::new(axis(1), Command::Status));
+    engine.receive(now, &wrong.emit().to_bytes());
+    let mut corrupt = ready(&poll).emit().to_bytes();
+    corrupt[5] ^= 0x01;
+    engine.receive(now, &corrupt);
+    let c = engine.axis(axis(0)).counters;
+    assert_eq!((c.replies, c.bad_replies, c.bcc_errors), (0, 1, 1));
+    assert_eq!(engine.axis(axis(0)).report, None);
+    assert_eq!(engine.axis(axis(1)).report, None);
+    // The right answer still completes the transaction.
+    reply(&mut engine, &mut now, ready(&poll));
+    assert_eq!(engine.axis(axis(0)).counters.replies, 1);
+}
+
+#[test]
+fn establishment_follows_section_6_1() {
+    let mut engine = Engine::new(Config {
+        establish: true,
+        ..config(2)
+    });
+    let mut now = Instant(0);
+    let mut script = vec![];
+    let mut address = 0;
+    loop {
+        match engine.poll(now) {
+            Output::Line(action) => script.push(format!("{action:?}")),
+            Output::Transmit(frame) => {
+                let request = Request::parse(&frame).unwrap();
+                script.push(format!(
+                    "{}:{:?}",
+                    request.axis.get(),
+                    request.command.code()
+                ));
+                reply(&mut engine, &mut now, answer(&request, &mut address));
+                if request.command == Command::Status {
+                    break;
+                }
+            }
+            Output::Idle(Some(t)) => now = t,
+            Output::Idle(None) => panic!("idle"),
+        }
+    }
+    let per_axis = |a: u8| {
+        [
+            "SetResponseDelay",
+            "SetWriteAddress",
+            "WriteMemory",
+            "SetWriteAddress",
+            "WriteMemory",
+        ]
+        .map(|c| format!("{a}:{c}"))
+    };
+    let mut expected = vec![
+        "SetBaud(B9600)".to_string(),
+        "BreakStart".to_string(),
+        "BreakEnd".to_string(),
+    ];
+    expected.extend(per_axis(0));
+    expected.extend(per_axis(1));
+    expected.extend(
+        [
+            "CommChange",
+            "CommChange",
+            "CommChange",
+            "SetBaud(B115200)",
+            // Each axis answered during the procedure: its position is read once first.
+            "0:ReadMemory",
+            "1:ReadMemory",
+            "0:Status",
+        ]
+        .map(String::from),
+    );
+    assert_eq!(script, expected);
+    assert!(events(&mut engine).contains(&Event::Established));
+    assert!(!engine.establishing());
+}
