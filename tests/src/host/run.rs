@@ -1,0 +1,256 @@
+//! The loop: reading both lines, driving the node, carrying out its line actions, sleeping,
+//! and reading control lines.
+
+use std::io::{self, Write};
+use std::os::fd::{AsFd, BorrowedFd};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration as StdDuration;
+
+use protocol::frame::COMM_CHANGE;
+use protocol::line::{LineAction, BREAK_MS};
+use protocol::node::Action;
+use protocol::time::Instant;
+use protocol::Request;
+use serde_json::json;
+
+use super::port::Input;
+use super::{
+    control, port, BusSide, Ended, Host, BUS_EVENT_GRAIN_US, MAX_LOGGED_BURST,
+    MAX_OUTPUTS_PER_PASS, MAX_READS_PER_PASS,
+};
+
+impl Host {
+    /// Run until `stop` is raised (checked at least every
+    /// [`Options::max_sleep`](super::Options::max_sleep)), a `quit` line, or the end of standard
+    /// input (with control lines). Fails on an I/O error of a line.
+    pub fn run(&mut self, stop: &AtomicBool) -> io::Result<Ended> {
+        let mut buf = [0u8; 4096];
+        self.log.note(self.now(), "started");
+        loop {
+            if stop.load(Ordering::Relaxed) {
+                return Ok(Ended::Stopped);
+            }
+            let now = self.now();
+            self.read_plc(now, &mut buf)?;
+            self.read_bus(now, &mut buf)?;
+            let until = self.drive(now)?;
+            if let Some(ended) = self.read_control(now, &mut buf)? {
+                return Ok(ended);
+            }
+            self.plc.flush()?;
+            if let BusSide::Device { port, .. } = &mut self.bus {
+                port.flush()?;
+            }
+            self.sleep(until)?;
+        }
+    }
+
+    fn read_plc(&mut self, now: u64, buf: &mut [u8]) -> io::Result<()> {
+        for _ in 0..MAX_READS_PER_PASS {
+            let n = match self.plc.read(buf)? {
+                Input::Bytes(n) => n,
+                Input::Nothing => break,
+            };
+            // A frame that ended (t3.5) before these bytes is handled before they start the
+            // next one.
+            self.drive(now)?;
+            let bytes = buf.get(..n).unwrap_or(&[]);
+            self.node.plc_received(Instant(now), bytes);
+            if self.burst.len() + bytes.len() <= MAX_LOGGED_BURST {
+                self.burst.extend_from_slice(bytes);
+            }
+        }
+        Ok(())
+    }
+
+    fn read_bus(&mut self, now: u64, buf: &mut [u8]) -> io::Result<()> {
+        match &mut self.bus {
+            BusSide::Sim(bus) => {
+                for (at, byte) in bus.advance(now) {
+                    let at = at.max(self.last_bus_rx);
+                    self.last_bus_rx = at;
+                    self.log.bus_received(at, byte);
+                    self.node.bus_received(Instant(at), &[byte]);
+                }
+            }
+            BusSide::Device { port, .. } => {
+                for _ in 0..MAX_READS_PER_PASS {
+                    let n = match port.read(buf)? {
+                        Input::Bytes(n) => n,
+                        Input::Nothing => break,
+                    };
+                    let bytes = buf.get(..n).unwrap_or(&[]);
+                    for &byte in bytes {
+                        self.log.bus_received(now, byte);
+                    }
+                    self.node.bus_received(Instant(now), bytes);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Poll the node until it is idle; its deadline.
+    fn drive(&mut self, now: u64) -> io::Result<Option<u64>> {
+        for _ in 0..MAX_OUTPUTS_PER_PASS {
+            match self.node.poll(Instant(now)) {
+                Some(Action::Bus(bytes)) => {
+                    if let Ok(request) = protocol::Frame::new_checked(&bytes)
+                        .and_then(|frame| Request::parse(&frame))
+                    {
+                        if let Some(counts) = self.sent.get_mut(usize::from(request.axis.get())) {
+                            *counts.entry(request.command.mnemonic()).or_default() += 1;
+                        }
+                    }
+                    if let Ok(frame) = protocol::Frame::new_checked(&bytes) {
+                        self.log.bus_sent(now, &frame);
+                    }
+                    match &mut self.bus {
+                        BusSide::Sim(bus) => {
+                            bus.host_send(now, &bytes);
+                        }
+                        BusSide::Device { port } => port.send(&bytes)?,
+                    }
+                }
+                Some(Action::Reply(bytes)) => {
+                    self.plc.send(bytes)?;
+                    self.log.modbus_request(now, &self.burst, "reply");
+                    self.log.modbus_reply(now, bytes);
+                    self.burst.clear();
+                }
+                Some(Action::Line(action)) => self.line(now, action)?,
+                Some(Action::PlcLine(line)) => {
+                    self.plc.drain()?;
+                    self.plc.set_rate(line.baud)?;
+                    self.log.note(now, &format!("PLC line: {line:?}"));
+                }
+                Some(Action::Store(store)) => {
+                    // A PC has no settings flash: a save is kept for the run (and counted), a
+                    // restart or factory reset is only logged.
+                    if let protocol::plc::Store::Save(_) = store {
+                        self.saves += 1;
+                        self.node.stored(Ok(self.saves));
+                    }
+                    self.log.note(now, &format!("store: {store:?}"));
+                }
+                None => {
+                    if self.node.receiver_counters() != self.seen_receiver {
+                        // A burst ended without a reply (a broadcast, another unit, noise).
+                        self.seen_receiver = self.node.receiver_counters();
+                        if !self.burst.is_empty() {
+                            self.log.modbus_request(now, &self.burst, "no reply");
+                            self.burst.clear();
+                        }
+                    }
+                    return Ok(self.node.poll_at().map(|t| t.0));
+                }
+            }
+        }
+        // More to do: come back at once.
+        Ok(Some(now))
+    }
+
+    fn line(&mut self, now: u64, action: LineAction) -> io::Result<()> {
+        self.log.note(now, &format!("line: {action:?}"));
+        match (&mut self.bus, action) {
+            (BusSide::Sim(bus), LineAction::SetBaud(baud)) => bus.set_host_baud(baud),
+            (BusSide::Sim(bus), LineAction::BreakStart) => {
+                // The node ends the break BREAK_MS later; the simulated line takes it whole.
+                bus.host_break(now, u64::from(BREAK_MS) * 1_000);
+            }
+            (BusSide::Sim(_), LineAction::BreakEnd) => {}
+            (BusSide::Sim(bus), LineAction::CommChange) => {
+                bus.host_send(now, &COMM_CHANGE);
+            }
+            (BusSide::Device { port }, LineAction::SetBaud(baud)) => {
+                port.drain()?;
+                port.set_rate(baud.bits_per_second())?;
+            }
+            (BusSide::Device { port }, LineAction::BreakStart) => {
+                port.drain()?;
+                port.set_break(true)?;
+            }
+            (BusSide::Device { port }, LineAction::BreakEnd) => port.set_break(false)?,
+            (BusSide::Device { port }, LineAction::CommChange) => port.send(&COMM_CHANGE)?,
+        }
+        Ok(())
+    }
+
+    fn sleep(&self, until: Option<u64>) -> io::Result<()> {
+        let now = self.now();
+        let max_us = u64::try_from(self.max_sleep.as_micros()).unwrap_or(u64::MAX);
+        let mut wake = now.saturating_add(max_us);
+        if let Some(t) = until {
+            wake = wake.min(t);
+        }
+        let mut fds: Vec<(BorrowedFd<'_>, bool)> = vec![(self.plc.fd(), self.plc.output_pending())];
+        match &self.bus {
+            BusSide::Sim(bus) => {
+                if let Some(t) = bus.next_event() {
+                    wake = wake.min(t.max(now + BUS_EVENT_GRAIN_US));
+                }
+            }
+            BusSide::Device { port } => {
+                fds.push((port.fd(), port.output_pending()));
+            }
+        }
+        if wake <= now {
+            return Ok(());
+        }
+        let stdin = io::stdin();
+        if self.control.is_some() {
+            fds.push((stdin.as_fd(), false));
+        }
+        port::wait(&fds, StdDuration::from_micros(wake - now))
+    }
+
+    fn read_control(&mut self, now: u64, buf: &mut [u8]) -> io::Result<Option<Ended>> {
+        let Some(mut pending) = self.control.take() else {
+            return Ok(None);
+        };
+        let result = self.read_control_lines(now, buf, &mut pending);
+        self.control = Some(pending);
+        result
+    }
+
+    fn read_control_lines(
+        &mut self,
+        now: u64,
+        buf: &mut [u8],
+        pending: &mut Vec<u8>,
+    ) -> io::Result<Option<Ended>> {
+        let stdin = io::stdin();
+        if !port::readable(stdin.as_fd())? {
+            return Ok(None);
+        }
+        // Readable: one read returns what is there without blocking (or 0 at the end).
+        let n = match nix::unistd::read(stdin.as_fd(), buf) {
+            Ok(n) => n,
+            Err(nix::errno::Errno::EINTR | nix::errno::Errno::EAGAIN) => return Ok(None),
+            Err(e) => return Err(e.into()),
+        };
+        if n == 0 {
+            self.log.note(now, "standard input closed");
+            return Ok(Some(Ended::InputClosed));
+        }
+        pending.extend_from_slice(buf.get(..n).unwrap_or(&[]));
+        while let Some(end) = pending.iter().position(|&b| b == b'\n') {
+            let line: Vec<u8> = pending.drain(..=end).collect();
+            let line = String::from_utf8_lossy(&line);
+            let Some(command) = control::parse(&line) else {
+                continue;
+            };
+            let (answer, ended) = match command {
+                Ok(command) => self.control(now, command),
+                Err(error) => (json!({"ok": false, "error": error}), None),
+            };
+            let mut out = io::stdout().lock();
+            writeln!(out, "{answer}")?;
+            out.flush()?;
+            if ended.is_some() {
+                return Ok(ended);
+            }
+        }
+        Ok(None)
+    }
+}
