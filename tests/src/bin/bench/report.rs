@@ -1,0 +1,264 @@
+//! The report: every scenario run, its rows against their limits, notes and the JSON object.
+
+use protocol::engine::{timing, Config, Engine};
+use protocol::line::Baud;
+use protocol::time::Duration;
+use serde_json::{json, Value};
+
+use crate::measure::{config, round3, transaction, trt, Row};
+use crate::scenarios::{dead_axis, position_age, request_latency, status_cycle};
+use crate::{Args, AXES, DEAD, MOVER, MS, S, WINDOW};
+
+pub(crate) struct Report {
+    pub(crate) rows: Vec<Row>,
+    pub(crate) notes: Vec<String>,
+    pub(crate) json: Value,
+}
+
+pub(crate) fn run(args: &Args) -> Result<Report, String> {
+    let mut rows = Vec::new();
+    let mut notes = Vec::new();
+    let engine_size = std::mem::size_of::<Engine>();
+
+    // 1.
+    let mut cycle_json = Vec::new();
+    let mut alive_115 = None;
+    for (baud, ids) in [
+        (
+            Baud::B38400,
+            ["cycle_38k4_mean", "cycle_38k4_p99", "cycle_38k4_max"],
+        ),
+        (
+            Baud::B115200,
+            ["cycle_115k2_mean", "cycle_115k2_p99", "cycle_115k2_max"],
+        ),
+    ] {
+        let r = status_cycle(baud)?;
+        let kbit = f64::from(baud.bits_per_second()) / 1000.0;
+        let limit = r.limit as f64;
+        for (id, label, value, target) in [
+            (ids[0], "mean", r.stats.mean, Some(1.05)),
+            (ids[1], "p99", r.stats.p99 as f64, None),
+            (ids[2], "max", r.stats.max as f64, None),
+        ] {
+            rows.push(Row {
+                id,
+                scenario: "1 status cycle",
+                what: format!("{kbit} kbit/s, 16 idle axes, {label}"),
+                measured_us: value,
+                limit_us: limit,
+                limit_is: "16 x T",
+                target,
+            });
+        }
+        notes.push(format!(
+            "1. {kbit} kbit/s: T = {} us, Trt = {} us; {} cycles measured over {} s, {} frames, {} time-outs",
+            transaction(baud),
+            trt(baud),
+            r.stats.n,
+            WINDOW / S,
+            r.frames,
+            r.timeouts
+        ));
+        cycle_json.push(json!({
+            "baud": baud.bits_per_second(),
+            "transaction_us": transaction(baud),
+            "limit_us": r.limit,
+            "cycle": r.stats.json(),
+            "frames": r.frames,
+            "timeouts": r.timeouts,
+        }));
+        if baud == Baud::B115200 {
+            alive_115 = Some(r.stats);
+        }
+    }
+    let alive = alive_115.ok_or("no 115.2 kbit/s cycle")?;
+
+    // 2.
+    let t115 = transaction(Baud::B115200);
+    let trt115 = trt(Baud::B115200);
+    let lat = request_latency(args.seed, args.requests)?;
+    for (id, label, value, limit, limit_is, target) in [
+        ("latency_p50", "p50", lat.stats.p50, t115, "T", None),
+        ("latency_p99", "p99", lat.stats.p99, t115, "T", Some(1.0)),
+        ("latency_max", "max", lat.stats.max, t115, "T", None),
+        ("latency_max_trt", "max", lat.stats.max, trt115, "Trt", None),
+    ] {
+        rows.push(Row {
+            id,
+            scenario: "2 request->wire",
+            what: format!("115.2 kbit/s, {} requests, {label}", lat.stats.n),
+            measured_us: value as f64,
+            limit_us: limit as f64,
+            limit_is,
+            target,
+        });
+    }
+    notes.push(format!(
+        "2. latency mean {:.0} us, min {} us; at most {} frame(s) went out ahead of a request; \
+         submit overshoot past the drawn arrival time: max {} us{}",
+        lat.stats.mean,
+        lat.stats.min,
+        lat.max_frames_ahead,
+        lat.max_overshoot,
+        if lat.max_overshoot == 0 {
+            " (exact)"
+        } else {
+            " (significant: latencies are measured from the actual submit time)"
+        }
+    ));
+
+    // 3.
+    let dead = dead_axis(config(Baud::B115200))?;
+    let quiet = dead_axis(Config {
+        // The first try happens at the first probe, in the warm-up; none in the window.
+        rejoin_interval: Duration(u64::MAX),
+        ..config(Baud::B115200)
+    })?;
+    for (id, label, value, limit, target) in [
+        ("dead_mean", "mean", dead.stats.mean, alive.mean, Some(1.25)),
+        (
+            "dead_max",
+            "max",
+            dead.stats.max as f64,
+            alive.max as f64,
+            Some(1.25),
+        ),
+        (
+            "dead_norejoin_mean",
+            "mean, rejoin off",
+            quiet.stats.mean,
+            alive.mean,
+            None,
+        ),
+        (
+            "dead_norejoin_max",
+            "max, rejoin off",
+            quiet.stats.max as f64,
+            alive.max as f64,
+            None,
+        ),
+        (
+            "dead_detection_max",
+            "max while detecting",
+            dead.transient.max as f64,
+            alive.max as f64,
+            None,
+        ),
+    ] {
+        rows.push(Row {
+            id,
+            scenario: "3 one dead axis",
+            what: format!("115.2 kbit/s, 15 live axes, {label}"),
+            measured_us: value,
+            limit_us: limit,
+            limit_is: "all alive",
+            target,
+        });
+    }
+    let defaults = config(Baud::B115200);
+    notes.push(format!(
+        "3. axis {DEAD} silent: offline {:.1} ms after its first unanswered poll ((1 + {} retries) x (frame + Trt) = {:.1} ms); \
+         in {} s: {} status probes and {} rejoin tries at 9.6 kbit/s/RTIM 255 ms (rejoin_interval {} ms), \
+         the longest costing {:.1} ms of bus time; live-axis cycle p99 {:.1} ms (rejoin off: {} probes, p99 {:.1} ms); \
+         15 x T = {:.1} ms",
+        dead.detection as f64 / 1000.0,
+        defaults.retries,
+        (u64::from(defaults.retries) + 1) as f64
+            * (timing::frame_time(Baud::B115200).as_micros() + trt115) as f64
+            / 1000.0,
+        dead.window / S,
+        dead.probes,
+        dead.rejoins,
+        defaults.rejoin_interval.as_micros() / MS,
+        dead.longest_try as f64 / 1000.0,
+        dead.stats.p99 as f64 / 1000.0,
+        quiet.probes,
+        quiet.stats.p99 as f64 / 1000.0,
+        (15 * t115) as f64 / 1000.0,
+    ));
+
+    // 4.
+    let age = position_age()?;
+    let status_limit = (u64::from(AXES) * t115) as f64;
+    for (id, label, value) in [
+        ("age_mean", "mean", age.stats.mean),
+        ("age_p99", "p99", age.stats.p99 as f64),
+        ("age_max", "max", age.stats.max as f64),
+    ] {
+        rows.push(Row {
+            id,
+            scenario: "4 position age",
+            what: format!("115.2 kbit/s, 1 of 16 moving, {label}"),
+            measured_us: value,
+            limit_us: status_limit,
+            limit_is: "16 x T",
+            target: None,
+        });
+    }
+    notes.push(format!(
+        "4. axis {MOVER}: {} moves, {} samples (1/ms); first position read at most {} us after \
+         a move started; idle axes' cycle while it moves: mean {:.0} us, max {} us \
+         (17 x T = {} us: 16 polls + 1 R4)",
+        age.moves,
+        age.stats.n,
+        age.first_read,
+        age.cycle.mean,
+        age.cycle.max,
+        17 * t115
+    ));
+
+    let json = json!({
+        "virtual_time": true,
+        "seed": args.seed,
+        "engine_size_bytes": engine_size,
+        "setup": "16 simulated controllers from power-up (9.6 kbit/s, RTIM 255 ms); \
+                  Config.establish = true to the rate under test, RTIM 3 ms",
+        "rows": rows.iter().map(|r| json!({
+            "id": r.id,
+            "scenario": r.scenario,
+            "what": r.what,
+            "measured_us": round3(r.measured_us),
+            "limit_us": round3(r.limit_us),
+            "limit_is": r.limit_is,
+            "ratio": round3(r.ratio()),
+            "target_ratio": r.target,
+            "pass": r.pass(),
+        })).collect::<Vec<_>>(),
+        "details": {
+            "status_cycle": cycle_json,
+            "request_latency": {
+                "baud": 115_200,
+                "transaction_us": t115,
+                "trt_us": trt115,
+                "latency": lat.stats.json(),
+                "max_submit_overshoot_us": lat.max_overshoot,
+                "max_frames_ahead": lat.max_frames_ahead,
+            },
+            "dead_axis": {
+                "axis": DEAD,
+                "window_us": dead.window,
+                "cycle": dead.stats.json(),
+                "during_detection": dead.transient.json(),
+                "detection_us": dead.detection,
+                "probes": dead.probes,
+                "rejoin_tries": dead.rejoins,
+                "longest_try_us": dead.longest_try,
+                "rejoin_off": {
+                    "cycle": quiet.stats.json(),
+                    "probes": quiet.probes,
+                    "rejoin_tries": quiet.rejoins,
+                    "longest_try_us": quiet.longest_try,
+                },
+            },
+            "position_age": {
+                "axis": MOVER,
+                "moves": age.moves,
+                "age": age.stats.json(),
+                "first_read_max_us": age.first_read,
+                "cycle_while_moving": age.cycle.json(),
+            },
+        },
+    });
+    Ok(Report { rows, notes, json })
+}
