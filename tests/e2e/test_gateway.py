@@ -297,7 +297,6 @@ def test_invalid_requests_get_exceptions_and_never_reach_the_bus(gateway):
             lambda: gw.call("mask_write_register", address=DRG1, and_mask=0, or_mask=DRG1_SON, unit=u),
             ILLEGAL_FUNCTION,
         ),
-        ("FC2B device id", lambda: gw.call("read_device_information", unit=u), ILLEGAL_FUNCTION),
         (
             "FC17 read/write",
             lambda: gw.call(
@@ -313,6 +312,14 @@ def test_invalid_requests_get_exceptions_and_never_reach_the_bus(gateway):
     ]
     for name, request, expected in cases:
         assert gw.exception(request) == expected, name
+    # FC2B is served for MEI type 0x0E only; a malformed request gets the spec's exception
+    # (Application Protocol §6.21): another MEI type 01, an unknown ReadDevId code 03.
+    for name, request, expected in [
+        ("FC2B MEI 0x0D", adu(u, 0x2B, 0x0D, 0x01, 0x00), ILLEGAL_FUNCTION),
+        ("FC2B code 5", adu(u, 0x2B, 0x0E, 0x05, 0x00), ILLEGAL_DATA_VALUE),
+    ]:
+        reply = gw.raw_exchange(request)
+        assert reply[:3] == bytes([u, 0xAB, expected]), (name, reply.hex(" "))
     # A unit the gateway does not serve gets no reply at all.
     assert gw.raw_exchange(adu(unit(5), 0x03, 0x90, 0x05, 0x00, 0x01)) == b""
     time.sleep(0.3)
