@@ -1,9 +1,14 @@
-//! Build script of the firmware: puts `memory.x` where the linker finds it, and adds defmt's
-//! linker script to the `hw` build only.
+//! Build script of the firmware: puts the board's memory layout (`memory/l475vg.x` or
+//! `memory/f103c8.x`) where the linker finds it as `board.x`, and adds defmt's linker script to
+//! the `hw` build only.
 //!
-//! cortex-m-rt's `link.x` does `INCLUDE memory.x`, which the linker resolves through its search
-//! path. Copying the file into `OUT_DIR` and adding that directory to the search path works no
-//! matter which directory cargo runs the linker from, and relinks when `memory.x` changes.
+//! cortex-m-rt's `link.x` does `INCLUDE memory.x`; the linker finds our top-level `memory.x` in
+//! its working directory (the package root), and that file does `INCLUDE board.x`, which the
+//! linker finds here in `OUT_DIR` (on its search path). The board file must not be called
+//! `memory.x`: the linker would read the top-level one first.
+//!
+//! `RC_GATEWAY_BOARD_LAYOUT` (a path) replaces the board's layout: scripts/size-report.sh uses it
+//! to measure a build that does not fit its chip (how far over it is), never for a build to flash.
 //! `-Tlink.x` lives in `.cargo/config.toml` (every build needs it); `-Tdefmt.x` is here because
 //! only the `hw` feature links defmt, and the linker fails on a script that no crate provides.
 
@@ -11,12 +16,23 @@ use std::{env, error::Error, fs, path::PathBuf};
 
 fn main() -> Result<(), Box<dyn Error>> {
     let out = PathBuf::from(env::var_os("OUT_DIR").ok_or("cargo did not set OUT_DIR")?);
+    // One memory layout per board, chosen by the board feature.
+    let board = if env::var_os("CARGO_FEATURE_BOARD_F103").is_some() {
+        "memory/f103c8.x"
+    } else {
+        "memory/l475vg.x"
+    };
+    let layout = env::var_os("RC_GATEWAY_BOARD_LAYOUT").map_or_else(|| board.into(), PathBuf::from);
+    fs::copy(&layout, out.join("board.x"))?;
+    // Also where the linker looks when its working directory is not the package root.
     fs::copy("memory.x", out.join("memory.x"))?;
     println!("cargo:rustc-link-search={}", out.display());
     if env::var_os("CARGO_FEATURE_HW").is_some() {
         println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
     }
     println!("cargo:rerun-if-changed=memory.x");
+    println!("cargo:rerun-if-changed=memory");
+    println!("cargo:rerun-if-env-changed=RC_GATEWAY_BOARD_LAYOUT");
     println!("cargo:rerun-if-changed=build.rs");
     Ok(())
 }

@@ -30,6 +30,10 @@
 compile_error!("the features `hw` and `emulator` exclude each other: build the emulator with `--no-default-features --features emulator`");
 #[cfg(not(any(feature = "hw", feature = "emulator")))]
 compile_error!("choose a build: feature `hw` (the default) or `emulator`");
+#[cfg(all(feature = "board-l475", feature = "board-f103"))]
+compile_error!("choose one board: `board-l475` (the default) or `board-f103` with `--no-default-features --features hw,board-f103`");
+#[cfg(not(any(feature = "board-l475", feature = "board-f103")))]
+compile_error!("choose a board: feature `board-l475` or `board-f103`");
 
 #[macro_use]
 mod log;
@@ -66,7 +70,7 @@ fn start(spawner: Spawner) {
     }
     info!("rc-gateway {} starting", VERSION);
 
-    let board = match board::Board::new(p, node::default_config().plc) {
+    let board = match board::board(p, node::default_config().plc) {
         Ok(board) => board,
         Err(_) => {
             // Only a baud rate the kernel clock cannot make: a build error, not a field fault.

@@ -4,14 +4,22 @@
 //! during a break the bus TX and DE pins belong to the UART driver. Both cases write the GPIO
 //! registers directly, through the register block (safe code: the PAC's accessors are volatile
 //! register accesses). [`crate::board`] records each pin here when it makes the HAL object from it,
-//! so no pin choice is repeated. This is the STM32 "GPIO v2" register layout (MODER/BSRR: L4, G0,
-//! F4...); an F1 board needs its own version of this module (CRL/CRH).
+//! so no pin choice is repeated. BSRR is the same on every STM32; the pin mode is MODER on "GPIO
+//! v2" chips (L4, G0, F4...) and CRL/CRH on the F1, each behind [`PinId::set_mode`].
 
 use core::sync::atomic::{AtomicU16, Ordering};
 
 use embassy_stm32::gpio::Pin;
 use embassy_stm32::pac;
-use embassy_stm32::pac::gpio::vals::Moder;
+
+/// What a pin is switched to below the HAL.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    /// A GPIO output (push-pull).
+    Output,
+    /// Back to its peripheral (alternate function, push-pull).
+    Alternate,
+}
 
 /// A pin as (port, number): port 0 = GPIOA.
 #[derive(Clone, Copy)]
@@ -36,8 +44,11 @@ impl PinId {
             2 => pac::GPIOC,
             3 => pac::GPIOD,
             4 => pac::GPIOE,
+            #[cfg(not(feature = "board-f103"))]
             5 => pac::GPIOF,
+            #[cfg(not(feature = "board-f103"))]
             6 => pac::GPIOG,
+            #[cfg(not(feature = "board-f103"))]
             7 => pac::GPIOH,
             _ => return None,
         })
@@ -56,40 +67,69 @@ impl PinId {
         }
     }
 
-    fn set_mode(self, mode: Moder) {
+    #[cfg(not(feature = "board-f103"))]
+    fn set_mode(self, mode: Mode) {
+        use pac::gpio::vals::Moder;
         if let Some(gpio) = self.block() {
             let n = usize::from(self.pin);
-            critical_section::with(|_| gpio.moder().modify(|w| w.set_moder(n, mode)));
+            let moder = match mode {
+                Mode::Output => Moder::OUTPUT,
+                Mode::Alternate => Moder::ALTERNATE,
+            };
+            critical_section::with(|_| gpio.moder().modify(|w| w.set_moder(n, moder)));
+        }
+    }
+
+    #[cfg(feature = "board-f103")]
+    fn set_mode(self, mode: Mode) {
+        use pac::gpio::vals::{CnfOut, Mode as Speed};
+        if let Some(gpio) = self.block() {
+            let n = usize::from(self.pin);
+            let cnf = match mode {
+                Mode::Output => CnfOut::PUSH_PULL,
+                Mode::Alternate => CnfOut::ALT_PUSH_PULL,
+            };
+            critical_section::with(|_| {
+                gpio.cr(n / 8).modify(|w| {
+                    w.set_mode(n % 8, Speed::OUTPUT50MHZ);
+                    w.set_cnf_out(n % 8, cnf);
+                })
+            });
         }
     }
 }
 
-/// Holds the bus low for a break: TX as a GPIO output at 0 and DE as a GPIO output at 1 (the
-/// transceiver must drive the low level onto the pair), then hands both back to the UART.
-/// embassy's `send_break` sends one break character only; §6-1 wants 200 ms.
+/// Holds the bus low for a break: TX as a GPIO output at 0 and a hardware DE as a GPIO output at
+/// 1 (the transceiver must drive the low level onto the pair), then hands both back to the UART.
+/// A DE that is a GPIO already is the line's own business ([`crate::serial`]). embassy's
+/// `send_break` sends one break character only; §6-1 wants 200 ms.
 pub struct LineBreak {
     tx: PinId,
-    de: PinId,
+    de: Option<PinId>,
 }
 
 impl LineBreak {
-    /// The break of a UART whose TX and DE pins are these.
-    pub fn new(tx: PinId, de: PinId) -> LineBreak {
+    /// The break of a UART whose TX pin is `tx`, and whose DE pin is `de` if the UART drives it.
+    pub fn new(tx: PinId, de: Option<PinId>) -> LineBreak {
         LineBreak { tx, de }
     }
 
     /// Starts holding the line low. Call only when the UART has finished transmitting.
     pub fn hold(&self) {
         self.tx.set_level(false);
-        self.de.set_level(true);
-        self.de.set_mode(Moder::OUTPUT);
-        self.tx.set_mode(Moder::OUTPUT);
+        if let Some(de) = self.de {
+            de.set_level(true);
+            de.set_mode(Mode::Output);
+        }
+        self.tx.set_mode(Mode::Output);
     }
 
     /// Back to the UART: TX idles high (mark), DE follows the UART (released when idle).
     pub fn release(&self) {
-        self.tx.set_mode(Moder::ALTERNATE);
-        self.de.set_mode(Moder::ALTERNATE);
+        self.tx.set_mode(Mode::Alternate);
+        if let Some(de) = self.de {
+            de.set_mode(Mode::Alternate);
+        }
     }
 }
 
@@ -131,7 +171,9 @@ pub fn on_fault_drive(pin: PinId, high: bool) {
     }
 }
 
-/// On a fault, `pin` (an alternate-function pin such as a DE) becomes a GPIO output at 0.
+/// On a fault, `pin` (an alternate-function pin such as a hardware DE) becomes a GPIO output
+/// at 0. (A board whose DE pins are GPIOs registers them with [`on_fault_drive`].)
+#[cfg_attr(feature = "board-f103", allow(dead_code))]
 pub fn on_fault_release(pin: PinId) {
     SAFE_RELEASE.add(pin);
 }
@@ -167,14 +209,14 @@ pub fn force_safe() {
                 }
             }
         });
-        if release != 0 {
-            gpio.moder().modify(|w| {
-                for n in 0..16 {
-                    if release & (1 << n) != 0 {
-                        w.set_moder(n, Moder::OUTPUT);
-                    }
+        for n in 0..16u8 {
+            if release & (1 << n) != 0 {
+                PinId {
+                    port: port as u8,
+                    pin: n,
                 }
-            });
+                .set_mode(Mode::Output);
+            }
         }
     }
 }

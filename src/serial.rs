@@ -1,6 +1,9 @@
-//! An RS485 line: a buffered UART with hardware driver enable, and the operations the protocol
-//! asks of the bus (send then wait for transmission complete, rate change, break).
+//! An RS485 line: a buffered UART with a driver enable, by hardware (the UART's DE output, USART
+//! v3/v4 chips such as the L4) or by a GPIO set before a write and cleared once the last stop bit
+//! has left (F1), and the operations the protocol asks of the bus (send then wait for
+//! transmission complete, rate change, break).
 
+use embassy_stm32::gpio::Output;
 use embassy_stm32::usart::BufferedUart;
 use embedded_io_async::{Read, ReadReady, Write};
 
@@ -14,20 +17,25 @@ pub struct Rs485 {
     /// How this line holds a break, if it is the bus.
     line_break: Option<LineBreak>,
     in_break: bool,
+    /// The driver enable, if software drives it (no hardware DE on the chip).
+    de: Option<Output<'static>>,
 }
 
 impl Rs485 {
-    /// Wraps a UART built with `new_with_de`.
+    /// Wraps a UART: built with `new_with_de` (hardware DE, `de` is `None`), or without a DE
+    /// pin, which `de` then is (driven low: the transmitter off).
     pub fn new(
         uart: BufferedUart<'static>,
         tx_capacity: usize,
         line_break: Option<LineBreak>,
+        de: Option<Output<'static>>,
     ) -> Rs485 {
         Rs485 {
             uart,
             tx_capacity,
             line_break,
             in_break: false,
+            de,
         }
     }
 
@@ -61,13 +69,20 @@ impl Rs485 {
             warn!("uart: send during a break, break ended");
             self.break_end().await;
         }
+        if let Some(de) = self.de.as_mut() {
+            de.set_high();
+        }
         for chunk in bytes.chunks(self.tx_capacity.max(1)) {
             // Flush after each chunk: the driver's `write` waits for free space without
             // registering a waker, so never write more than the empty ring holds.
             if self.uart.write_all(chunk).await.is_err() || self.uart.flush().await.is_err() {
                 warn!("uart: transmit error");
-                return;
+                break;
             }
+        }
+        // `flush` returned: transmission complete, the line may turn around.
+        if let Some(de) = self.de.as_mut() {
+            de.set_low();
         }
     }
 
@@ -95,6 +110,9 @@ impl Rs485 {
         let _ = self.uart.flush().await;
         match &self.line_break {
             Some(line_break) => {
+                if let Some(de) = self.de.as_mut() {
+                    de.set_high();
+                }
                 line_break.hold();
                 self.in_break = true;
             }
@@ -106,6 +124,9 @@ impl Rs485 {
     pub async fn break_end(&mut self) {
         if let Some(line_break) = &self.line_break {
             line_break.release();
+        }
+        if let Some(de) = self.de.as_mut() {
+            de.set_low();
         }
         self.in_break = false;
     }

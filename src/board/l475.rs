@@ -1,0 +1,203 @@
+//! # B-L475E-IOT01A (STM32L475VG): the board QEMU emulates
+//!
+//! Header names from ST's UM2153 (Arduino Uno V3 connectors CN1-CN4, PMOD connector CN10).
+//!
+//! | Signal | Pin | Header | Notes |
+//! |---|---|---|---|
+//! | RS485 **bus** TX | PA0 | Arduino D1 | UART4 (QEMU `-serial` #3) |
+//! | RS485 bus RX | PA1 | Arduino D0 | |
+//! | RS485 bus DE | PA15 | Arduino D9 | hardware driver enable (CR3.DEM), active high |
+//! | RS485 **PLC** TX | PD5 | PMOD CN10 (UART) | USART2 (QEMU `-serial` #1) |
+//! | RS485 PLC RX | PD6 | PMOD CN10 | |
+//! | RS485 PLC DE | PD4 | PMOD CN10 (RTS) | hardware driver enable, active high |
+//! | IN0 PC1 | PC5 | Arduino A0 | inputs: high = ON, pull-down (open = OFF) |
+//! | IN1 PC2 | PC4 | Arduino A1 | |
+//! | IN2 PC4 | PC3 | Arduino A2 | |
+//! | IN3 PC8 | PC2 | Arduino A3 | |
+//! | IN4 PC16 | PC1 | Arduino A4 | |
+//! | IN5 PC32 | PC0 | Arduino A5 | |
+//! | IN11 HOME | PD14 | Arduino D2 | |
+//! | IN12 *STP | PB0 | Arduino D3 | |
+//! | IN13 CSTR | PA3 | Arduino D4 | |
+//! | IN14 RES | PB4 | Arduino D5 | |
+//! | IN15 SON | PB1 | Arduino D6 | |
+//! | Stop input | PA4 | Arduino D7 | safety: the stop is active while the input is OFF (open wire = stop) |
+//! | OUT0 PM1 | PB2 | Arduino D8 | outputs: high = ON; every output low after reset, panic, HardFault |
+//! | OUT1 PM2 | PA2 | Arduino D10 | |
+//! | OUT2 PM4 | PA7 | Arduino D11 | |
+//! | OUT3 PM8 | PA6 | Arduino D12 | |
+//! | OUT6 MOVE | PB9 | Arduino D14 | |
+//! | OUT7 ZONE1 | PB8 | Arduino D15 | |
+//! | OUT10 HEND | PD0 | PMOD CN10 | the PMOD pins beside the UART: check UM2153's solder bridges |
+//! | OUT11 PEND | PD1 | PMOD CN10 | |
+//! | OUT12 SV | PD2 | PMOD CN10 | |
+//! | OUT13 LINK | PD7 | PMOD CN10 | |
+//! | OUT14 *ALM | PD3 | PMOD CN10 (CTS) | |
+//! | LED run | PB14 | LED2 (green) | blinks 1 Hz while the gateway task runs |
+//! | LED bus link | PA5 | LED1 (green), Arduino D13 | |
+//! | LED alarm | PC9 | LED3 (yellow) | PC9 low lights LED4 (blue) instead |
+//!
+//! The 24 V input and output stages (opto-couplers, high-side drivers) are not on this board: the
+//! table assumes non-inverting stages (3.3 V high = signal ON), hence `INPUT_ON` / `OUTPUT_ON`.
+//!
+//! # Emulator
+//! QEMU's `b-l475e-iot01a` connects `-serial` #0..#4 to USART1, USART2, USART3, UART4, UART5
+//! (#1 and #3 are proven by the emulator tests). The harness gives #1 (PLC) and #3 (bus) host
+//! endpoints and `null` to the others; it drives
+//! input pins with qtest `set_irq_in /machine/soc/gpioX unnamed-gpio-in N level` and reads
+//! outputs from the GPIO registers. QEMU ignores DE (CR3.DEM) and does not wire USART TX to
+//! its GPIO pin, so a break shows only as the pins' mode and output registers.
+
+use embassy_stm32::peripherals::{UART4, USART2};
+use embassy_stm32::usart::{self, BufferedInterruptHandler, BufferedUart, ConfigError};
+use embassy_stm32::{bind_interrupts, Peripherals};
+
+use super::{
+    indicator_on_fault, input, line_config, output, settings_flash, Board, Watchdog, BUS_RX,
+    BUS_TX, BUS_TX_CAPACITY, INPUT_ON, OUTPUT_ON, PLC_RX, PLC_TX, PLC_TX_CAPACITY,
+};
+use crate::discrete::{Inputs, Leds, Outputs};
+use crate::pins::{self, LineBreak, PinId};
+use crate::serial::Rs485;
+
+/// The board, as the gateway names it to the PLC (device identification).
+pub const MODEL_NAME: &str = "B-L475E-IOT01A (STM32L475VG)";
+/// System clock: HSI16 through the PLL (no crystal needed), the STM32L475's maximum.
+pub const SYSCLK_HZ: u32 = 80_000_000;
+
+/// The flash pages `memory/l475vg.x` keeps out of the program for the settings: the last four 2 KiB
+/// pages of bank 2 (offsets from the start of flash). Erasing them does not stall the program,
+/// which runs from bank 1.
+#[cfg(feature = "hw")]
+pub const SETTINGS_RANGE: core::ops::Range<u32> = 0x000F_E000..0x0010_0000;
+
+/// Driver-enable lead and lag, in sample times (1/16 bit): half a bit either side of the
+/// characters, ample for RS485 transceivers (enable times of a few hundred ns). Assertion and
+/// de-assertion are equal because embassy-stm32 0.6.0 programs DEDT from the assertion time.
+const DE_TIME: u8 = 8;
+
+bind_interrupts!(struct Irqs {
+    UART4 => BufferedInterruptHandler<UART4>;
+    USART2 => BufferedInterruptHandler<USART2>;
+});
+
+/// The clock tree of [`SYSCLK_HZ`].
+pub fn clock_config() -> embassy_stm32::Config {
+    use embassy_stm32::rcc::{Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
+    let mut config = embassy_stm32::Config::default();
+    config.rcc.hsi = true;
+    // HSI16 / 1 (DIVM) * 10 (N) / 2 (R) = 80 MHz (VCO 160 MHz).
+    const _: () = assert!(16_000_000 * 10 / 2 == SYSCLK_HZ);
+    config.rcc.pll = Some(Pll {
+        source: PllSource::HSI,
+        prediv: PllPreDiv::DIV1,
+        mul: PllMul::MUL10,
+        divp: None,
+        divq: None,
+        divr: Some(PllRDiv::DIV2),
+    });
+    config.rcc.sys = Sysclk::PLL1_R;
+    config
+}
+
+/// This chip's part of a UART's settings: the hardware driver enable's timing.
+pub fn uart_config(config: &mut usart::Config) {
+    config.de_assertion_time = DE_TIME;
+    config.de_deassertion_time = DE_TIME;
+}
+
+/// Why the chip last started, from RCC_CSR's reset flags, which are then cleared so that the
+/// next start reads its own.
+pub fn reset_cause() -> protocol::plc::ResetCause {
+    use protocol::plc::ResetCause;
+    let rcc = embassy_stm32::pac::RCC;
+    let csr = rcc.csr().read();
+    let cause = if csr.iwdgrstf() || csr.wwdgrstf() {
+        ResetCause::Watchdog
+    } else if csr.sftrstf() {
+        ResetCause::Software
+    } else if csr.borrstf() {
+        ResetCause::PowerOn
+    } else if csr.pinrstf() {
+        ResetCause::Pin
+    } else if csr.lpwrrstf() || csr.oblrstf() || csr.fwrstf() {
+        ResetCause::Other
+    } else {
+        ResetCause::PowerOn
+    };
+    rcc.csr().modify(|w| w.set_rmvf(true));
+    cause
+}
+
+/// Takes the peripherals this board uses. Fails only if a UART rejects its configuration.
+pub fn board(p: Peripherals, plc_line: protocol::plc::PlcLine) -> Result<Board, ConfigError> {
+    // Outputs first, driven OFF, so that nothing is ever ON before the gateway says so.
+    let outputs = Outputs::new(
+        [
+            (0, output(p.PB2)),
+            (1, output(p.PA2)),
+            (2, output(p.PA7)),
+            (3, output(p.PA6)),
+            (6, output(p.PB9)),
+            (7, output(p.PB8)),
+            (10, output(p.PD0)),
+            (11, output(p.PD1)),
+            (12, output(p.PD2)),
+            (13, output(p.PD7)),
+            (14, output(p.PD3)),
+        ],
+        OUTPUT_ON,
+    );
+    let leds = Leds::new(output(p.PB14), output(p.PA5), indicator_on_fault(p.PC9));
+    let inputs = Inputs::new(
+        [
+            (0, input(p.PC5)),
+            (1, input(p.PC4)),
+            (2, input(p.PC3)),
+            (3, input(p.PC2)),
+            (4, input(p.PC1)),
+            (5, input(p.PC0)),
+            (11, input(p.PD14)),
+            (12, input(p.PB0)),
+            (13, input(p.PA3)),
+            (14, input(p.PB4)),
+            (15, input(p.PB1)),
+        ],
+        input(p.PA4),
+        INPUT_ON,
+    );
+
+    let line_break = LineBreak::new(PinId::of(&*p.PA0), Some(PinId::of(&*p.PA15)));
+    pins::on_fault_release(PinId::of(&*p.PA15));
+    let bus = BufferedUart::new_with_de(
+        p.UART4,
+        p.PA1,
+        p.PA0,
+        p.PA15,
+        Irqs,
+        BUS_TX.take(),
+        BUS_RX.take(),
+        line_config(super::BUS_INITIAL_BAUD, protocol::plc::Parity::None),
+    )?;
+    pins::on_fault_release(PinId::of(&*p.PD4));
+    let plc = BufferedUart::new_with_de(
+        p.USART2,
+        p.PD6,
+        p.PD5,
+        p.PD4,
+        Irqs,
+        PLC_TX.take(),
+        PLC_RX.take(),
+        line_config(plc_line.baud, plc_line.parity),
+    )?;
+
+    Ok(Board {
+        bus: Rs485::new(bus, BUS_TX_CAPACITY, Some(line_break), None),
+        plc: Rs485::new(plc, PLC_TX_CAPACITY, None, None),
+        inputs,
+        outputs,
+        leds,
+        watchdog: Watchdog::new(p.IWDG),
+        settings_flash: settings_flash(p.FLASH),
+    })
+}

@@ -1,0 +1,170 @@
+//! The board: what the gateway task drives ([`Board`]) and every board-specific choice, in one
+//! module per board (the build picks one with a Cargo feature):
+//!
+//! | Feature | Module | Board |
+//! |---|---|---|
+//! | `board-l475` (default) | [`l475`] | ST B-L475E-IOT01A (STM32L475VG, hardware driver enable); what QEMU emulates |
+//! | `board-f103` | [`f103`] | an STM32F103C8 "blue pill" (driver enable as a GPIO) |
+//!
+//! A board module supplies the pins and peripherals ([`board`]), the clock tree, this chip's
+//! part of a UART's settings, the reset cause, the settings' flash range and the board's name;
+//! everything else in the firmware is the same for both.
+
+#[cfg(feature = "board-f103")]
+pub mod f103;
+#[cfg(feature = "board-l475")]
+pub mod l475;
+
+#[cfg(feature = "board-f103")]
+pub use f103::{board, clock_config, reset_cause, uart_config, MODEL_NAME, SETTINGS_RANGE};
+/// The emulator has no settings store.
+#[cfg(all(feature = "board-l475", feature = "hw"))]
+pub use l475::SETTINGS_RANGE;
+#[cfg(feature = "emulator")]
+pub use l475::SYSCLK_HZ;
+#[cfg(feature = "board-l475")]
+pub use l475::{board, clock_config, reset_cause, uart_config, MODEL_NAME};
+
+use embassy_stm32::gpio::{Input, Level, Output, Pin, Pull, Speed};
+use embassy_stm32::usart;
+use embassy_stm32::Peri;
+use static_cell::ConstStaticCell;
+
+use crate::discrete::{opposite, Inputs, Leds, Outputs};
+use crate::pins::{self, PinId};
+use crate::serial::Rs485;
+
+/// The bus starts at the rate every controller has after a break (complete edition §7-2-1); the
+/// gateway task switches it to the node's rate at once.
+pub const BUS_INITIAL_BAUD: u32 = protocol::line::BAUD_AFTER_BREAK.bits_per_second();
+/// Level of an input pin while its signal is ON (the 24 V input stage is non-inverting).
+pub const INPUT_ON: Level = Level::High;
+/// Level of an output pin while its signal is ON (OFF, the safe state, is the other level).
+pub const OUTPUT_ON: Level = Level::High;
+/// The gateway task must make progress at least this often, or the IWDG resets the chip.
+/// Generous: a 256-byte reply at 9.6 kbit/s keeps the task in one `await` for 267 ms.
+#[cfg(feature = "hw")]
+const WATCHDOG_TIMEOUT_US: u32 = 1_000_000;
+
+// UART ring buffers, in .bss. Each holds at least what the task writes or may leave unread at
+// once: a 16-byte bus frame, a Modbus RTU ADU (at most 256 bytes).
+pub(crate) static BUS_TX: ConstStaticCell<[u8; 32]> = ConstStaticCell::new([0; 32]);
+pub(crate) static BUS_RX: ConstStaticCell<[u8; 128]> = ConstStaticCell::new([0; 128]);
+pub(crate) static PLC_TX: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
+pub(crate) static PLC_RX: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
+/// The TX rings' sizes: a write never exceeds them (the driver refuses longer writes).
+pub(crate) const BUS_TX_CAPACITY: usize = 32;
+pub(crate) const PLC_TX_CAPACITY: usize = 256;
+
+/// Everything the gateway task drives.
+pub struct Board {
+    /// The RS485 bus to the controllers.
+    pub bus: Rs485,
+    /// The RS485 line to the PLC (Modbus RTU).
+    pub plc: Rs485,
+    /// The PIO inputs and the stop input.
+    pub inputs: Inputs,
+    /// The PIO outputs.
+    pub outputs: Outputs,
+    /// Run, bus link and alarm LEDs.
+    pub leds: Leds,
+    /// Fed by the gateway task's progress.
+    pub watchdog: Watchdog,
+    /// The flash for the settings store, taken by the gateway task.
+    pub settings_flash: Option<SettingsFlash>,
+}
+
+/// The flash the settings store writes, as sequential-storage wants it (async over blocking).
+#[cfg(feature = "hw")]
+pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<
+    embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>,
+>;
+/// No flash interface in QEMU.
+#[cfg(feature = "emulator")]
+pub type SettingsFlash = core::convert::Infallible;
+
+/// An RS485 line's UART settings: `baud`, 8 data bits, `parity`, one stop bit.
+pub fn line_config(baud: u32, parity: protocol::plc::Parity) -> usart::Config {
+    let mut config = usart::Config::default();
+    config.baudrate = baud;
+    config.parity = match parity {
+        protocol::plc::Parity::None => usart::Parity::ParityNone,
+        protocol::plc::Parity::Even => usart::Parity::ParityEven,
+        protocol::plc::Parity::Odd => usart::Parity::ParityOdd,
+    };
+    // Wake the task for every byte: the protocol stamps arrival times (Modbus t3.5, §5 time-outs),
+    // and QEMU never sets ISR.IDLE, which is the other wake-up.
+    config.eager_reads = Some(1);
+    uart_config(&mut config);
+    config
+}
+
+/// A PIO output, OFF, registered to be forced OFF on a fault.
+pub(crate) fn output(pin: Peri<'static, impl Pin>) -> Output<'static> {
+    pins::on_fault_drive(PinId::of(&*pin), OUTPUT_ON == Level::Low);
+    Output::new(pin, opposite(OUTPUT_ON), Speed::Low)
+}
+
+/// An LED that a fault turns on (the alarm LED).
+pub(crate) fn indicator_on_fault(pin: Peri<'static, impl Pin>) -> Output<'static> {
+    pins::on_fault_drive(PinId::of(&*pin), true);
+    Output::new(pin, Level::Low, Speed::Low)
+}
+
+/// A driver-enable pin driven by software (a board without hardware DE), off, and off on a fault.
+#[cfg_attr(feature = "board-l475", allow(dead_code))]
+pub(crate) fn driver_enable(pin: Peri<'static, impl Pin>) -> Output<'static> {
+    pins::on_fault_drive(PinId::of(&*pin), false);
+    Output::new(pin, Level::Low, Speed::VeryHigh)
+}
+
+/// A PIO input, pulled toward OFF so that an open wire reads OFF (and the stop input "stop").
+pub(crate) fn input(pin: Peri<'static, impl Pin>) -> Input<'static> {
+    let pull = match INPUT_ON {
+        Level::High => Pull::Down,
+        Level::Low => Pull::Up,
+    };
+    Input::new(pin, pull)
+}
+
+#[cfg(feature = "hw")]
+pub(crate) fn settings_flash(
+    flash: Peri<'static, embassy_stm32::peripherals::FLASH>,
+) -> Option<SettingsFlash> {
+    Some(embassy_embedded_hal::adapter::BlockingAsync::new(
+        embassy_stm32::flash::Flash::new_blocking(flash),
+    ))
+}
+
+#[cfg(feature = "emulator")]
+pub(crate) fn settings_flash(
+    _flash: Peri<'static, embassy_stm32::peripherals::FLASH>,
+) -> Option<SettingsFlash> {
+    None
+}
+
+/// The independent watchdog on the board; nothing in the emulator (QEMU has no IWDG model).
+pub struct Watchdog {
+    #[cfg(feature = "hw")]
+    iwdg: embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
+}
+
+impl Watchdog {
+    #[cfg(feature = "hw")]
+    pub(crate) fn new(iwdg: Peri<'static, embassy_stm32::peripherals::IWDG>) -> Watchdog {
+        let mut iwdg = embassy_stm32::wdg::IndependentWatchdog::new(iwdg, WATCHDOG_TIMEOUT_US);
+        iwdg.unleash();
+        Watchdog { iwdg }
+    }
+
+    #[cfg(feature = "emulator")]
+    pub(crate) fn new(_iwdg: Peri<'static, embassy_stm32::peripherals::IWDG>) -> Watchdog {
+        Watchdog {}
+    }
+
+    /// The gateway task made progress.
+    pub fn pet(&mut self) {
+        #[cfg(feature = "hw")]
+        self.iwdg.pet();
+    }
+}
