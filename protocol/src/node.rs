@@ -188,6 +188,21 @@ impl Node {
         }
     }
 
+    /// The same node as [`Node::new`]`(config)`, made in place: for a node built at compile
+    /// time in a `static` (with the default settings) that takes the settings loaded at
+    /// start-up. Built by value instead, the node (about 10 KB) and its parts would be
+    /// temporaries on the stack (measured on the MCU: 20 KB of stack at start-up).
+    pub fn configure(&mut self, config: GatewayConfig) {
+        self.gateway.configure(config);
+        self.receiver = Receiver::new(config.plc.baud).without_gap_check();
+        self.slave = Slave::new();
+        self.reply = ReplyBuffer::new();
+        self.pio = Pio::new(pio::Config::DEFAULT);
+        self.outputs = PioOutputs::SAFE;
+        self.idle_until = None;
+        self.dirty = true;
+    }
+
     /// Bytes received on the RS485 bus at `now`.
     pub fn bus_received(&mut self, now: Instant, bytes: &[u8]) {
         if !bytes.is_empty() {

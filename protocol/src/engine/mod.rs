@@ -153,17 +153,7 @@ pub struct Engine {
 impl Engine {
     /// An engine for `config`. With [`Config::establish`], the first outputs run §6-1.
     pub const fn new(config: Config) -> Engine {
-        let rtim = if config.establish {
-            RTIM_AFTER_BREAK
-        } else {
-            config.rtim
-        };
-        let retries = if config.retries > 3 {
-            3
-        } else {
-            config.retries
-        };
-        let config = Config { retries, ..config };
+        let (config, rtim) = Self::normalized(config);
         Engine {
             config,
             axes: AxisMap::new(AxisState::new(rtim)),
@@ -178,17 +168,72 @@ impl Engine {
             line_baud: config.baud,
             free_at: Instant::ZERO,
             break_until: None,
-            phase: if config.establish {
-                Some(Phase::SlowBaud)
-            } else {
-                None
-            },
+            phase: Self::first_phase(&config),
             settle_until: Instant::ZERO,
             schedule: Schedule::new(config.position_reads_per_cycle),
             rejoin: Rejoin::new(),
             job_cursor: 0,
             next_id: 0,
             bus: BusCounters::ZERO,
+        }
+    }
+
+    /// The same engine as [`Engine::new`]`(config)`, made in place, one field at a time, so
+    /// that nothing the size of the engine is built on the stack: the firmware keeps the node
+    /// in a `static` built at compile time and applies the settings it loads at start-up
+    /// through this. Anything in progress is dropped (no frame is half sent: call it only
+    /// between actions).
+    pub fn reset(&mut self, config: Config) {
+        let (config, rtim) = Self::normalized(config);
+        self.config = config;
+        for state in self.axes.values_mut() {
+            *state = AxisState::new(rtim);
+        }
+        for active in self.active.values_mut() {
+            *active = None;
+        }
+        for stop in self.stops.values_mut() {
+            *stop = None;
+        }
+        self.queue.clear();
+        self.events.clear();
+        self.in_flight = None;
+        self.retry = None;
+        self.pending = None;
+        self.deframer = Deframer::new();
+        self.line_baud = config.baud;
+        self.free_at = Instant::ZERO;
+        self.break_until = None;
+        self.phase = Self::first_phase(&config);
+        self.settle_until = Instant::ZERO;
+        self.schedule = Schedule::new(config.position_reads_per_cycle);
+        self.rejoin = Rejoin::new();
+        self.job_cursor = 0;
+        self.next_id = 0;
+        self.bus = BusCounters::ZERO;
+    }
+
+    /// `config` with its retries capped at 3, and the RTIM the axes start with.
+    const fn normalized(config: Config) -> (Config, crate::Rtim) {
+        let rtim = if config.establish {
+            RTIM_AFTER_BREAK
+        } else {
+            config.rtim
+        };
+        let retries = if config.retries > 3 {
+            3
+        } else {
+            config.retries
+        };
+        (Config { retries, ..config }, rtim)
+    }
+
+    /// Where the engine starts: §6-1 first, or polling at once.
+    const fn first_phase(config: &Config) -> Option<Phase> {
+        if config.establish {
+            Some(Phase::SlowBaud)
+        } else {
+            None
         }
     }
 

@@ -131,6 +131,23 @@ impl Gateway {
         }
     }
 
+    /// The same gateway as [`Gateway::new`]`(config)`, made in place (see [`Engine::reset`]).
+    pub fn configure(&mut self, config: GatewayConfig) {
+        self.engine.reset(config.bus);
+        self.config = config;
+        for axis in self.axes.values_mut() {
+            *axis = PlcAxis::new();
+        }
+        self.failsafe = FailSafe::new();
+        self.sync = SyncStart::new();
+        self.channel = Channel::new();
+        self.points = PointCache::new();
+        self.persist = Persist::new(&config);
+        self.plc_line_changed = false;
+        self.now = Instant::ZERO;
+        self.events_lost = 0;
+    }
+
     /// The bus master.
     pub fn engine(&self) -> &Engine {
         &self.engine
