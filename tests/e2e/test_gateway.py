@@ -38,6 +38,9 @@ from conftest import (
     G_VERSION,
     G_WATCHDOG,
     GATEWAY_UNIT,
+    ILLEGAL_DATA_ADDRESS,
+    ILLEGAL_DATA_VALUE,
+    ILLEGAL_FUNCTION,
     PNOW,
     POSR,
     REASON_CANCELLED,
@@ -47,8 +50,6 @@ from conftest import (
     wait_for,
 )
 
-# Modbus exception codes.
-ILLEGAL_FUNCTION, ILLEGAL_DATA_ADDRESS, ILLEGAL_DATA_VALUE = 1, 2, 3
 
 
 def motion_snapshot(gw, axes=(0, 1, 2)):
@@ -190,32 +191,18 @@ def test_alarm_and_reset(gateway):
     assert gw.control("alarm 2 74")["ok"] is False
 
 
-def channel(gw, request, timeout=10.0):
-    """One command-channel exchange: write REQ, wait for RESP, clear REQ, see RESP clear."""
-    assert gw.read(GATEWAY_UNIT, G_RESPONSE)[0] == 0, "response clear before a request"
-    gw.write(GATEWAY_UNIT, G_REQUEST, request)
-    response = wait_for(
-        lambda: (lambda r: r if r[0] != 0 else None)(gw.read(GATEWAY_UNIT, G_RESPONSE, 5)),
-        timeout,
-        f"response to {request}",
-    )
-    gw.write(GATEWAY_UNIT, G_REQUEST, 0)
-    assert gw.read(GATEWAY_UNIT, G_RESPONSE, 5) == [0] * 5, "response cleared"
-    return response
-
-
 def test_point_table_write_and_read_back(gateway):
     gw = gateway
     velocity = 4  # field offset from 0x400: VCMD
     value = 1234
     stores = gw.sim(0)["nv_writes"]
-    first = channel(gw, [2, 0, 5, velocity, value >> 16, value & 0xFFFF])
+    first = gw.channel([2, 0, 5, velocity, value >> 16, value & 0xFFFF])
     assert first[:4] == [2, 0, 0, value], first
     assert 1 <= first[4] < 0xFFFF, f"written with V5: {first}"
     assert gw.sim(0)["nv_writes"] == stores + 1
-    readback = channel(gw, [1, 0, 5, velocity, 0, 0])
+    readback = gw.channel([1, 0, 5, velocity, 0, 0])
     assert readback == [1, 0, 0, value, 0], readback
-    again = channel(gw, [2, 0, 5, velocity, value >> 16, value & 0xFFFF])
+    again = gw.channel([2, 0, 5, velocity, value >> 16, value & 0xFFFF])
     assert again == [2, 0, 0, value, 0xFFFF], f"unchanged: no V5 spent: {again}"
     assert gw.sim(0)["nv_writes"] == stores + 1
     # Invalid request: point 16.
