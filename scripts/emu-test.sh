@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The firmware in QEMU, end to end: installs what it needs (qemu-system-arm >= 10, the pinned
-# Rust toolchain, pytest + pyelftools in a venv at target/emu-venv), builds the emulator variant
-# and runs tests/emu/. Extra arguments go to pytest, e.g. `scripts/emu-test.sh -k break -v`.
+# Rust toolchain, pytest + pyelftools + pymodbus in a venv at target/emu-venv), builds the
+# emulator variant and the simulated controllers (rc-sim), and runs tests/emu/. Extra arguments go to pytest, e.g. `scripts/emu-test.sh -k break -v`.
 # Each test's stack high-water mark is appended to target/emu/stack-hwm.log (scripts/size-report.sh
 # reports the largest).
 set -euo pipefail
@@ -9,10 +9,12 @@ cd "$(dirname "$0")/.."
 
 PYTEST_VERSION=8.4.2
 PYELFTOOLS_VERSION=0.32
+PYMODBUS_VERSION=3.16.1
 
 scripts/qemu-install.sh
 rustup toolchain install >/dev/null 2>&1 || rustup toolchain install
 elf=$(scripts/emu-build.sh)
+cargo build --locked --quiet -p rc-host --bin rc-sim
 
 venv=target/emu-venv
 has_pip() { [[ -x "$1" ]] && "$1" -m pip --version >/dev/null 2>&1; }
@@ -28,7 +30,7 @@ else
     python=python3
     user=(--user)
 fi
-want=("pytest==$PYTEST_VERSION" "pyelftools==$PYELFTOOLS_VERSION")
+want=("pytest==$PYTEST_VERSION" "pyelftools==$PYELFTOOLS_VERSION" "pymodbus==$PYMODBUS_VERSION")
 if ! "$python" - "${want[@]}" <<'PY'
 import sys
 from importlib.metadata import version, PackageNotFoundError

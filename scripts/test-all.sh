@@ -34,6 +34,9 @@ scripts/e2e.sh
 step "firmware: release build"
 cargo fw --locked
 
+step "firmware in QEMU: the real ELF (emulator build) against simulated controllers, Modbus and discrete I/O"
+scripts/emu-test.sh
+
 step "demo: README's run-without-hardware command"
 scripts/demo.sh > /dev/null
 

@@ -1,49 +1,64 @@
-"""Emulator harness: the real firmware (emulator build) in QEMU's `b-l475e-iot01a` machine.
+"""Emulator harness: the real firmware (emulator build) in QEMU's `b-l475e-iot01a` machine, with
+simulated Robo Cylinder controllers on its bus and a Modbus RTU master on its PLC line.
 
 Each test gets a fresh QEMU, started paused (`-S`) with
-- the PLC line (USART2, `-serial` #1) on a loopback TCP socket with TCP_NODELAY,
-- the RS485 bus (UART4, `-serial` #3) on a pseudo-terminal through `-chardev serial`, so that the
-  rate the firmware programs shows as the terminal's termios speed,
+- the PLC line (USART2, `-serial` #1) on a loopback TCP socket with TCP_NODELAY, where pymodbus
+  (a Modbus RTU master nobody in this project wrote) talks RTU framing,
+- the RS485 bus (UART4, `-serial` #3) on the pseudo-terminal of `rc-sim`, the project's simulated
+  controllers in real time (`--slow-baud-is-break`: the firmware's switch to 9600 bit/s right
+  before its break stands for the break, which a pseudo-terminal cannot carry; `--log`: every
+  frame, decoded, in `rc-sim.log`, which the tests read as the controllers' view),
 - semihosting on QEMU's standard output (the firmware's log, its `ready` line, panics),
 - a qtest socket to drive input pins and read GPIO registers and RAM,
 - a QMP socket to resume the machine.
+QEMU runs without `-icount`: its virtual clock is then the host's, the clock rc-sim keeps too.
+With `-icount shift=auto` the guest's clock runs fast to catch up after any stall of QEMU, so the
+firmware's reply time-outs expire early against rc-sim's real-time controllers (seen: retries
+colliding with late replies, axes going offline).
 Before resuming, RAM between the end of the firmware's statics and the top of the stack is painted
 with a pattern; at the end of the test the lowest overwritten address gives the stack high-water
 mark, appended to `target/emu/stack-hwm.log`.
 
-Nothing is skipped: a missing QEMU or firmware ELF fails the test. Every wait is bounded and QEMU
-is always killed in teardown.
+Nothing is skipped: a missing QEMU, rc-sim or firmware ELF fails the test. Every wait is bounded
+and QEMU and rc-sim are always killed in teardown.
 """
 
 import json
 import os
-import pty
-import select
+import re
 import shutil
 import socket
 import subprocess
-import termios
+import sys
 import threading
 import time
-import tty
 from pathlib import Path
 
 import pytest
 from elftools.elf.elffile import ELFFile
+from pymodbus import FramerType
+from pymodbus.client import ModbusTcpClient
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "tests" / "pyshared"))
+
+from plc import PlcMaster  # noqa: E402
+
 QEMU = os.environ.get("QEMU", "qemu-system-arm")
+RC_SIM = Path(os.environ.get("RC_SIM", ROOT / "target" / "debug" / "rc-sim"))
 HWM_LOG = ROOT / "target" / "emu" / "stack-hwm.log"
 
-ESC = 0x1B
 PAINT = 0xA5
+# The bus commands that only read (status and position polls, memory reads): everything else
+# changes something on an axis.
+READS = {"Status", "ReadMemory"}
 
 # GPIO register blocks (RM0351): port n at 0x4800_0000 + 0x400 n.
 GPIO_BASE = 0x4800_0000
 MODER, IDR, ODR = 0x00, 0x10, 0x14
 MODE_INPUT, MODE_OUTPUT, MODE_AF, MODE_ANALOG = 0, 1, 2, 3
 
-# The board's pin table (src/board.rs), as (port letter, pin).
+# The board's pin table (src/board/l475.rs), as (port letter, pin).
 INPUTS = {  # PIO bit -> pin
     0: ("c", 5), 1: ("c", 4), 2: ("c", 3), 3: ("c", 2), 4: ("c", 1), 5: ("c", 0),
     11: ("d", 14), 12: ("b", 0), 13: ("a", 3), 14: ("b", 4), 15: ("b", 1),
@@ -157,20 +172,56 @@ class Qmp:
         self.sock.close()
 
 
-class Emulator:
-    """A running QEMU with the firmware, and the host ends of its lines and pins."""
+class Plc(PlcMaster):
+    """pymodbus on the firmware's PLC line, RTU framing over QEMU's socket."""
 
-    def __init__(self, elf, workdir):
+    def __init__(self, port):
+        client = ModbusTcpClient("127.0.0.1", port=port, framer=FramerType.RTU, timeout=1, retries=2)
+        if not client.connect():
+            raise AssertionError(f"cannot connect to QEMU's PLC socket on port {port}")
+        super().__init__(client)
+
+    def raw_exchange(self, frame, wait=0.3):
+        """Send `frame` as it is; whatever comes back within `wait` seconds."""
+        sock = self.client.socket
+        sock.setblocking(False)
+        try:
+            while True:  # nothing stale left for the answer
+                try:
+                    if not sock.recv(65536):
+                        break
+                except BlockingIOError:
+                    break
+            sock.sendall(bytes(frame))
+            deadline = time.monotonic() + wait
+            received = b""
+            while time.monotonic() < deadline:
+                try:
+                    received += sock.recv(65536)
+                except BlockingIOError:
+                    time.sleep(0.01)
+            return received
+        finally:
+            sock.setblocking(True)
+
+    def close(self):
+        self.client.close()
+
+
+class Emulator:
+    """A running QEMU with the firmware, rc-sim on its bus, and the host ends of its pins."""
+
+    def __init__(self, elf, workdir, axes):
         self.elf = elf
         self.workdir = workdir
+        self.axes = axes
         self.log_lines = []
         self.log_lock = threading.Lock()
         self.process = None
+        self.sim = None
         self.plc = None
         self.qtest = None
         self.qmp = None
-        self._bus_rx = b""
-        self._plc_rx = b""
         self.symbols = elf_symbols(elf)
 
     # ------------------------------------------------------------------ lifecycle
@@ -178,18 +229,24 @@ class Emulator:
     def start(self):
         if shutil.which(QEMU) is None:
             pytest.fail(f"{QEMU} not found: run scripts/qemu-install.sh (or scripts/emu-test.sh)")
-        # The bus: a pseudo-terminal. We keep the master (our end) and a slave descriptor (to read
-        # the termios QEMU sets through its own descriptor of the same terminal).
-        self.bus_master, self.bus_slave = pty.openpty()
-        tty.setraw(self.bus_slave)
-        os.set_blocking(self.bus_master, False)
-        bus_path = os.ttyname(self.bus_slave)
+        if not RC_SIM.is_file():
+            pytest.fail(f"{RC_SIM} missing: cargo build -p rc-host --bin rc-sim")
+        self.sim_log_path = self.workdir / "rc-sim.log"
+        with open(self.sim_log_path, "wb") as sim_log:
+            self.sim = subprocess.Popen(
+                [str(RC_SIM), "--pty", "--axes", self.axes, "--slow-baud-is-break", "--log"],
+                stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=sim_log,
+            )
+        first = self.sim.stdout.readline().decode().split()
+        if len(first) != 2 or first[0] != "PTY":
+            raise AssertionError(f"rc-sim did not start: {first} {self.sim_log()}")
+        bus_path = first[1]
         plc_port = free_port()
         qtest_path = self.workdir / "qtest.sock"
         qmp_path = self.workdir / "qmp.sock"
         self.stderr_path = self.workdir / "qemu.stderr"
         args = [
-            QEMU, "-M", "b-l475e-iot01a", "-accel", "tcg", "-icount", "shift=auto",
+            QEMU, "-M", "b-l475e-iot01a", "-accel", "tcg",
             "-nographic", "-monitor", "none", "-S",
             "-kernel", str(self.elf),
             "-semihosting-config", "enable=on,target=native",
@@ -208,9 +265,8 @@ class Emulator:
         self._check_alive("starting")
         self.qtest = Qtest(qtest_path)
         self.qmp = Qmp(qmp_path)
-        self.plc = connect(("127.0.0.1", plc_port))
-        self.plc.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self.plc.setblocking(False)
+        wait_for(lambda: _listening(plc_port) or self._dead(), 20, "QEMU's PLC socket")
+        self.plc = Plc(plc_port)
         self._paint_stack()
         self.qmp.execute("cont")
         # Bytes sent before the firmware has enabled its receivers are lost: wait for its word.
@@ -252,22 +308,17 @@ class Emulator:
                 hwm = self.stack_high_water_mark()
         except Exception as error:  # the measurement must never hide the test's own result
             print(f"stack high-water mark not measured: {error}")
-        for closer in (self.qtest, self.qmp, self.plc):
+        for closer in (self.plc, self.qtest, self.qmp):
             if closer is not None:
                 try:
                     closer.close()
                 except OSError:
                     pass
-        if self.process is not None and self.process.poll() is None:
-            self.process.kill()
-        if self.process is not None:
-            self.process.wait(timeout=10)
-        for fd in ("bus_master", "bus_slave"):
-            if hasattr(self, fd):
-                try:
-                    os.close(getattr(self, fd))
-                except OSError:
-                    pass
+        for process in (self.process, self.sim):
+            if process is not None and process.poll() is None:
+                process.kill()
+            if process is not None:
+                process.wait(timeout=10)
         return hwm
 
     # ------------------------------------------------------------------ stack
@@ -286,73 +337,38 @@ class Emulator:
         untouched = len(ram) - len(ram.lstrip(bytes([PAINT])))
         return high - (low + untouched)
 
-    # ------------------------------------------------------------------ lines
+    def request_panic(self):
+        """Makes the gateway task panic (emulator build only: `EMU_PANIC` in src/gateway.rs)."""
+        self.qtest.cmd(f"writeb {self.symbols['EMU_PANIC']:#x} 0x1")
 
-    def plc_send(self, data):
-        self.plc.setblocking(True)
-        self.plc.sendall(bytes(data))
-        self.plc.setblocking(False)
+    # ------------------------------------------------------------------ the bus, as rc-sim saw it
 
-    def bus_send(self, data):
-        data = bytes(data)
-        while data:
-            _, writable, _ = select.select([], [self.bus_master], [], 5)
-            if not writable:
-                raise AssertionError("bus pseudo-terminal not writable")
-            data = data[os.write(self.bus_master, data):]
-
-    def _poll_plc(self):
+    def sim_log(self):
         try:
-            chunk = self.plc.recv(65536)
-            if not chunk:
-                raise AssertionError("QEMU closed the PLC socket")
-            self._plc_rx += chunk
-        except BlockingIOError:
-            pass
+            return self.sim_log_path.read_text(errors="replace").splitlines()
+        except OSError:
+            return []
 
-    def _poll_bus(self):
-        try:
-            self._bus_rx += os.read(self.bus_master, 65536)
-        except (BlockingIOError, OSError):
-            pass
+    def bus_commands(self, axis=None):
+        """Every command the controllers received, in order: (time s, axis, command name)."""
+        found = []
+        for line in self.sim_log():
+            m = re.match(r"\s*([\d.]+) >> Request \{ axis: Axis\((\d+)\), command: (\w+)", line)
+            if m and (axis is None or int(m.group(2)) == axis):
+                found.append((float(m.group(1)), int(m.group(2)), m.group(3)))
+        return found
 
-    def plc_receive(self, count, timeout=5):
-        """Exactly `count` bytes from the PLC line (fails on time-out)."""
-        def enough():
-            self._check_alive("reading the PLC line")
-            self._poll_plc()
-            return len(self._plc_rx) >= count
+    def bus_changes(self, axis=None):
+        """The commands that change something on an axis (not status, position or memory reads)."""
+        return [c for c in self.bus_commands(axis) if c[2] not in READS]
 
-        wait_for(enough, timeout, f"{count} bytes on the PLC line (have {self._plc_rx!r})")
-        data, self._plc_rx = self._plc_rx[:count], self._plc_rx[count:]
-        return data
-
-    def bus_receive(self, count, timeout=5):
-        def enough():
-            self._check_alive("reading the bus")
-            self._poll_bus()
-            return len(self._bus_rx) >= count
-
-        wait_for(enough, timeout, f"{count} bytes on the bus (have {self._bus_rx!r})")
-        data, self._bus_rx = self._bus_rx[:count], self._bus_rx[count:]
-        return data
-
-    def quiet(self, seconds=0.2):
-        """Whatever arrives on both lines within `seconds`: (bus bytes, PLC bytes)."""
-        time.sleep(seconds)
-        self._poll_bus()
-        self._poll_plc()
-        bus, plc = self._bus_rx, self._plc_rx
-        self._bus_rx = self._plc_rx = b""
-        return bus, plc
-
-    def bus_speed(self):
-        """The pseudo-terminal's termios output speed, in bit/s (the rate the guest set)."""
-        speed = termios.tcgetattr(self.bus_slave)[5]
-        for name in dir(termios):
-            if name.startswith("B") and name[1:].isdigit() and getattr(termios, name) == speed:
-                return int(name[1:])
-        return speed
+    def bus_events(self):
+        """rc-sim's line events in order: breaks, rate changes, communication changes."""
+        events = []
+        for line in self.sim_log():
+            if " -- " in line or "communication-change" in line:
+                events.append(line.split(None, 1)[1])
+        return events
 
     # ------------------------------------------------------------------ pins
 
@@ -380,22 +396,26 @@ class Emulator:
         for bit, pin in INPUTS.items():
             self.set_pin(pin, word >> bit & 1)
 
-    # ------------------------------------------------------------------ bring-up commands
 
-    def command(self, body, answer, timeout=5):
-        """A bring-up command frame (ESC + body, padded to 16 bytes); waits for its answer."""
-        frame = bytes([ESC]) + body
-        frame += b" " * (16 - len(frame))
-        self.plc_send(frame)
-        got = self.plc_receive(2, timeout)
-        assert got == bytes([ESC]) + answer, f"answer to {body!r}: {got!r}"
+def _listening(port):
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=1):
+            return True
+    except OSError:
+        return False
 
 
 def elf_symbols(path):
     with open(path, "rb") as f:
         table = ELFFile(f).get_section_by_name(".symtab")
         wanted = ("__sheap", "_stack_start", "__ebss", "__sbss", "__sdata")
-        return {s.name: s["st_value"] for s in table.iter_symbols() if s.name in wanted}
+        found = {}
+        for symbol in table.iter_symbols():
+            if symbol.name in wanted:
+                found[symbol.name] = symbol["st_value"]
+            elif "EMU_PANIC" in symbol.name:  # mangled: rc_gateway::gateway::EMU_PANIC
+                found["EMU_PANIC"] = symbol["st_value"]
+        return found
 
 
 def _build_elf():
@@ -425,8 +445,10 @@ def pytest_runtest_makereport(item, call):
 
 @pytest.fixture
 def emu(request, elf, tmp_path):
-    """A fresh QEMU running the firmware, past its `ready` line."""
-    emulator = Emulator(elf, tmp_path)
+    """A fresh QEMU running the firmware, past its `ready` line, with one simulated axis (axis
+    0: the firmware's default configuration) on its bus. `@pytest.mark.axes("0-3")` gives more."""
+    marker = request.node.get_closest_marker("axes")
+    emulator = Emulator(elf, tmp_path, marker.args[0] if marker else "1")
     try:
         emulator.start()
         yield emulator
@@ -440,5 +462,12 @@ def emu(request, elf, tmp_path):
         if failed is not None and failed.failed:
             print("---- firmware log (semihosting) ----")
             print("\n".join(emulator.log()[-60:]))
+            print("---- bus (rc-sim), without status polls ----")
+            lines = [line for line in emulator.sim_log() if "command: Status }" not in line and "code: Status," not in line]
+            print("\n".join(line[:200] for line in lines[-80:]))
             print("---- QEMU stderr ----")
             print(emulator.stderr()[-3000:])
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "axes(spec): the simulated axes on the bus (rc-sim --axes)")

@@ -1,0 +1,169 @@
+"""The real firmware ELF in QEMU driven the way a PLC wired to its terminals drives it: through the
+discrete inputs (QEMU's GPIO, qtest `set_irq_in`) with the outputs read back from the GPIO
+registers, and rc-sim's controller on the bus. The discrete I/O drives axis 0 (the firmware's
+default PIOAXIS), PCON-style (pattern 0): PC1-PC32 select a point, CSTR starts, HOME homes,
+*STP pauses (OFF = stop), RES resets an alarm, SON is the servo; PM1-PM8, PEND, HEND, MOVE, SV,
+LINK and *ALM answer.
+
+Only the point table is set up over Modbus first (as commissioning would, with the PLC watchdog
+off: no Modbus master stays on this line); everything after that goes through the pins.
+"""
+
+import time
+
+from conftest import INPUTS, STOP_INPUT, wait_for
+from plc import DRG1, G_FAILSAFE, G_WATCHDOG, GATEWAY_UNIT, LINK, LINK_ONLINE, unit
+
+# Input bits (PIO word) and output bits.
+PC1, PC2, HOME, STP_N, CSTR, RES, SON = 0, 1, 11, 12, 13, 14, 15
+PM1, PM2, MOVE, HEND, PEND, SV, LINK_OUT, ALM_N = 0, 1, 6, 10, 11, 12, 13, 14
+ROW = 0x1000
+
+
+class Pins:
+    """The PLC's outputs (our inputs), as levels held until changed."""
+
+    def __init__(self, emu):
+        self.emu = emu
+        self.word = 0
+
+    def set(self, bit, on):
+        self.word = self.word | 1 << bit if on else self.word & ~(1 << bit)
+        self.emu.set_pin(INPUTS[bit], on)
+
+    def pulse(self, bit, seconds=0.1):
+        """ON long enough for the input filter to see it, then OFF."""
+        self.set(bit, True)
+        time.sleep(seconds)
+        self.set(bit, False)
+
+    def select(self, point):
+        for bit in range(6):
+            self.set(PC1 + bit, point >> bit & 1)
+
+
+def output(emu, bit):
+    return emu.outputs() >> bit & 1
+
+
+def wait_output(emu, bit, level, timeout, what):
+    wait_for(lambda: output(emu, bit) == level, timeout, what, interval=0.02)
+
+
+def commissioned(emu, points):
+    """The cabinet as wired: stop chain closed, *STP ON; the point table written over Modbus
+    with the watchdog off; then the Modbus master leaves."""
+    plc = emu.plc
+    emu.set_pin(STOP_INPUT, True)
+    pins = Pins(emu)
+    pins.set(STP_N, True)
+    wait_for(lambda: plc.read(unit(0), LINK)[0] == LINK_ONLINE, 20, "axis 0 online")
+    plc.write(GATEWAY_UNIT, G_WATCHDOG, 0)
+    plc.write(GATEWAY_UNIT, G_FAILSAFE, 0)  # acknowledge the stop input open at power-up
+    for n, (position, speed) in points.items():
+        values = [position >> 16, position & 0xFFFF, 0, 10, 0, speed, 0, 0, 0, 0, 30, 30, 0, 0, 0]
+        plc.write(unit(0), ROW + 16 * n, values)
+        wait_for(lambda: _row_stored(plc, n, values), 10, f"row {n} stored")
+    assert plc.read(unit(0), DRG1) == [0], "Modbus left the axis alone"
+    wait_output(emu, LINK_OUT, 1, 5, "LINK")
+    return pins
+
+
+def _row_stored(plc, n, values):
+    try:
+        return plc.read(unit(0), ROW + 16 * n, 15)[:6] == values[:6]
+    except Exception:  # 04 while the row is fetched
+        return False
+
+
+def test_son_home_and_move_to_a_point(emu):
+    pins = commissioned(emu, {2: (30_00, 50_00)})
+    # SON (OFF) owns the servo: a servo that is on (the controller's own power-up) goes off.
+    wait_output(emu, SV, 0, 10, "SV off while SON is OFF")
+    pins.set(SON, True)
+    wait_output(emu, SV, 1, 10, "SV")
+    assert "Servo" in [c[2] for c in emu.bus_changes(0)]
+    assert output(emu, ALM_N) == 1, "*ALM ON: no alarm"
+    pins.pulse(HOME)
+    wait_output(emu, HEND, 1, 20, "HEND")
+    assert "Home" in [c[2] for c in emu.bus_changes(0)]
+    pins.select(2)
+    pins.pulse(CSTR)
+    wait_output(emu, PEND, 1, 15, "PEND")
+    wait_for(lambda: emu.outputs() & 0xF == 2, 5, "PM1-PM8 show point 2")
+    assert output(emu, MOVE) == 0
+    moves = [c for c in emu.bus_changes(0) if c[2] == "MoveToPoint"]
+    assert len(moves) == 1, moves
+    # SON OFF: the servo goes off.
+    pins.set(SON, False)
+    wait_output(emu, SV, 0, 10, "SV off")
+
+
+def test_stp_stops_a_move(emu):
+    pins = commissioned(emu, {3: (70_00, 10_00)})
+    pins.set(SON, True)
+    wait_output(emu, SV, 1, 10, "SV")
+    pins.pulse(HOME)
+    wait_output(emu, HEND, 1, 20, "HEND")
+    pins.select(3)
+    pins.pulse(CSTR)
+    wait_output(emu, MOVE, 1, 10, "MOVE")
+    before = len(emu.bus_changes(0))
+    pins.set(STP_N, False)
+    wait_output(emu, MOVE, 0, 10, "stopped")
+    assert "CancelMotion" in [c[2] for c in emu.bus_changes(0)[before:]]
+    assert emu.outputs() & 0xF != 3, "PM1-PM8 do not show point 3: never reached"
+    # While *STP is OFF, CSTR is ignored: nothing more goes out.
+    settled = len(emu.bus_changes(0))
+    pins.pulse(CSTR)
+    time.sleep(0.5)
+    assert [c[2] for c in emu.bus_changes(0)[settled:]] in ([], ["CancelMotion"]), "no move"
+    assert output(emu, MOVE) == 0
+    # *STP back ON: the move does not resume by itself; a new CSTR starts it.
+    pins.set(STP_N, True)
+    time.sleep(0.5)
+    assert output(emu, MOVE) == 0
+    pins.pulse(CSTR)
+    wait_output(emu, MOVE, 1, 10, "moving again")
+
+
+def test_res_clears_an_alarm(emu):
+    pins = commissioned(emu, {})
+    pins.set(SON, True)
+    wait_output(emu, SV, 1, 10, "SV")
+    pins.pulse(HOME)
+    wait_output(emu, HEND, 1, 20, "HEND")
+    # Point 9 was never written: the controller answers the move with an alarm.
+    pins.select(9)
+    pins.pulse(CSTR)
+    wait_output(emu, ALM_N, 0, 10, "*ALM OFF: alarm")
+    from conftest import LED_ALARM
+
+    wait_for(lambda: emu.odr(LED_ALARM) == 1, 5, "alarm LED on")
+    pins.pulse(RES)
+    wait_output(emu, ALM_N, 1, 10, "*ALM ON: reset")
+    assert "Reset" in [c[2] for c in emu.bus_changes(0)]
+    # SON is still ON: the servo comes back after the reset (which turned it off).
+    wait_output(emu, SV, 1, 10, "SV again")
+    wait_for(lambda: emu.odr(LED_ALARM) == 0, 5, "alarm LED off")
+
+
+def test_the_stop_input_stops_a_move_and_blocks_the_next(emu):
+    pins = commissioned(emu, {3: (70_00, 10_00)})
+    pins.set(SON, True)
+    wait_output(emu, SV, 1, 10, "SV")
+    pins.pulse(HOME)
+    wait_output(emu, HEND, 1, 20, "HEND")
+    pins.select(3)
+    pins.pulse(CSTR)
+    wait_output(emu, MOVE, 1, 10, "MOVE")
+    before = len(emu.bus_changes(0))
+    emu.set_pin(STOP_INPUT, False)  # the stop chain opens
+    wait_output(emu, MOVE, 0, 10, "stopped")
+    assert "CancelMotion" in [c[2] for c in emu.bus_changes(0)[before:]]
+    assert emu.plc.read(GATEWAY_UNIT, G_FAILSAFE)[0] & 2, "latched: the stop input"
+    settled = len(emu.bus_changes(0))
+    pins.pulse(CSTR)
+    time.sleep(0.5)
+    assert all(c[2] == "CancelMotion" for c in emu.bus_changes(0)[settled:]), "no move while open"
+    assert output(emu, MOVE) == 0
