@@ -15,11 +15,12 @@ use std::time::{Duration, Instant};
 
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::sys::termios::{self, BaudRate, SetArg};
+use protocol::alarm::AlarmCode;
 use protocol::frame::Packet;
 use protocol::line::Baud;
 use protocol::{Axis, Command, Deframer, Reply, Request, Rtim};
 use rc_host::sim::realtime::{
-    bus_at_line, Ended, Handle, Options, Outcome, Pty, RealTime, TcpServer, Transport,
+    bus_at_line, Control, Ended, Handle, Options, Outcome, Pty, RealTime, TcpServer, Transport,
 };
 use rc_host::sim::BusConfig;
 
@@ -188,6 +189,40 @@ fn servo(reply: &Reply) -> bool {
 }
 
 // ----- pseudo-terminal -----
+
+/// `--control` in `rc-sim`: faults injected into a running bus reach the master on the next pass.
+#[test]
+fn controls_cut_an_axis_off_and_raise_an_alarm_while_running() {
+    let pty = Pty::open(Baud::B115200).unwrap();
+    let port = open_port(&pty);
+    let mut realtime = realtime(Options::default());
+    let (sender, receiver) = std::sync::mpsc::channel();
+    realtime.set_control(receiver);
+    let handle = realtime.spawn(Transport::Pty(pty)).unwrap();
+    let mut master = Master::new(port);
+    let status = request(1, Command::Status);
+    assert_eq!(
+        master.transact(&status).report().unwrap().alarm,
+        AlarmCode::NONE
+    );
+
+    sender.send(Control::Silent(axis(1), true)).unwrap();
+    std::thread::sleep(Duration::from_millis(100)); // several passes of the loop
+    master.expect_silence(&status);
+    master.transact(&request(0, Command::Status)); // the other axis still answers
+
+    sender.send(Control::Silent(axis(1), false)).unwrap();
+    sender
+        .send(Control::Alarm(axis(1), AlarmCode(0xE0)))
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(100));
+    assert_eq!(
+        master.transact(&status).report().unwrap().alarm,
+        AlarmCode(0xE0)
+    );
+    let outcome = handle.stop().unwrap();
+    assert_eq!(outcome.ended, Ended::Stopped);
+}
 
 #[test]
 fn pty_status_servo_and_missing_axis() {

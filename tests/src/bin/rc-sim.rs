@@ -26,7 +26,9 @@ use clap::{ArgGroup, Parser};
 use nix::sys::signal::{self, SigHandler, Signal};
 use protocol::line::Baud;
 use protocol::{Axis, Rtim};
-use rc_host::sim::realtime::{bus_at_line, Ended, Options, Pty, RealTime, TcpServer, Transport};
+use rc_host::sim::realtime::{
+    bus_at_line, Control, Ended, Options, Pty, RealTime, TcpServer, Transport,
+};
 use rc_host::sim::{BusConfig, Faults};
 
 const ABOUT: &str = "\
@@ -117,6 +119,11 @@ struct Cli {
     /// Noise bytes per burst, at most.
     #[arg(long, value_name = "N", default_value_t = 3)]
     noise_max: u8,
+    /// Read faults to inject from standard input, one per line: `silent AXIS on|off`,
+    /// `alarm AXIS CODE` (hex, 80-FF), `power AXIS MS`; each is answered `OK` or `ERR why` on
+    /// standard output.
+    #[arg(long)]
+    control: bool,
     /// Exit after this many seconds.
     #[arg(long, value_name = "SECS", value_parser = parse_seconds)]
     duration: Option<Duration>,
@@ -207,6 +214,33 @@ fn parse_seconds(text: &str) -> Result<Duration, String> {
         .ok_or_else(|| format!("{text:?}: not a number of seconds"))
 }
 
+/// `--control`: one line of standard input at a time, answered on standard output, until the
+/// input ends or the simulation does.
+fn read_controls(axes: &[Axis], sender: &std::sync::mpsc::Sender<Control>) {
+    for line in std::io::stdin().lines() {
+        let Ok(line) = line else { return };
+        let answer = match Control::parse(&line) {
+            Ok(control) => {
+                if !axes.contains(&control.axis()) {
+                    format!("ERR axis {} is not on the bus", control.axis().get())
+                } else if sender.send(control).is_err() {
+                    return;
+                } else {
+                    "OK".to_string()
+                }
+            }
+            Err(why) => format!("ERR {why}"),
+        };
+        let mut out = std::io::stdout().lock();
+        if writeln!(out, "{answer}")
+            .and_then(|()| out.flush())
+            .is_err()
+        {
+            return;
+        }
+    }
+}
+
 static STOP: AtomicBool = AtomicBool::new(false);
 
 extern "C" fn on_signal(_: nix::libc::c_int) {
@@ -280,6 +314,14 @@ fn run(cli: &Cli) -> std::io::Result<()> {
         cli.rtim
     );
     let mut realtime = RealTime::new(bus_at_line(config, &cli.axes.0, baud, rtim), options);
+    if cli.control {
+        let (sender, receiver) = std::sync::mpsc::channel();
+        realtime.set_control(receiver);
+        let axes = cli.axes.0.clone();
+        std::thread::Builder::new()
+            .name("control".into())
+            .spawn(move || read_controls(&axes, &sender))?;
+    }
     let ended = realtime.run(&mut transport, &STOP)?;
     let why = match ended {
         Ended::Stopped => "stopped by a signal",

@@ -93,14 +93,17 @@
 //!
 //! Either way the bus runs from the start of [`RealTime::run`], client or not.
 
+mod control;
 mod log;
 mod transport;
 
+pub use control::Control;
 pub use transport::{Pty, TcpServer, Transport};
 
 use std::collections::VecDeque;
 use std::io;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::Receiver;
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -215,6 +218,7 @@ pub struct RealTime {
     stats: RealTimeStats,
     queue: VecDeque<u8>,
     log: FrameLog,
+    control: Option<Receiver<Control>>,
 }
 
 impl RealTime {
@@ -226,7 +230,14 @@ impl RealTime {
             stats: RealTimeStats::default(),
             queue: VecDeque::new(),
             log: FrameLog::default(),
+            control: None,
         }
+    }
+
+    /// Take [`Control`]s from `receiver` while running: each is applied at the next pass of
+    /// the loop (within [`Options::max_sleep`]) and noted in the log.
+    pub fn set_control(&mut self, receiver: Receiver<Control>) {
+        self.control = Some(receiver);
     }
 
     /// The bus.
@@ -316,6 +327,7 @@ impl RealTime {
             }
 
             self.deliver(now, transport)?;
+            self.apply_controls(now);
 
             let now = clock(Instant::now());
             let mut sleep = self.options.max_sleep;
@@ -345,6 +357,19 @@ impl RealTime {
             stop,
             thread: Some(thread),
         })
+    }
+
+    fn apply_controls(&mut self, now: u64) {
+        let Some(receiver) = &self.control else {
+            return;
+        };
+        let controls: Vec<Control> = receiver.try_iter().collect();
+        for control in controls {
+            match control.apply(&mut self.bus) {
+                Ok(()) => self.note(now, &format!("control: {control:?}")),
+                Err(why) => self.note(now, &format!("control refused: {why}")),
+            }
+        }
     }
 
     fn line_rate(&mut self, now: u64, baud: Baud) {
