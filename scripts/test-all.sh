@@ -31,6 +31,9 @@ cargo test --locked
 step "end-to-end: pymodbus -> rc-gateway-host (PTY) -> simulated actuators"
 scripts/e2e.sh
 
+step "interop: libmodbus and mbpoll -> rc-gateway-host (PTY) -> simulated actuators"
+scripts/interop.sh
+
 step "firmware: release build"
 cargo fw --locked
 
