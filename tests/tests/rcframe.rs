@@ -535,3 +535,23 @@ fn bad_command_line_input_exits_2() {
         assert!(!out.stderr.is_empty(), "{args:?}");
     }
 }
+
+#[test]
+fn alarm_texts_come_from_the_codec_table() {
+    let out = rcframe(&["alarm", "E0"]);
+    assert_eq!(out.status.code(), Some(0));
+    let line: Value = serde_json::from_str(stdout(&out).trim()).unwrap();
+    assert_eq!(line["code"], "E0");
+    assert_eq!(line["level"], "Error");
+    assert_eq!(line["text"], protocol::alarm::AlarmCode(0xE0).text());
+
+    let all = stdout(&rcframe(&["alarm"]));
+    let codes: Vec<Value> = all
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert!(codes.iter().any(|c| c["code"] == "B1"), "{all}");
+    assert!(codes.len() > 10, "{all}");
+
+    assert_eq!(rcframe(&["alarm", "zz"]).status.code(), Some(2));
+}

@@ -51,6 +51,7 @@
 mod rcframe;
 
 use clap::{Parser, Subcommand};
+use protocol::alarm::AlarmCode;
 use rcframe::{decode, encode};
 use std::process::ExitCode;
 
@@ -68,6 +69,38 @@ enum Mode {
     Encode(encode::EncodeArgs),
     /// Decode a frame or a capture into JSON lines
     Decode(decode::DecodeArgs),
+    /// The alarm table (complete edition §8): `rcframe alarm E0` for one code, or every code
+    /// 01-FF as JSON lines `{"code":"E0","level":"Error","text":...}` without an argument
+    Alarm {
+        /// An alarm code in hex (the controller's status reply and ALMC show it).
+        code: Option<String>,
+    },
+}
+
+/// `rcframe alarm [CODE]`.
+fn alarm(code: Option<&str>) -> Result<bool, String> {
+    let line = |code: AlarmCode| {
+        serde_json::json!({
+            "code": format!("{:02X}", code.0),
+            "level": format!("{:?}", code.level()),
+            "text": code.text(),
+        })
+    };
+    match code {
+        Some(text) => {
+            let code = u8::from_str_radix(text.trim_start_matches("0x"), 16)
+                .map_err(|_| format!("{text:?}: an alarm code is hex, 00-FF"))?;
+            println!("{}", line(AlarmCode(code)));
+        }
+        None => {
+            for code in 1..=u8::MAX {
+                if AlarmCode(code).info().is_some() {
+                    println!("{}", line(AlarmCode(code)));
+                }
+            }
+        }
+    }
+    Ok(true)
 }
 
 /// Exit status for bad command-line input, as clap uses.
@@ -81,6 +114,7 @@ fn main() -> ExitCode {
             true
         }),
         Mode::Decode(args) => decode::run(args),
+        Mode::Alarm { code } => alarm(code.as_deref()),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,
