@@ -342,6 +342,31 @@ fn pty_slow_baud_is_break() {
     }
 }
 
+/// A switch to 9.6 kbit/s with a frame right after it (the gateway's rejoin probe of a lost axis
+/// at the power-up settings) is a rate change, not a break: the other controllers stay at their
+/// rate and RTIM.
+#[test]
+fn pty_slow_baud_with_bytes_at_once_is_no_break() {
+    let options = Options {
+        slow_baud_is_break: true,
+        ..Options::default()
+    };
+    let (handle, mut master) = spawn_pty(options);
+    set_speed(&master.port, BaudRate::B9600);
+    master.expect_silence(&request(1, Command::Status)); // nobody listens at 9.6 kbit/s
+    std::thread::sleep(Duration::from_millis(150)); // silence now, but after bytes
+    set_speed(&master.port, BaudRate::B115200);
+    master.transact(&request(1, Command::Status));
+
+    let outcome = handle.stop().unwrap();
+    assert_eq!(outcome.realtime.stats().emulated_breaks, 0);
+    for n in [0, 1] {
+        let controller = outcome.realtime.bus().controller(axis(n)).unwrap();
+        assert_eq!(controller.baud(), Baud::B115200);
+        assert_eq!(controller.rtim_ms(), 3);
+    }
+}
+
 #[test]
 fn pty_echo_returns_the_masters_bytes() {
     let pty = Pty::open(Baud::B115200).unwrap();

@@ -50,10 +50,10 @@ LINE RATE AND BREAKS
   (a Linux pseudo-terminal ignores tcsendbreak; raw TCP has no out-of-band signal), so a break
   from the master is never seen. On a pseudo-terminal the master's termios speed is followed
   when it changes (9600, 19200, 38400, 57600 or 115200 bit/s; --fixed-baud turns that off), and
-  --slow-baud-is-break treats a switch to 9600 bit/s as a break, which makes a master that does
-  run the establishment procedure work (it switches to 9600 bit/s right before its break); any
-  other switch to 9600 bit/s (such as a probe of an offline axis at the power-up settings) then
-  breaks the line too, so use it with every configured axis present.
+  --slow-baud-is-break treats a switch to 9600 bit/s followed by 100 ms of silence as a break,
+  which makes a master that does run the establishment procedure work (it switches to 9600
+  bit/s right before its 200 ms break); a switch with a frame right after it (such as a probe
+  of an offline axis at the power-up settings) is a plain rate change.
 
 TIMING
   The simulator keeps exact wire timing internally (byte times, RTIM, collisions); the host's
@@ -86,7 +86,8 @@ struct Cli {
     /// Do not follow the pseudo-terminal's termios speed.
     #[arg(long)]
     fixed_baud: bool,
-    /// Pseudo-terminal: a switch of the master's speed to 9600 bit/s is a break.
+    /// Pseudo-terminal: a switch of the master's speed to 9600 bit/s, then 100 ms of silence, is
+    /// a break.
     #[arg(long)]
     slow_baud_is_break: bool,
     /// The transceiver's receiver is always on: the master hears its own bytes.

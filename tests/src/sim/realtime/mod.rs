@@ -66,16 +66,18 @@
 //! - the default is a master that does not establish: controllers power up at the line settings
 //!   given (see above);
 //! - [`Options::slow_baud_is_break`] (off by default, pseudo-terminal only) treats the master
-//!   switching its speed *to* 9.6 kbit/s as a break: the §6-1 procedure (and the gateway's
-//!   engine) switches to 9.6 kbit/s right before its break, and after a break every controller
-//!   is at 9.6 kbit/s anyway, so the rest of the procedure (configuration at 9.6 kbit/s and
-//!   RTIM 255 ms, the communication-change broadcast, the switch to the new rate) then runs as on
-//!   a real line. The emulated break lasts [`EMULATED_BREAK_US`], more than 10 bit times at
-//!   9.6 kbit/s, so that it ends before the master's first byte after its own (invisible)
-//!   200 ms break. It is a heuristic: *any* switch to 9.6 kbit/s breaks the line, including the
-//!   gateway engine's rejoin probe of an offline axis at the power-up settings, which then
-//!   knocks every other axis back to 9.6 kbit/s and RTIM 255 ms. Use it to test establishment
-//!   with every configured axis present, not with missing or power-cycled axes.
+//!   switching its speed *to* 9.6 kbit/s and then staying silent for [`BREAK_SILENCE_US`] as a
+//!   break: the §6-1 procedure (and the gateway's engine) switches to 9.6 kbit/s right before
+//!   its 200 ms break, during which it sends nothing, and after a break every controller is at
+//!   9.6 kbit/s anyway, so the rest of the procedure (configuration at 9.6 kbit/s and RTIM
+//!   255 ms, the communication-change broadcast, the switch to the new rate) then runs as on a
+//!   real line. The emulated break starts when the silence has lasted [`BREAK_SILENCE_US`] and
+//!   lasts [`EMULATED_BREAK_US`], more than 10 bit times at 9.6 kbit/s, so that it ends before
+//!   the master's first byte after its own (invisible) break. A switch to 9.6 kbit/s followed
+//!   by bytes sooner is a plain rate change: the gateway engine's rejoin probe of an offline
+//!   axis at the power-up settings writes its probe at once, and must not knock every other
+//!   axis back to 9.6 kbit/s. It is a heuristic still: a master that switches to 9.6 kbit/s and
+//!   then idles for no reason breaks the line.
 //!
 //! # Transports
 //! - [`Pty`]: a pseudo-terminal pair. The master opens [`Pty::path`] (`/dev/pts/N`) as its
@@ -120,6 +122,11 @@ use transport::Input;
 /// How long an emulated break lasts (µs): more than 10 bit times at 9.6 kbit/s (1042 µs), and
 /// short enough to end before the master's next byte.
 pub const EMULATED_BREAK_US: u64 = 2_000;
+
+/// How long the master stays silent after switching to 9.6 kbit/s before the switch counts as
+/// a break ([`Options::slow_baud_is_break`], µs): half the §6-1 break (200 ms), and far longer
+/// than any master takes to write the frame it switched the rate for.
+pub const BREAK_SILENCE_US: u64 = 100_000;
 
 /// Reads per pass of the loop, at most (4 KiB each).
 const MAX_READS_PER_PASS: usize = 16;
@@ -219,6 +226,9 @@ pub struct RealTime {
     queue: VecDeque<u8>,
     log: FrameLog,
     control: Option<Receiver<Control>>,
+    /// When the master switched to 9.6 kbit/s, while it has been silent since
+    /// ([`Options::slow_baud_is_break`]).
+    pending_break: Option<u64>,
 }
 
 impl RealTime {
@@ -231,6 +241,7 @@ impl RealTime {
             queue: VecDeque::new(),
             log: FrameLog::default(),
             control: None,
+            pending_break: None,
         }
     }
 
@@ -302,6 +313,9 @@ impl RealTime {
                 match transport.read(&mut buf)? {
                     Input::Bytes(n) => {
                         let bytes = buf.get(..n).unwrap_or(&[]);
+                        if self.pending_break.take().is_some() {
+                            self.note(now, "bytes at once after the switch to 9600 bit/s: a rate change only");
+                        }
                         self.stats.reads += 1;
                         self.stats.bytes_from_master += bytes.len() as u64;
                         if self.options.log {
@@ -326,12 +340,14 @@ impl RealTime {
                 }
             }
 
+            self.emulate_break(now);
             self.deliver(now, transport)?;
             self.apply_controls(now);
 
             let now = clock(Instant::now());
             let mut sleep = self.options.max_sleep;
-            if let Some(at) = self.bus.next_event() {
+            let pending_break = self.pending_break.map(|at| at + BREAK_SILENCE_US);
+            for at in [self.bus.next_event(), pending_break].into_iter().flatten() {
                 sleep = sleep.min(Duration::from_micros(at.saturating_sub(now)));
             }
             if let Some(d) = deadline {
@@ -379,10 +395,23 @@ impl RealTime {
         self.bus.set_host_baud(baud);
         self.stats.baud_changes += 1;
         self.note(now, &format!("master at {} bit/s", baud.bits_per_second()));
-        if self.options.slow_baud_is_break && baud == Baud::B9600 {
+        self.pending_break =
+            (self.options.slow_baud_is_break && baud == Baud::B9600).then_some(now);
+    }
+
+    /// A switch to 9.6 kbit/s followed by [`BREAK_SILENCE_US`] of silence is a break.
+    fn emulate_break(&mut self, now: u64) {
+        let Some(at) = self.pending_break else {
+            return;
+        };
+        if now >= at + BREAK_SILENCE_US {
+            self.pending_break = None;
             self.bus.host_break(now, EMULATED_BREAK_US);
             self.stats.emulated_breaks += 1;
-            self.note(now, "break (emulated: master switched to 9600 bit/s)");
+            self.note(
+                now,
+                "break (emulated: master switched to 9600 bit/s, then silent)",
+            );
         }
     }
 
