@@ -11,35 +11,12 @@ off: no Modbus master stays on this line); everything after that goes through th
 
 import time
 
-from conftest import INPUTS, STOP_INPUT, wait_for
-from plc import DRG1, G_FAILSAFE, G_WATCHDOG, GATEWAY_UNIT, LINK, LINK_ONLINE, unit
+from emu import (
+    ALM_N, CSTR, HEND, HOME, LED_ALARM, LINK_OUT, MOVE, PEND, RES, SON, STOP_INPUT, STP_N, SV, Pins,
+)
+from plc import DRG1, G_FAILSAFE, G_WATCHDOG, GATEWAY_UNIT, LINK, LINK_ONLINE, unit, wait_for
 
-# Input bits (PIO word) and output bits.
-PC1, PC2, HOME, STP_N, CSTR, RES, SON = 0, 1, 11, 12, 13, 14, 15
-PM1, PM2, MOVE, HEND, PEND, SV, LINK_OUT, ALM_N = 0, 1, 6, 10, 11, 12, 13, 14
 ROW = 0x1000
-
-
-class Pins:
-    """The PLC's outputs (our inputs), as levels held until changed."""
-
-    def __init__(self, emu):
-        self.emu = emu
-        self.word = 0
-
-    def set(self, bit, on):
-        self.word = self.word | 1 << bit if on else self.word & ~(1 << bit)
-        self.emu.set_pin(INPUTS[bit], on)
-
-    def pulse(self, bit, seconds=0.1):
-        """ON long enough for the input filter to see it, then OFF."""
-        self.set(bit, True)
-        time.sleep(seconds)
-        self.set(bit, False)
-
-    def select(self, point):
-        for bit in range(6):
-            self.set(PC1 + bit, point >> bit & 1)
 
 
 def output(emu, bit):
@@ -137,7 +114,6 @@ def test_res_clears_an_alarm(emu):
     pins.select(9)
     pins.pulse(CSTR)
     wait_output(emu, ALM_N, 0, 10, "*ALM OFF: alarm")
-    from conftest import LED_ALARM
 
     wait_for(lambda: emu.odr(LED_ALARM) == 1, 5, "alarm LED on")
     pins.pulse(RES)

@@ -2,11 +2,8 @@
 safe state (every PIO output OFF, the alarm LED on, both RS485 drivers released) before anything
 else, and it stays halted."""
 
-from conftest import (
-    BUS_DE, BUS_TX, INPUTS, LED_ALARM, LED_RUN, MODE_AF, MODE_OUTPUT, OUTPUTS, PLC_DE, STOP_INPUT,
-    wait_for,
-)
-from plc import LINK, LINK_ONLINE, unit
+from emu import BUS_DE, BUS_TX, INPUTS, LED_ALARM, LED_RUN, MODE_AF, MODE_OUTPUT, OUTPUTS, PLC_DE, STOP_INPUT
+from plc import LINK, LINK_ONLINE, unit, wait_for
 
 SON, STP_N = 15, 12
 SV, LINK_OUT = 12, 13

@@ -9,7 +9,9 @@ end; targets stay within 70 mm so that they are inside the simulator's own strok
 
 import time
 
-from conftest import LED_ALARM, LED_LINK, STOP_INPUT, wait_for
+import pytest
+
+from emu import LED_ALARM, LED_LINK, STOP_INPUT
 from plc import (
     ALMC,
     CMCT,
@@ -21,7 +23,6 @@ from plc import (
     DRG1,
     DRG1_CSTR,
     DRG1_SON,
-    DSS1,
     DSS1_ALMH,
     DSS1_PEND,
     DSS1_SV,
@@ -37,6 +38,8 @@ from plc import (
     ILLEGAL_DATA_VALUE,
     ILLEGAL_FUNCTION,
     LINK,
+    ModbusError,
+    LINK_OFFLINE,
     LINK_ONLINE,
     POSR,
     REASON_ALARM,
@@ -44,9 +47,20 @@ from plc import (
     SERVER_FAILURE,
     adu,
     unit,
+    wait_for,
 )
 
 ROW = 0x1000  # position table: row n at 0x1000 + 16 n
+AXISCFG, APPLY = 0x0100, 0x000A  # gateway unit: axis n's configuration at 0x0100 + 8 n
+
+
+def _apply(plc):
+    try:
+        plc.write(GATEWAY_UNIT, APPLY, 1)
+        return True
+    except ModbusError as refused:
+        assert refused.code == ILLEGAL_DATA_VALUE
+        return False
 
 
 def online(emu, axis=0, timeout=20):
@@ -230,3 +244,30 @@ def test_malformed_and_out_of_range_requests_get_exceptions_and_never_reach_the_
     assert emu.bus_changes() == before, "nothing but polls reached the bus"
     assert plc.read(u, DRG1) == [DRG1_SON], "state untouched"
     assert plc.read(u, POSR) == [0]
+
+
+@pytest.mark.axes("0-1")
+def test_a_cut_axis_goes_offline_the_others_carry_on_and_it_rejoins(emu):
+    """A wire to one controller cut (rc-sim: the axis stops answering): the gateway reports it
+    offline (LINK 2, its link output and bus LED state) within the retries' bound, keeps serving
+    the other axis, and takes the axis back on its own once it answers again."""
+    plc = online(emu, 0)
+    # The firmware's defaults enable axis 0 only: commission axis 1 as a PLC would (AXISCFG
+    # enable, APPLY: a new establishment with both axes).
+    plc.write(GATEWAY_UNIT, AXISCFG + 8 * 1, 1)
+    wait_for(lambda: _apply(plc), 10, "APPLY taken (refused with 03 while the bus is busy)")
+    wait_for(lambda: plc.read(unit(1), LINK)[0] == LINK_ONLINE, 30, "axis 1 online after APPLY")
+    emu.inject("silent 1 on")
+    wait_for(lambda: plc.read(unit(1), LINK)[0] == LINK_OFFLINE, 10, "axis 1 offline")
+    assert plc.read(unit(0), LINK)[0] == LINK_ONLINE
+    before = plc.read(unit(0), CMCT)[0]
+    plc.servo_on(0)
+    assert plc.read(unit(0), CMCT)[0] == before + 1, "axis 0 still takes commands"
+    # A command for the offline axis is refused at once (04), never queued to run later.
+    with pytest.raises(ModbusError) as refused:
+        plc.write(unit(1), DRG1, [DRG1_SON])
+    assert refused.value.code == SERVER_FAILURE
+    emu.inject("silent 1 off")
+    # The rejoin try comes within the engine's rejoin interval (5 s) plus a cycle.
+    wait_for(lambda: plc.read(unit(1), LINK)[0] == LINK_ONLINE, 30, "axis 1 back online")
+    assert not [c for c in emu.bus_changes(1) if c[2] in ("ServoOn", "Servo")], "nothing ran late on axis 1"
