@@ -40,8 +40,11 @@ cargo fw --locked
 step "firmware in QEMU: the real ELF (emulator build) against simulated controllers, Modbus and discrete I/O"
 scripts/emu-test.sh
 
-step "demo: README's run-without-hardware command"
+step "demo: README's run-without-hardware command (the firmware in QEMU, 4 simulated axes)"
 scripts/demo.sh > /dev/null
+
+step "demo: the same with the gateway on the PC (--host-gateway)"
+scripts/demo.sh --host-gateway > /dev/null
 
 step "benchmarks (virtual time): each figure next to its physical limit"
 scripts/bench.sh
