@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 
 step() { printf '\n==> %s\n' "$*"; }
 
-step "toolchain (rust-toolchain.toml: pinned rustc, thumbv7em-none-eabihf, rustfmt, clippy)"
+step "toolchain (rust-toolchain.toml: pinned rustc, thumbv7em-none-eabihf, thumbv7m-none-eabi, rustfmt, clippy)"
 # A plain `cargo` does not add the targets/components the file lists when the toolchain itself
 # is already installed; `rustup toolchain install` with no argument does.
 rustup toolchain install
@@ -21,6 +21,9 @@ cargo clippy --all-targets --locked -- -D warnings
 
 step "clippy: firmware for thumbv7em-none-eabihf, warnings denied"
 cargo clippy -p rc-gateway --target thumbv7em-none-eabihf --locked -- -D warnings
+
+step "clippy: firmware for the STM32F103C8 board (thumbv7m-none-eabi), warnings denied"
+cargo clippy -p rc-gateway --target thumbv7m-none-eabi --no-default-features --features hw,board-f103 --locked -- -D warnings
 
 step "protocol: no_std build (with defmt) for the firmware target"
 cargo clippy -p protocol --target thumbv7em-none-eabihf --features defmt --locked -- -D warnings
@@ -39,6 +42,9 @@ cargo fw --locked
 
 step "firmware in QEMU: the real ELF (emulator build) against simulated controllers, Modbus and discrete I/O"
 scripts/emu-test.sh
+
+step "size: flash, static RAM and stack of both boards against their budgets (a report: both are over today)"
+scripts/size-report.sh
 
 step "demo: README's run-without-hardware command (the firmware in QEMU, 4 simulated axes)"
 scripts/demo.sh > /dev/null
