@@ -34,6 +34,11 @@ pub struct Config {
     /// soon as RTIM after the command, and the bound would throw every valid answer away: every
     /// valid, matching answer is accepted whenever it arrives while its command waits.
     pub wire_timing: bool,
+    /// Added to every response time-out (complete edition §5 Trt). Zero on a wire, where §5's
+    /// figure holds. More where the bytes may wait outside the wire: an emulator on a loaded
+    /// host can stall for a few hundred ms with an answer already sent, and a USB adapter's
+    /// latency timer holds received bytes for up to 16 ms.
+    pub reply_slack: Duration,
     /// Position reads (R4 PNOW) per polling cycle for moving axes.
     pub position_reads_per_cycle: u8,
     /// How often an offline axis is probed, at most: the first probe follows after
@@ -65,6 +70,7 @@ impl Config {
         establish: true,
         echo: false,
         wire_timing: true,
+        reply_slack: Duration::from_millis(0),
         position_reads_per_cycle: 4,
         probe_interval: Duration::from_millis(500),
         motion_timeout: Duration::from_millis(60_000),

@@ -71,8 +71,10 @@ impl Engine {
             state.counters.retries = state.counters.retries.wrapping_add(1);
         }
         let is_v5 = matches!(request.command, Command::StoreFromEdit(_));
-        let deadline =
-            now + timing::frame_time(baud).plus(timing::response_timeout(baud, state.rtim, is_v5));
+        let deadline = now
+            + timing::frame_time(baud)
+                .plus(timing::response_timeout(baud, state.rtim, is_v5))
+                .plus(self.config.reply_slack);
         // §6-1 step 2: `p`'s own answer may already come after the new delay.
         let fastest = match request.command {
             Command::SetResponseDelay(new) => new.min(state.rtim),

@@ -91,6 +91,38 @@ fn timeout_is_trt_and_retries_then_offline_and_probes_slowly() {
     );
 }
 
+/// `reply_slack` lengthens every response time-out by itself, and only that: an answer late by
+/// less than the slack is taken, the same answer without the slack comes after the time-out.
+#[test]
+fn reply_slack_extends_the_response_timeout() {
+    let slack = Duration::from_millis(200);
+    let trt = timing::frame_time(Baud::B115200).plus(timing::response_timeout(
+        Baud::B115200,
+        Rtim::MIN,
+        false,
+    ));
+    for (with_slack, answered) in [(false, false), (true, true)] {
+        let mut engine = Engine::new(Config {
+            reply_slack: if with_slack {
+                slack
+            } else {
+                Duration::from_millis(0)
+            },
+            ..config(1)
+        });
+        let mut now = Instant(0);
+        let poll = next_frame(&mut engine, &mut now);
+        let timeout = if with_slack { trt.plus(slack) } else { trt };
+        assert_eq!(engine.poll(now), Output::Idle(Some(now + timeout)));
+        // The answer arrives 100 ms after the plain time-out.
+        now = now + trt.plus(Duration::from_millis(100));
+        let _ = engine.poll(now);
+        engine.receive(now, &ready(&poll).emit().to_bytes());
+        let c = engine.axis(axis(0)).counters;
+        assert_eq!(c.timeouts == 0, answered, "slack {with_slack}: {c:?}");
+    }
+}
+
 #[test]
 fn relative_move_is_never_resent_and_position_is_reread() {
     let mut engine = Engine::new(config(1));
