@@ -28,9 +28,13 @@ pub const fn default_config() -> GatewayConfig {
     // complete sooner after the hand-over than a real line allows, and the emulator's virtual
     // clock is only kept near real time. The earliest-answer bound is a property of a wire
     // (`protocol::engine::Config::wire_timing`); on the board it stays on.
+    // And its host can stall QEMU for a few hundred ms with a controller's answer already sent
+    // (rc-sim keeps real time): the response time-outs get that much slack, so that a stall of
+    // the emulator is not taken for a silent axis.
     #[cfg(feature = "emulator")]
     {
         config.bus.wire_timing = false;
+        config.bus.reply_slack = protocol::time::Duration::from_millis(250);
     }
     config
 }
