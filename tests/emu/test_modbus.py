@@ -28,7 +28,6 @@ from plc import (
     DSS1_SV,
     FAILED,
     G_FAILSAFE,
-    G_FAILSAFE_COUNT,
     G_PIO_AXIS,
     G_SYNC_MASK,
     G_VERSION,
@@ -78,6 +77,10 @@ def online(emu, axis=0, timeout=20):
     wait_for(lambda: emu.plc.read(unit(axis), LINK)[0] == LINK_ONLINE, timeout, f"axis {axis} online")
     emu.plc.write(GATEWAY_UNIT, G_PIO_AXIS, 0xFFFF)
     assert emu.plc.read(GATEWAY_UNIT, G_PIO_AXIS) == [0xFFFF]
+    # The PLC watchdog off: on a loaded host QEMU can stall for longer than its 1 s, which the
+    # firmware rightly takes for a silent PLC (a stop, FAILSAFE latched, the alarm LED on). The
+    # watchdog's own test sets it.
+    emu.plc.write(GATEWAY_UNIT, G_WATCHDOG, 0)
     return emu.plc
 
 
@@ -189,13 +192,16 @@ def test_the_watchdog_stops_a_moving_axis_when_the_plc_falls_silent(emu):
     time.sleep(2.0)  # silence: no request at all
     stops = [c for c in emu.bus_changes(0)[before:] if c[2] == "CancelMotion"]
     assert stops, f"a stop went out: {emu.bus_changes(0)[before:]}"
-    assert plc.read(GATEWAY_UNIT, G_FAILSAFE, 2) == [1, 2], "latched, counted"
+    latched, count = plc.read(GATEWAY_UNIT, G_FAILSAFE, 2)
+    # At least this trip; a host stall of QEMU longer than 500 ms while the PLC polled may have
+    # tripped it once more (the firmware cannot tell a stalled emulator from a silent PLC).
+    assert latched == 1 and count >= 2, ("latched, counted", latched, count)
     at = plc.pnow(0)
     time.sleep(0.3)  # (less than the watchdog: another silence would trip it again)
     assert plc.pnow(0) == at < 70_00, "stopped short of the target"
     assert plc.cmst(0) == (FAILED, REASON_CANCELLED << 8)
     plc.write(GATEWAY_UNIT, G_FAILSAFE, 0)
-    assert plc.read(GATEWAY_UNIT, G_FAILSAFE_COUNT)[0] == 2
+    assert plc.read(GATEWAY_UNIT, G_FAILSAFE, 2) == [0, count]
 
 
 def test_malformed_and_out_of_range_requests_get_exceptions_and_never_reach_the_bus(emu):

@@ -48,7 +48,7 @@ from elftools.elf.elffile import ELFFile
 from pymodbus import FramerType
 from pymodbus.client import ModbusTcpClient
 
-from plc import PlcMaster, wait_for
+from plc import PlcMaster, crc16, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -183,8 +183,10 @@ class Plc(PlcMaster):
             raise EmulatorError(f"cannot connect to QEMU's PLC socket on port {port}")
         super().__init__(client)
 
-    def raw_exchange(self, frame, wait=0.3):
-        """Send `frame` as it is; whatever comes back within `wait` seconds."""
+    def raw_exchange(self, frame, wait=1.0):
+        """Send `frame` as it is; what comes back: a whole RTU frame (its CRC checks) as soon as
+        it is there, else whatever came within `wait` seconds (generous: a loaded host stalls
+        QEMU; a request that gets no answer costs the whole wait)."""
         sock = self.client.socket
         sock.setblocking(False)
         try:
@@ -202,6 +204,8 @@ class Plc(PlcMaster):
                     received += sock.recv(65536)
                 except BlockingIOError:
                     time.sleep(0.01)
+                if len(received) >= 5 and crc16(received[:-2]) == received[-2:]:
+                    break
             return received
         finally:
             sock.setblocking(True)

@@ -77,7 +77,9 @@
 //!   by bytes sooner is a plain rate change: the gateway engine's rejoin probe of an offline
 //!   axis at the power-up settings writes its probe at once, and must not knock every other
 //!   axis back to 9.6 kbit/s. It is a heuristic still: a master that switches to 9.6 kbit/s and
-//!   then idles for no reason breaks the line.
+//!   then idles for no reason breaks the line, and so does any switch to 9.6 kbit/s that the
+//!   simulator only sees after it was not scheduled for a while (a loaded host), when the
+//!   silence after it went unobserved.
 //!
 //! # Transports
 //! - [`Pty`]: a pseudo-terminal pair. The master opens [`Pty::path`] (`/dev/pts/N`) as its
@@ -127,6 +129,10 @@ pub const EMULATED_BREAK_US: u64 = 2_000;
 /// a break ([`Options::slow_baud_is_break`], µs): half the §6-1 break (200 ms), and far longer
 /// than any master takes to write the frame it switched the rate for.
 pub const BREAK_SILENCE_US: u64 = 100_000;
+
+/// A pass of the loop later than this after the previous one (µs) means the simulator was not
+/// scheduled in between (its passes are at most [`Options::max_sleep`] apart otherwise).
+const STALL_US: u64 = 50_000;
 
 /// Reads per pass of the loop, at most (4 KiB each).
 const MAX_READS_PER_PASS: usize = 16;
@@ -293,9 +299,14 @@ impl RealTime {
         };
         let deadline = self.options.duration.map(|d| started + d);
         let mut buf = [0u8; 4096];
+        let mut last_pass = clock(started);
         loop {
             let wall = Instant::now();
             let now = clock(wall);
+            // This process did not run for a while (a loaded host): a rate change seen now may
+            // be old, and the master's silence after it unobserved.
+            let stalled = now.saturating_sub(last_pass) > STALL_US;
+            last_pass = now;
             if stop.load(Ordering::Relaxed) {
                 self.deliver(now, transport)?;
                 return Ok(Ended::Stopped);
@@ -306,7 +317,7 @@ impl RealTime {
             }
 
             if let Some(baud) = transport.speed_change()? {
-                self.line_rate(now, baud);
+                self.line_rate(now, baud, stalled);
             }
             // Bounded, so that a master writing without pause cannot stall the bus.
             for _ in 0..MAX_READS_PER_PASS {
@@ -314,7 +325,10 @@ impl RealTime {
                     Input::Bytes(n) => {
                         let bytes = buf.get(..n).unwrap_or(&[]);
                         if self.pending_break.take().is_some() {
-                            self.note(now, "bytes at once after the switch to 9600 bit/s: a rate change only");
+                            self.note(
+                                now,
+                                "bytes at once after the switch to 9600 bit/s: a rate change only",
+                            );
                         }
                         self.stats.reads += 1;
                         self.stats.bytes_from_master += bytes.len() as u64;
@@ -388,7 +402,7 @@ impl RealTime {
         }
     }
 
-    fn line_rate(&mut self, now: u64, baud: Baud) {
+    fn line_rate(&mut self, now: u64, baud: Baud, stalled: bool) {
         if !self.options.follow_baud || baud == self.bus.host_baud() {
             return;
         }
@@ -397,6 +411,14 @@ impl RealTime {
         self.note(now, &format!("master at {} bit/s", baud.bits_per_second()));
         self.pending_break =
             (self.options.slow_baud_is_break && baud == Baud::B9600).then_some(now);
+        if stalled {
+            // The silence that makes the switch a break may have passed unseen: take it as one
+            // (a §6-1 break is the switch's usual reason).
+            self.pending_break = self
+                .pending_break
+                .map(|at| at.saturating_sub(BREAK_SILENCE_US));
+            self.emulate_break(now);
+        }
     }
 
     /// A switch to 9.6 kbit/s followed by [`BREAK_SILENCE_US`] of silence is a break.
