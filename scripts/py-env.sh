@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
-# Prints the path of a Python interpreter with the emulator harness' packages (pytest, pyelftools,
-# pymodbus at pinned versions): a virtual environment at target/emu-venv, created and filled on
-# first use; `pip --user` where python3-venv is missing. Used by scripts/emu-test.sh and
-# scripts/demo.sh. Progress and warnings go to standard error.
+# Prints the path of a Python interpreter with pinned packages in a virtual environment, created
+# and filled on first use (`pip --user` where python3-venv is missing). Progress and warnings go
+# to standard error.
+#
+#   scripts/py-env.sh                          # target/emu-venv with the emulator harness'
+#                                              # packages (scripts/emu-test.sh, scripts/demo.sh)
+#   scripts/py-env.sh VENV PACKAGE==VERSION... # another venv, other packages (scripts/e2e.sh)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -10,21 +13,26 @@ PYTEST_VERSION=8.4.2
 PYELFTOOLS_VERSION=0.32
 PYMODBUS_VERSION=3.16.1
 
-venv=target/emu-venv
+venv=${1:-target/emu-venv}
+[[ $venv == /* ]] || venv=$PWD/$venv
 has_pip() { [[ -x "$1" ]] && "$1" -m pip --version >/dev/null 2>&1; }
 if ! has_pip "$venv/bin/python"; then
     rm -rf "$venv"
     python3 -m venv "$venv" >/dev/null 2>&1 || rm -rf "$venv"
 fi
 if has_pip "$venv/bin/python"; then
-    python="$PWD/$venv/bin/python"
+    python="$venv/bin/python"
     user=()
 else
     echo "py-env: python3 -m venv failed (Debian: apt-get install python3-venv); using pip --user" >&2
     python=python3
     user=(--user)
 fi
-want=("pytest==$PYTEST_VERSION" "pyelftools==$PYELFTOOLS_VERSION" "pymodbus==$PYMODBUS_VERSION")
+if (($# > 1)); then
+    want=("${@:2}")
+else
+    want=("pytest==$PYTEST_VERSION" "pyelftools==$PYELFTOOLS_VERSION" "pymodbus==$PYMODBUS_VERSION")
+fi
 if ! "$python" - "${want[@]}" <<'PY'
 import sys
 from importlib.metadata import version, PackageNotFoundError

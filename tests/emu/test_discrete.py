@@ -76,15 +76,26 @@ def test_son_home_and_move_to_a_point(emu):
     wait_output(emu, SV, 0, 10, "SV off")
 
 
-def test_stp_stops_a_move(emu):
-    pins = commissioned(emu, {3: (70_00, 10_00)})
+def servo_on_and_homed(emu, pins):
+    """SON ON until SV, a HOME pulse until HEND: what every wired sequence starts with."""
     pins.set(SON, True)
     wait_output(emu, SV, 1, 10, "SV")
     pins.pulse(HOME)
     wait_output(emu, HEND, 1, 20, "HEND")
+
+
+def moving_slowly_to_point_3(emu):
+    """Point 3 at 70 mm, 10 mm/s; servo on, homed, started with PC + CSTR; MOVE seen."""
+    pins = commissioned(emu, {3: (70_00, 10_00)})
+    servo_on_and_homed(emu, pins)
     pins.select(3)
     pins.pulse(CSTR)
     wait_output(emu, MOVE, 1, 10, "MOVE")
+    return pins
+
+
+def test_stp_stops_a_move(emu):
+    pins = moving_slowly_to_point_3(emu)
     before = len(emu.bus_changes(0))
     pins.set(STP_N, False)
     wait_output(emu, MOVE, 0, 10, "stopped")
@@ -106,10 +117,7 @@ def test_stp_stops_a_move(emu):
 
 def test_res_clears_an_alarm(emu):
     pins = commissioned(emu, {})
-    pins.set(SON, True)
-    wait_output(emu, SV, 1, 10, "SV")
-    pins.pulse(HOME)
-    wait_output(emu, HEND, 1, 20, "HEND")
+    servo_on_and_homed(emu, pins)
     # Point 9 was never written: the controller answers the move with an alarm.
     pins.select(9)
     pins.pulse(CSTR)
@@ -125,14 +133,7 @@ def test_res_clears_an_alarm(emu):
 
 
 def test_the_stop_input_stops_a_move_and_blocks_the_next(emu):
-    pins = commissioned(emu, {3: (70_00, 10_00)})
-    pins.set(SON, True)
-    wait_output(emu, SV, 1, 10, "SV")
-    pins.pulse(HOME)
-    wait_output(emu, HEND, 1, 20, "HEND")
-    pins.select(3)
-    pins.pulse(CSTR)
-    wait_output(emu, MOVE, 1, 10, "MOVE")
+    pins = moving_slowly_to_point_3(emu)
     before = len(emu.bus_changes(0))
     emu.set_pin(STOP_INPUT, False)  # the stop chain opens
     wait_output(emu, MOVE, 0, 10, "stopped")
