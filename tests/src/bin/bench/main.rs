@@ -33,6 +33,7 @@
 //! [`timing::transaction_time`]: protocol::engine::timing::transaction_time
 
 mod measure;
+mod movers;
 mod report;
 mod scenarios;
 mod table;
@@ -82,6 +83,7 @@ fn main() -> ExitCode {
                 println!("{}", report.json);
             } else {
                 print!("{}", table(&report, &args));
+                println!("BENCH {}", report.bench);
             }
             ExitCode::SUCCESS
         }
