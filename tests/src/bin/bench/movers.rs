@@ -1,6 +1,6 @@
-//! 5. Four of 16 axes moving back and forth (issue targets of the adaptive polling): how soon a
-//! completed move shows in what the PLC reads, how old the idle axes' status gets meanwhile, and
-//! what one dead axis costs the live ones while the others move.
+//! Scenario 5: four of 16 axes moving back and forth (the adaptive polling's targets): how soon
+//! a completed move shows in what the PLC reads, how old the idle axes' status gets meanwhile,
+//! and what one dead axis costs the live ones while the others move.
 
 use protocol::engine::{Event, Job, JobId, JobKind, Link};
 use protocol::line::Baud;
