@@ -110,8 +110,8 @@ pub struct Pty {
     /// Held open so that the terminal keeps its settings and never hangs up.
     slave: File,
     path: PathBuf,
-    /// The last termios speed seen (the `CBAUD` bits).
-    speed: tcflag_t,
+    /// The last speed seen, bit/s (`None`: not a rate).
+    speed: Option<u32>,
 }
 
 impl Pty {
@@ -121,7 +121,7 @@ impl Pty {
         let (master, slave, path) = crate::pty::open_raw(termios_rate(baud))?;
         let flags = OFlag::from_bits_retain(fcntl(&master, FcntlArg::F_GETFL)?);
         fcntl(&master, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK))?;
-        let speed = raw_speed(&termios::tcgetattr(&slave)?);
+        let speed = speed_bps(&slave)?;
         Ok(Pty {
             master,
             slave,
@@ -137,12 +137,12 @@ impl Pty {
 
     /// The rate the master set, when it changed since the last call and is one of the rates.
     fn speed_change(&mut self) -> io::Result<Option<Baud>> {
-        let speed = raw_speed(&termios::tcgetattr(&self.slave)?);
+        let speed = speed_bps(&self.slave)?;
         if speed == self.speed {
             return Ok(None);
         }
         self.speed = speed;
-        Ok(baud_of_speed(speed))
+        Ok(speed.and_then(Baud::from_bits_per_second))
     }
 
     fn read(&mut self, buf: &mut [u8]) -> io::Result<Input> {
@@ -174,10 +174,30 @@ fn termios_rate(baud: Baud) -> Option<BaudRate> {
     }
 }
 
-fn baud_of_speed(speed: tcflag_t) -> Option<Baud> {
-    Baud::ALL
+/// The terminal's speed in bit/s: from its `CBAUD` code, or, where a program set an arbitrary
+/// rate (`BOTHER`, as the `serialport` crate does on Linux through `termios2`), the number itself.
+fn speed_bps(terminal: &File) -> io::Result<Option<u32>> {
+    let code = raw_speed(&termios::tcgetattr(terminal)?);
+    if code == nix::libc::BOTHER {
+        // SAFETY: termios2 is a plain C struct, valid all-zero; TCGETS2 fills it from the
+        // terminal open as `terminal`, whose descriptor outlives the call.
+        let mut attrs: nix::libc::termios2 = unsafe { std::mem::zeroed() };
+        let done = unsafe {
+            nix::libc::ioctl(
+                std::os::fd::AsRawFd::as_raw_fd(terminal),
+                nix::libc::TCGETS2,
+                &mut attrs,
+            )
+        };
+        if done != 0 {
+            return Err(io::Error::last_os_error());
+        }
+        return Ok(Some(attrs.c_ospeed));
+    }
+    Ok(Baud::ALL
         .into_iter()
-        .find(|&baud| termios_rate(baud).is_some_and(|rate| rate as tcflag_t == speed))
+        .find(|&baud| termios_rate(baud).is_some_and(|rate| rate as tcflag_t == code))
+        .map(Baud::bits_per_second))
 }
 
 /// A listening socket on a loopback address, one client at a time.
