@@ -3,5 +3,6 @@ pub mod harness;
 pub mod host;
 pub mod node_harness;
 pub mod pty;
+pub mod rcframe;
 pub mod regmap;
 pub mod sim;

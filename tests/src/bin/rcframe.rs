@@ -47,12 +47,9 @@
 //!
 //! Bad command-line input: a message on standard error and exit status 2.
 
-#[path = "../rcframe/mod.rs"]
-mod rcframe;
-
 use clap::{Parser, Subcommand};
 use protocol::alarm::AlarmCode;
-use rcframe::{decode, encode};
+use rc_host::rcframe::{decode, encode};
 use std::process::ExitCode;
 
 /// Encode and decode IAI Robo Cylinder serial frames, for debugging an RS485 bus.

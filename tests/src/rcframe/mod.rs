@@ -1,4 +1,5 @@
-//! The modules of the `rcframe` binary (see `src/bin/rcframe.rs`).
+//! Frames for people: the `rcframe` binary's encode and decode (see `src/bin/rcframe.rs`), and
+//! the units and descriptions `rc-commission` shares with it.
 
 pub mod decode;
 pub mod describe;
