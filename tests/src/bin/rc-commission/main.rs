@@ -7,7 +7,7 @@
 //! $ rc-commission --port /dev/ttyUSB0 --baud 9600 establish --to 115200
 //! $ rc-commission --port /dev/ttyUSB0 --lead 6 --home motor move 0 --mm 25.5
 //! $ rc-commission --port /dev/ttyUSB0 --lead 6 --home motor points write 0 --file table.csv --dry-run
-//! $ rc-commission --port /dev/ttyUSB0 sniff --lead 6 --home motor
+//! $ rc-commission --port /dev/ttyUSB0 --lead 6 --home motor sniff
 //! ```
 //!
 //! It works the same on a pseudo-terminal (`rc-sim --pty`), which is how it is tested. Exit
