@@ -118,7 +118,7 @@ use crate::line::LineAction;
 use crate::modbus::{Handled, Receiver, ReceiverCounters, ReplyBuffer, Slave, SlaveCounters};
 use crate::pio::{self, Pio, PioInputs, PioOutputs};
 use crate::plc::{Gateway, GatewayConfig, PlcLine, Store};
-use crate::time::{earliest, Instant};
+use crate::time::{earliest, Duration, Instant};
 
 /// The most the whole node may take on a microcontroller: 12 KiB for 16 axes (an STM32F103C8
 /// has 20 KiB of RAM in all). Checked at compile time on the firmware's targets; the host test
@@ -170,6 +170,15 @@ pub struct Node {
     dirty: bool,
 }
 
+/// The PLC line's frame receiver: t3.5 of `baud`, or `gap` where one is configured
+/// ([`GatewayConfig::plc_frame_gap`]); no t1.5 check either way (see [`Node::new`]).
+const fn plc_receiver(baud: u32, gap: Option<Duration>) -> Receiver {
+    match gap {
+        Some(gap) => Receiver::with_timing(None, gap),
+        None => Receiver::new(baud).without_gap_check(),
+    }
+}
+
 impl Node {
     /// A node for `config`. Const, so that it can be built in a `static` rather than on a
     /// task's stack. The Modbus receiver's t3.5 follows `config.plc.baud`; its t1.5 gap check
@@ -178,7 +187,7 @@ impl Node {
     pub const fn new(config: GatewayConfig) -> Node {
         Node {
             gateway: Gateway::new(config),
-            receiver: Receiver::new(config.plc.baud).without_gap_check(),
+            receiver: plc_receiver(config.plc.baud, config.plc_frame_gap),
             slave: Slave::new(),
             reply: ReplyBuffer::new(),
             pio: Pio::new(pio::Config::DEFAULT),
@@ -194,7 +203,7 @@ impl Node {
     /// temporaries on the stack (measured on the MCU: 20 KB of stack at start-up).
     pub fn configure(&mut self, config: GatewayConfig) {
         self.gateway.configure(config);
-        self.receiver = Receiver::new(config.plc.baud).without_gap_check();
+        self.receiver = plc_receiver(config.plc.baud, config.plc_frame_gap);
         self.slave = Slave::new();
         self.reply = ReplyBuffer::new();
         self.pio = Pio::new(pio::Config::DEFAULT);
@@ -267,7 +276,7 @@ impl Node {
             }
         }
         if let Some(line) = self.gateway.take_plc_line() {
-            self.receiver = Receiver::new(line.baud).without_gap_check();
+            self.receiver = plc_receiver(line.baud, self.gateway.config().plc_frame_gap);
             return Some(Action::PlcLine(line));
         }
         if let Some(store) = self.gateway.take_store() {

@@ -461,3 +461,29 @@ fn configure_gives_the_node_new_would() {
     rig.node.configure(config);
     assert_eq!(format!("{:?}", rig.node), format!("{fresh:?}"));
 }
+
+/// A request whose bytes come in two bursts further apart than t3.5 (a socket, not a wire):
+/// split in two, it gets no answer; with `plc_frame_gap` longer than the pause, it is one
+/// request and answered.
+#[test]
+fn a_frame_gap_longer_than_t3_5_keeps_a_request_read_in_two_bursts_whole() {
+    for (gap, answered) in [(None, false), (Some(Duration::from_millis(20)), true)] {
+        let mut rig = Rig::ready(1, |c| c.plc_frame_gap = gap);
+        let request = Modbus::ReadHoldingRegisters {
+            address: LINK,
+            quantity: 1,
+        };
+        let mut adu = [0u8; 256];
+        let len = request.emit(1, &mut adu).unwrap();
+        let replies = rig.node.plc_counters().replies;
+        rig.node.plc_received(Instant(rig.now), &adu[..3]);
+        rig.run_for(5 * MS); // 5 ms: longer than t3.5 at 115.2 kbit/s (1.75 ms)
+        rig.node.plc_received(Instant(rig.now), &adu[3..len]);
+        rig.run_for(50 * MS);
+        assert_eq!(
+            rig.node.plc_counters().replies > replies,
+            answered,
+            "gap {gap:?}"
+        );
+    }
+}

@@ -109,6 +109,11 @@ pub struct GatewayConfig {
     pub unit: u8,
     /// The PLC line.
     pub plc: PlcLine,
+    /// The silence that ends a Modbus frame on the PLC line when it must be longer than t3.5 of
+    /// `plc.baud` (Modbus over Serial Line §2.5.1.1); `None` on a wire. Only where bytes do not
+    /// arrive at the wire's pace: the emulator's PLC line is a socket, whose bytes the task can
+    /// read in bursts further apart than t3.5, which would split a request in two.
+    pub plc_frame_gap: Option<Duration>,
     /// The bus master's configuration; its `axes` are the axes the PLC can address.
     pub bus: Config,
     /// Per-axis units and travel.
@@ -131,6 +136,7 @@ impl GatewayConfig {
         GatewayConfig {
             unit: DEFAULT_GATEWAY_UNIT,
             plc: PlcLine::DEFAULT,
+            plc_frame_gap: None,
             bus: Config {
                 axes,
                 ..Config::DEFAULT
