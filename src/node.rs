@@ -30,11 +30,13 @@ pub const fn default_config() -> GatewayConfig {
     // (`protocol::engine::Config::wire_timing`); on the board it stays on.
     // And its host can stall QEMU for a few hundred ms with a controller's answer already sent
     // (rc-sim keeps real time): the response time-outs get that much slack, so that a stall of
-    // the emulator is not taken for a silent axis.
+    // the emulator is not taken for a silent axis. Its PLC line is a socket whose bytes the task
+    // may read in bursts further apart than t3.5: a frame ends after 20 ms of silence there.
     #[cfg(feature = "emulator")]
     {
         config.bus.wire_timing = false;
         config.bus.reply_slack = protocol::time::Duration::from_millis(250);
+        config.plc_frame_gap = Some(protocol::time::Duration::from_millis(20));
     }
     config
 }
