@@ -10,15 +10,35 @@
 # the simulator's own view (`stats` on the control line: commands the controllers received,
 # motion, position) must be unchanged: nothing refused or malformed reaches the bus.
 #
+# The same scenarios then run against the real firmware ELF in QEMU (`--target firmware`; both by
+# default): tests/pyshared/emu.py starts QEMU with rc-sim on the bus, commissions it as a
+# Modbus-only installation (3 axes, watchdog off, no PIO axis; stop chain closed from power-up)
+# and bridges the firmware's PLC line to a pseudo-terminal for the masters. There the
+# controllers' view is rc-sim's frame log (commands other than status and position polls), and
+# the refusals are counted by the gateway's PLCLINK registers.
+#
+#   scripts/interop.sh [--target host|firmware|all]
+#
 # Installs what it needs when missing: libmodbus-dev, mbpoll, pkg-config (and gcc) with apt-get
-# (through sudo unless root), the pinned Rust toolchain. One line per scenario, `ok <name>` or
-# `FAIL <name>: <why>`; exit status 1 if any failed. Every wait is bounded; nothing is timed.
+# (through sudo unless root), the pinned Rust toolchain; for the firmware, QEMU and the emulator
+# build as scripts/emu-test.sh does. One line per scenario, `ok <target>/<name>` or
+# `FAIL <target>/<name>: <why>`; exit status 1 if any failed. Every wait is bounded; nothing is
+# timed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 AXES=3
 GATEWAY=63
 target=${CARGO_TARGET_DIR:-target}
+
+targets=(host firmware)
+if [[ ${1:-} == --target ]]; then
+    case ${2:-} in
+    host | firmware) targets=("$2") ;;
+    all) ;;
+    *) echo "usage: $0 [--target host|firmware|all]" >&2 && exit 2 ;;
+    esac
+fi
 
 # ---------------------------------------------------------------------------------- set-up
 
@@ -57,10 +77,41 @@ why=""
 
 gateway_pid=""
 gateway_log=""
+kind=host
+bus_log=""
+
+# A fresh gateway of the current kind ($kind) on a new pseudo-terminal: its path in $pty.
+start_gateway() {
+    if [[ $kind == firmware ]]; then
+        start_firmware "$1"
+    else
+        start_host "$1"
+    fi
+}
+
+# The firmware in QEMU (tests/pyshared/emu.py), commissioned for Modbus only.
+start_firmware() {
+    gateway_log="$target/interop/firmware-$1.log"
+    coproc GW { exec "$python" tests/pyshared/emu.py "$elf" --axes "0-$((AXES - 1))" --modbus-only \
+        --workdir "$target/interop/firmware-$1" 2>"$gateway_log"; }
+    gateway_pid=$GW_PID
+    gw_out=${GW[0]}
+    gw_in=${GW[1]}
+    local line="" log=""
+    if ! read -r -t 180 -u "$gw_out" line || [[ $line != "PLC /dev/"* ]] ||
+        ! read -r -t 10 -u "$gw_out" log || [[ $log != "BUS LOG "* ]]; then
+        echo "interop: the firmware in QEMU did not start: '$line'" >&2
+        tail -n 30 "$gateway_log" >&2 || true
+        exit 1
+    fi
+    pty=${line#PLC }
+    bus_log=${log#BUS LOG }
+    echo "# firmware in QEMU (pid $gateway_pid, $AXES simulated axes): PLC line $pty"
+}
 
 # A fresh rc-gateway-host on a new pseudo-terminal: its path in $pty; control lines through the
 # coprocess' pipes.
-start_gateway() {
+start_host() {
     gateway_log="$target/interop/rc-gateway-host-$1.log"
     coproc GW { exec "$gateway_bin" --plc-pty --sim "$AXES" --points --watchdog-ms 0 --log 2>"$gateway_log"; }
     gateway_pid=$GW_PID
@@ -78,7 +129,12 @@ start_gateway() {
 
 stop_gateway() {
     [[ -n $gateway_pid ]] || return 0
-    { echo quit >&"$gw_in"; } 2>/dev/null || true
+    if [[ $kind == firmware ]]; then
+        # emu.py ends at the end of its input, and kills QEMU and rc-sim.
+        exec {gw_in}>&- 2>/dev/null || true
+    else
+        { echo quit >&"$gw_in"; } 2>/dev/null || true
+    fi
     local i
     for i in $(seq 50); do
         kill -0 "$gateway_pid" 2>/dev/null || break
@@ -110,6 +166,16 @@ exceptions() { grep -o '"exceptions":\[[0-9,]*\]' <<<"$answer" | sed 's/.*\[\(.*
 # What the simulated controllers saw: commands received (the frames other than the status and
 # position polls), whether they move, where they are.
 bus_view() {
+    if [[ $kind == firmware ]]; then
+        # rc-sim's log: the commands that change something; the refusals: PLCLINK (u32 each:
+        # frames, CRC errors, exceptions, replies, other units, broadcasts, malformed).
+        bus="commands=$(grep '>> Request' "$bus_log" | grep -cvE 'command: (Status|ReadMemory)')"
+        mb_read $GATEWAY 4 0x0510 14 >/dev/null || { echo "interop: PLCLINK unreadable: $why" >&2 && exit 1; }
+        counts="$((values[4] << 16 | values[5]))"
+        crc=$((values[2] << 16 | values[3]))
+        ignored=$((values[8] << 16 | values[9]))
+        return
+    fi
     control stats
     bus="commands=$(field commands) moving=$(field moving) position=$(field position)"
     counts=$(exceptions)
@@ -119,9 +185,9 @@ bus_view() {
 
 report() { # name, status of the check (0 ok), why
     if (($2 == 0)); then
-        echo "ok $1"
+        echo "ok $kind/$1"
     else
-        echo "FAIL $1: $3"
+        echo "FAIL $kind/$1: $3"
         failures=$((failures + 1))
     fi
 }
@@ -139,10 +205,15 @@ check_bus() { # master, min increase of exceptions 01, 02, 03, of CRC errors, of
     IFS=, read -r -a b <<<"$before_counts"
     IFS=, read -r -a a <<<"$counts"
     local want=("$2" "$3" "$4")
-    for i in 0 1 2; do
-        ((a[i] - b[i] >= want[i])) || ok=1
-        ((want[i] > 0 || a[i] == b[i])) || ok=1
-    done
+    if [[ $kind == firmware ]]; then
+        # PLCLINK counts exceptions of every code together.
+        ((a[0] - b[0] >= $2 + $3 + $4)) || ok=1
+    else
+        for i in 0 1 2; do
+            ((a[i] - b[i] >= want[i])) || ok=1
+            ((want[i] > 0 || a[i] == b[i])) || ok=1
+        done
+    fi
     ((crc - before_crc == $5)) || ok=1
     ((ignored - before_ignored >= $6)) || ok=1
     report "$1-refusals-counted" $ok \
@@ -159,21 +230,24 @@ gateway_failed() {
 # The C client on one group of scenarios; its FAIL lines (at least one if it fails) counted.
 run_client() {
     local out="$target/interop/libmodbus-$1.out" status=0 failed
-    timeout --kill-after=10 300 "$client" "$pty" "$version" "$AXES" "$1" | tee "$out" || status=$?
+    timeout --kill-after=10 300 "$client" "$pty" "$version" "$AXES" "$1" |
+        sed -u "s#^\(ok\|FAIL\|skip\) #\1 $kind/#" | tee "$out" || status=$?
     failed=$(grep -c '^FAIL' "$out" || true)
     ((failed > 0 || status == 0)) || failed=1
     failures=$((failures + failed))
 }
 
-start_gateway libmodbus
-failed_before=$failures
-run_client valid
-bus_view
-run_client invalid
-# Exceptions 01 x7, 02 x11, 03 x11, one bad CRC, one unit not served.
-check_bus libmodbus 7 11 11 1 1
-((failures == failed_before)) || gateway_failed
-stop_gateway
+libmodbus_suite() {
+    start_gateway libmodbus
+    failed_before=$failures
+    run_client valid
+    bus_view
+    run_client invalid
+    # Exceptions 01 x7, 02 x11, 03 x11, one bad CRC, one unit not served.
+    check_bus libmodbus 7 11 11 1 1
+    ((failures == failed_before)) || gateway_failed
+    stop_gateway
+}
 
 # ---------------------------------------------------------------------------------- mbpoll
 
@@ -188,14 +262,14 @@ fail() {
 scenario() { # name, function
     why=""
     if "$2"; then
-        echo "ok $1"
+        echo "ok $kind/$1"
     else
-        echo "FAIL $1: ${why:-failed}"
+        echo "FAIL $kind/$1: ${why:-failed}"
         failures=$((failures + 1))
     fi
 }
 
-skip() { echo "skip $1: $2"; }
+skip() { echo "skip $kind/$1: $2"; }
 
 # mbpoll ARGS...: its output in $mb_out, its exit status in $mb_rc.
 mb() {
@@ -451,43 +525,56 @@ mb_untouched() {
         fail "CMCT DRG1 POSR per axis ${state_before[*]} -> ${state_after[*]}"
 }
 
-start_gateway mbpoll
-failed_before=$failures
-echo "# mbpoll $(mbpoll -V 2>&1 | head -n 1) on $pty"
-scenario axes-online mb_axes_online
-scenario fc03-gateway-version mb_gateway_version
-scenario fc03-gateway-settings mb_gateway_settings
-scenario fc06-fc03-gateway-watchdog mb_gateway_watchdog
-scenario fc03-axis-status mb_axis_status
-scenario fc04-axis-status mb_fc04_status
-scenario fc06-servo-off-on mb_servo_off_on
-scenario fc01-coil-son-stop mb_coils_read
-scenario fc05-coil-home mb_coil_home
-scenario fc05-fc0f-coil-stp mb_coils_stp
-scenario fc10-direct-move mb_direct_move
-scenario fc06-posr mb_posr
-skip fc10-fc06-posr "mbpoll sends one value with FC06, never FC10 of one register (tested with FC06 only)"
-skip fc08-00-echo "mbpoll has no option for FC08 Diagnostics"
-skip fc08-counters "mbpoll has no option for FC08 Diagnostics"
-skip fc2b-0e-device-id "mbpoll has no option for FC2B/0E Read Device Identification (-u is FC11)"
-scenario fc11-report-server-id mb_report_server_id
-scenario fc03-plclink-counts mb_plclink
-bus_view
-scenario snapshot mb_before
-scenario exception-02-unknown-address mb_unknown_address
-scenario exception-03-bad-value mb_bad_value
-skip exception-01-unsupported-function "every function mbpoll can send (01 02 03 04 05 06 0F 10 11) is served (FC02 answers 02: no discrete inputs); it has no option for FC07, FC14, FC16, FC17 or another FC08/FC2B"
-skip exception-fc08-fc2b-bad-data "mbpoll cannot send FC08 or FC2B"
-skip broken-frames "mbpoll always sends a correct CRC and refuses quantities outside 1-125 itself"
-scenario no-reply-unserved-unit mb_unserved_unit
-scenario state-untouched mb_untouched
-# Exceptions 02 x10, 03 x7; no 01 (mbpoll cannot send an unsupported function); no bad CRC.
-check_bus mbpoll 0 10 7 0 1
-((failures == failed_before)) || gateway_failed
-stop_gateway
+mbpoll_suite() {
+    start_gateway mbpoll
+    failed_before=$failures
+    echo "# mbpoll $(mbpoll -V 2>&1 | head -n 1) on $pty"
+    scenario axes-online mb_axes_online
+    scenario fc03-gateway-version mb_gateway_version
+    scenario fc03-gateway-settings mb_gateway_settings
+    scenario fc06-fc03-gateway-watchdog mb_gateway_watchdog
+    scenario fc03-axis-status mb_axis_status
+    scenario fc04-axis-status mb_fc04_status
+    scenario fc06-servo-off-on mb_servo_off_on
+    scenario fc01-coil-son-stop mb_coils_read
+    scenario fc05-coil-home mb_coil_home
+    scenario fc05-fc0f-coil-stp mb_coils_stp
+    scenario fc10-direct-move mb_direct_move
+    scenario fc06-posr mb_posr
+    skip fc10-fc06-posr "mbpoll sends one value with FC06, never FC10 of one register (tested with FC06 only)"
+    skip fc08-00-echo "mbpoll has no option for FC08 Diagnostics"
+    skip fc08-counters "mbpoll has no option for FC08 Diagnostics"
+    skip fc2b-0e-device-id "mbpoll has no option for FC2B/0E Read Device Identification (-u is FC11)"
+    scenario fc11-report-server-id mb_report_server_id
+    scenario fc03-plclink-counts mb_plclink
+    bus_view
+    scenario snapshot mb_before
+    scenario exception-02-unknown-address mb_unknown_address
+    scenario exception-03-bad-value mb_bad_value
+    skip exception-01-unsupported-function "every function mbpoll can send (01 02 03 04 05 06 0F 10 11) is served (FC02 answers 02: no discrete inputs); it has no option for FC07, FC14, FC16, FC17 or another FC08/FC2B"
+    skip exception-fc08-fc2b-bad-data "mbpoll cannot send FC08 or FC2B"
+    skip broken-frames "mbpoll always sends a correct CRC and refuses quantities outside 1-125 itself"
+    scenario no-reply-unserved-unit mb_unserved_unit
+    scenario state-untouched mb_untouched
+    # Exceptions 02 x10, 03 x7; no 01 (mbpoll cannot send an unsupported function); no bad CRC.
+    check_bus mbpoll 0 10 7 0 1
+    ((failures == failed_before)) || gateway_failed
+    stop_gateway
+}
+
+if [[ " ${targets[*]} " == *" firmware "* ]]; then
+    scripts/qemu-install.sh
+    elf=$(scripts/emu-build.sh)
+    cargo build --locked --quiet -p rc-host --bin rc-sim
+    python=$(scripts/py-env.sh)
+fi
+for kind in "${targets[@]}"; do
+    libmodbus_suite
+    mbpoll_suite
+done
 
 if ((failures)); then
     echo "interop: $failures failed"
     exit 1
 fi
-echo "interop: all passed (libmodbus, mbpoll)"
+echo "interop: all passed (libmodbus, mbpoll; ${targets[*]})"

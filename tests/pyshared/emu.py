@@ -240,7 +240,10 @@ class Emulator:
 
     # ------------------------------------------------------------------ lifecycle
 
-    def start(self):
+    def start(self, stop_closed=False):
+        """Start rc-sim and QEMU and run the firmware until its `ready` line. `stop_closed`: the
+        cabinet's stop chain is closed from power-up (otherwise the stop input reads open until a
+        test closes it, and FAILSAFE latches that at start)."""
         if shutil.which(QEMU) is None:
             raise EmulatorError(f"{QEMU} not found: run scripts/qemu-install.sh (or scripts/emu-test.sh)")
         if not RC_SIM.is_file():
@@ -285,6 +288,8 @@ class Emulator:
         if self.with_plc:
             self.plc = Plc(plc_port)
         self._paint_stack()
+        if stop_closed:
+            self.set_pin(STOP_INPUT, True)
         self.qmp.execute("cont")
         # Bytes sent before the firmware has enabled its receivers are lost: wait for its word.
         self.wait_log("INFO  ready", 20)
@@ -504,6 +509,40 @@ def elf_symbols(path):
         return found
 
 
+def modbus_only(emulator, axes):
+    """Commission the gateway as a Modbus-only installation, with pymodbus on the PLC line:
+    watchdog off, no PIO axis, `axes` enabled with lead 8.00 mm and motor-end homing (the
+    simulated actuator), APPLY; returns once every axis is online. The line is free afterwards."""
+    from plc import G_PIO_AXIS, G_WATCHDOG, GATEWAY_UNIT, LINK, LINK_ONLINE, PNOW, ModbusError, unit
+
+    plc = Plc(emulator.plc_port)
+    try:
+        plc.write(GATEWAY_UNIT, G_WATCHDOG, 0)
+        plc.write(GATEWAY_UNIT, G_PIO_AXIS, 0xFFFF)
+        for axis in axes:
+            plc.write(GATEWAY_UNIT, 0x0100 + 8 * axis, [1, 800, 7])  # AXISCFG: enabled, lead, home
+
+        def applied():
+            try:
+                plc.write(GATEWAY_UNIT, 0x000A, 1)  # APPLY; 03 while the bus is busy
+                return True
+            except ModbusError:
+                return False
+
+        wait_for(applied, 20, "APPLY taken")
+        def status_readable(axis):
+            try:  # 04 until the gateway has read the axis' position once
+                return plc.read(unit(axis), PNOW, 8) is not None
+            except ModbusError:
+                return False
+
+        for axis in axes:
+            wait_for(lambda: plc.read(unit(axis), LINK)[0] == LINK_ONLINE, 30, f"axis {axis} online")
+            wait_for(lambda: status_readable(axis), 10, f"axis {axis}: status readable")
+    finally:
+        plc.close()
+
+
 def main():
     import argparse
 
@@ -511,6 +550,9 @@ def main():
     parser.add_argument("elf", help="the emulator build (scripts/emu-build.sh prints its path)")
     parser.add_argument("--axes", default="1", help="rc-sim --axes (default: 1, axis 0)")
     parser.add_argument("--workdir", default=str(ROOT / "target" / "emu" / "run"))
+    parser.add_argument("--modbus-only", action="store_true",
+                        help="stop chain closed from power-up; commission every axis of --axes (a count "
+                        "or a range a-b) over Modbus: watchdog off, no PIO axis, lead 8 mm, APPLY")
     parser.add_argument("sim_args", nargs="*", help="more rc-sim options, after --")
     args = parser.parse_args()
     workdir = Path(args.workdir)
@@ -520,7 +562,11 @@ def main():
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
     try:
-        emulator.start()
+        emulator.start(stop_closed=args.modbus_only)
+        if args.modbus_only:
+            first, _, last = args.axes.partition("-")
+            axes = range(int(first), int(last) + 1) if last else range(int(first))
+            modbus_only(emulator, list(axes))
         print(f"PLC {emulator.plc_pty()}", flush=True)
         print(f"BUS LOG {emulator.sim_log_path}", flush=True)
         threading.Thread(target=lambda: (sys.stdin.read(), stop.set()), daemon=True).start()
