@@ -34,7 +34,7 @@ cargo test --locked
 step "end-to-end: pymodbus -> rc-gateway-host (PTY) -> simulated actuators"
 scripts/e2e.sh
 
-step "interop: libmodbus and mbpoll -> rc-gateway-host (PTY) -> simulated actuators"
+step "interop: libmodbus and mbpoll -> rc-gateway-host (PTY), and -> the firmware in QEMU -> simulated actuators"
 scripts/interop.sh
 
 step "firmware: release build"
