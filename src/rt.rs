@@ -28,6 +28,8 @@ fn __pender(_context: *mut ()) {
 pub fn run(init: impl FnOnce(Spawner)) -> ! {
     let executor: &'static raw::Executor = EXECUTOR.init(raw::Executor::new(core::ptr::null_mut()));
     init(executor.spawner());
+    #[cfg(feature = "emulator")]
+    let mut load = load::Meter::start();
     loop {
         WORK.store(false, Ordering::Release);
         // SAFETY: `poll` is called only here, in thread mode, never re-entrantly; the executor is
@@ -37,9 +39,54 @@ pub fn run(init: impl FnOnce(Spawner)) -> ! {
         // wake between the check and WFI leaves the interrupt pending, and WFI returns at once.
         cortex_m::interrupt::free(|_| {
             if !WORK.load(Ordering::Acquire) {
+                #[cfg(feature = "emulator")]
+                load.asleep();
                 cortex_m::asm::wfi();
+                #[cfg(feature = "emulator")]
+                load.awake();
             }
         });
+    }
+}
+
+/// The emulator build only: how much of the time the CPU is not asleep in WFI, for
+/// `scripts/cpu-load.sh`, which runs QEMU with `-icount` (guest time then follows the instructions
+/// executed) and reads these two statics through qtest. The interrupt handlers that a wake runs
+/// count as busy: they run right after `awake`, before the next `asleep`.
+#[cfg(feature = "emulator")]
+mod load {
+    use core::sync::atomic::{AtomicU32, Ordering};
+
+    /// µs spent outside WFI since start (wraps after 71 minutes: read by difference).
+    #[used]
+    static EMU_BUSY_US: AtomicU32 = AtomicU32::new(0);
+    /// The time of the last `asleep`, µs since start (the window the busy time is taken over).
+    #[used]
+    static EMU_CLOCK_US: AtomicU32 = AtomicU32::new(0);
+
+    fn now_us() -> u32 {
+        // Wraps with the statics: the harness reads differences.
+        embassy_time::Instant::now().as_micros() as u32
+    }
+
+    pub(super) struct Meter {
+        woke: u32,
+    }
+
+    impl Meter {
+        pub(super) fn start() -> Meter {
+            Meter { woke: now_us() }
+        }
+
+        pub(super) fn asleep(&mut self) {
+            let now = now_us();
+            EMU_BUSY_US.fetch_add(now.wrapping_sub(self.woke), Ordering::Relaxed);
+            EMU_CLOCK_US.store(now, Ordering::Relaxed);
+        }
+
+        pub(super) fn awake(&mut self) {
+            self.woke = now_us();
+        }
     }
 }
 

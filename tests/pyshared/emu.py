@@ -217,7 +217,7 @@ class Plc(PlcMaster):
 class Emulator:
     """A running QEMU with the firmware, rc-sim on its bus, and the host ends of its pins."""
 
-    def __init__(self, elf, workdir, axes, sim_args=(), control=False, plc=True):
+    def __init__(self, elf, workdir, axes, sim_args=(), control=False, plc=True, qemu_args=()):
         """`axes`: rc-sim's --axes; `sim_args`: more rc-sim options (--baud, --drop ...);
         `control`: rc-sim reads faults to inject ([`inject`]); `plc`: connect pymodbus to the PLC
         line ([`plc`]) - without it the line's TCP port ([`plc_port`]) is free for another
@@ -228,6 +228,7 @@ class Emulator:
         self.sim_args = list(sim_args)
         self.with_control = control
         self.with_plc = plc
+        self.qemu_args = list(qemu_args)
         self.plc_port = None
         self.log_lines = []
         self.log_lock = threading.Lock()
@@ -275,7 +276,7 @@ class Emulator:
             "-qtest", f"unix:{qtest_path},server=on,wait=off", "-qtest-log", "/dev/null",
             "-qmp", f"unix:{qmp_path},server=on,wait=off",
             "-d", "guest_errors",
-        ]
+        ] + self.qemu_args
         self.args = args
         with open(self.stderr_path, "wb") as stderr:
             self.process = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=stderr)
@@ -504,8 +505,10 @@ def elf_symbols(path):
         for symbol in table.iter_symbols():
             if symbol.name in wanted:
                 found[symbol.name] = symbol["st_value"]
-            elif "EMU_PANIC" in symbol.name:  # mangled: rc_gateway::gateway::EMU_PANIC
-                found["EMU_PANIC"] = symbol["st_value"]
+            else:  # mangled: rc_gateway::gateway::EMU_PANIC, rc_gateway::rt::load::EMU_BUSY_US
+                for name in ("EMU_PANIC", "EMU_BUSY_US", "EMU_CLOCK_US"):
+                    if name in symbol.name:
+                        found[name] = symbol["st_value"]
         return found
 
 
