@@ -214,8 +214,9 @@ impl Node {
 
     /// Bytes received on the RS485 bus at `now`.
     pub fn bus_received(&mut self, now: Instant, bytes: &[u8]) {
-        if !bytes.is_empty() {
-            self.gateway.receive(now, bytes);
+        // Only a completed frame (or a rejected candidate) gives `poll` something new to do:
+        // the bytes before it are the deframer's alone.
+        if self.gateway.receive(now, bytes) {
             self.dirty = true;
         }
     }
@@ -259,6 +260,13 @@ impl Node {
     /// What to do at `now`, if anything: a Modbus reply first (the PLC waits for it), then the
     /// bus. Call until `None`, carrying out each action before the next call.
     pub fn poll(&mut self, now: Instant) -> Option<Action<'_>> {
+        // Nothing new and nothing due: the common case on the firmware's wakes between the bytes
+        // of a frame and between input samples, which must stay cheap (the gateway's poll
+        // itself looks at every axis).
+        match self.poll_at() {
+            Some(at) if now >= at => {}
+            _ => return None,
+        }
         let link = self.slave.counters();
         let mut model = self.gateway.registers(now, link);
         let handled = self

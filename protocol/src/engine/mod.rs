@@ -364,15 +364,26 @@ impl Engine {
         Ok(id)
     }
 
-    /// Bytes received from the line at `now`.
-    pub fn receive(&mut self, now: Instant, bytes: &[u8]) {
+    /// Bytes received from the line at `now`. Whether they completed anything (a frame, or a
+    /// candidate rejected): until then the engine has nothing new to do, so a caller that
+    /// polls only when something changed may skip its poll (bytes arrive one interrupt at a
+    /// time, 32 per transaction).
+    pub fn receive(&mut self, now: Instant, bytes: &[u8]) -> bool {
+        let mut changed = false;
         for &byte in bytes {
             match self.deframer.push(byte) {
-                Ok(Packet::Frame(frame)) => self.on_frame(now, &frame),
+                Ok(Packet::Frame(frame)) => {
+                    self.on_frame(now, &frame);
+                    changed = true;
+                }
                 Ok(Packet::CommChange) | Err(nb::Error::WouldBlock) => {}
-                Err(nb::Error::Other(error)) => self.on_bad_candidate(now, error),
+                Err(nb::Error::Other(error)) => {
+                    self.on_bad_candidate(now, error);
+                    changed = true;
+                }
             }
         }
+        changed
     }
 
     fn complete(&mut self, now: Instant, flight: InFlight, reply: Reply) {

@@ -169,11 +169,13 @@ impl Gateway {
         (plc.state, plc.reason)
     }
 
-    /// Bytes received on the RS485 bus.
-    pub fn receive(&mut self, now: Instant, bytes: &[u8]) {
+    /// Bytes received on the RS485 bus; whether they completed a frame or a rejected candidate
+    /// ([`Engine::receive`](crate::engine::Engine::receive)).
+    pub fn receive(&mut self, now: Instant, bytes: &[u8]) -> bool {
         self.now = now;
-        self.engine.receive(now, bytes);
+        let changed = self.engine.receive(now, bytes);
         self.handle_events();
+        changed
     }
 
     /// A valid Modbus request to the gateway or one of its axes arrived: the PLC is alive
