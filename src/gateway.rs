@@ -83,6 +83,7 @@ pub async fn run(mut board: Board) -> ! {
             deadline(node.poll_at()),
         )
         .await;
+        let sampled = matches!(event, Either4::Third(()));
         match event {
             Either4::First(n) => node.bus_received(now(), bytes(&bus_buf, n)),
             Either4::Second(n) => node.plc_received(now(), bytes(&plc_buf, n)),
@@ -147,10 +148,14 @@ pub async fn run(mut board: Board) -> ! {
             }
         }
 
-        board.outputs.write(node.outputs());
-        board
-            .leds
-            .show(embassy_time::Instant::now(), node.indicators());
+        // The pins follow at the next input sample (1 ms): a wake for each byte on a line need
+        // not rewrite them all (measured: a quarter of the CPU time per transaction).
+        if sampled {
+            board.outputs.write(node.outputs());
+            board
+                .leds
+                .show(embassy_time::Instant::now(), node.indicators());
+        }
         board.watchdog.pet();
     }
 }
