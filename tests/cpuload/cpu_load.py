@@ -30,7 +30,6 @@ from emu import Emulator, Plc, modbus_only  # noqa: E402
 from plc import GATEWAY_UNIT  # noqa: E402
 
 SHIFT = 4
-NS_PER_INSTRUCTION = 1 << SHIFT
 G_DIAG = 0x0400  # per axis n at 0x0400 + 16 n: frames sent (u32) first
 
 
@@ -47,13 +46,15 @@ def main():
     parser.add_argument("elf")
     parser.add_argument("--seconds", type=float, default=20.0, help="the measured window (default 20)")
     parser.add_argument("--json", action="store_true", help="one JSON object")
+    parser.add_argument("--shift", type=int, default=SHIFT, choices=range(0, 9),
+                        help="-icount shift: 2^shift ns per instruction (default 4: the board)")
     parser.add_argument("--axes", type=int, default=16, choices=range(1, 17), metavar="N",
                         help="simulated axes 0..N-1 (default 16)")
     args = parser.parse_args()
     axes = list(range(args.axes))
     with tempfile.TemporaryDirectory() as workdir:
         emu = Emulator(args.elf, workdir, f"0-{args.axes - 1}", plc=False,
-                       qemu_args=["-icount", f"shift={SHIFT},sleep=on"])
+                       qemu_args=["-icount", f"shift={args.shift},sleep=on"])
         try:
             emu.start(stop_closed=True)
             modbus_only(emu, axes)
@@ -75,12 +76,12 @@ def main():
         sys.exit(f"cpu-load: nothing measured (window {window_us} us, {transactions} transactions)")
     result = {
         "cpu_load_percent": round(100.0 * busy_us / window_us, 2),
-        "instructions_per_transaction": round(busy_us * 1000 / NS_PER_INSTRUCTION / transactions),
+        "instructions_per_transaction": round(busy_us * 1000 / (1 << args.shift) / transactions),
         "transactions_per_second": round(transactions / (window_us / 1e6), 1),
         "window_guest_s": round(window_us / 1e6, 2),
         "axes": len(axes),
         "baud": 115200,
-        "ns_per_instruction": NS_PER_INSTRUCTION,
+        "ns_per_instruction": 1 << args.shift,
         "assumes": "STM32L475 at 80 MHz, 1.28 cycles per instruction",
     }
     if args.json:
