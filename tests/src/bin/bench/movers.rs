@@ -5,10 +5,10 @@
 use protocol::engine::{Event, Job, JobId, JobKind, Link};
 use protocol::line::Baud;
 use protocol::status::Outputs;
-use protocol::{Axis, HomeDirection, Pulses};
-use rc_host::harness::Harness;
+use protocol::{Axis, Pulses};
 
 use crate::measure::{all_axes, axis, config, cycles, established, Stats};
+use crate::scenarios::{homed, start_homing};
 use crate::{DEAD, MS, S, WARM_UP, WINDOW};
 
 /// The moving axes: spread over the address range, so that none is next to another in a
@@ -41,13 +41,7 @@ pub(crate) fn movers(dead: bool) -> Result<MoversResult, String> {
     let mut movers = Vec::new();
     for n in MOVERS {
         let a = axis(n)?;
-        let id = h
-            .engine
-            .submit(Job {
-                axis: a,
-                kind: JobKind::Home(HomeDirection::MotorEnd),
-            })
-            .map_err(|e| format!("home refused: {e:?}"))?;
+        let id = start_homing(&mut h, a)?;
         movers.push(Mover {
             axis: a,
             job: Some(id),
@@ -58,7 +52,7 @@ pub(crate) fn movers(dead: bool) -> Result<MoversResult, String> {
         });
     }
     for m in &mut movers {
-        wait_done(&mut h, m.job.take().ok_or("no home job")?, 30 * S)?;
+        homed(&mut h, m.job.take().ok_or("no home job")?)?;
     }
     let dead_axis = axis(DEAD)?;
     if dead {
@@ -155,16 +149,4 @@ pub(crate) fn movers(dead: bool) -> Result<MoversResult, String> {
         idle_age: Stats::of(&cycles(&h.sent, &idle, from, h.now))?,
         live_max: live_cycles.iter().copied().max().ok_or("no live cycle")?,
     })
-}
-
-fn wait_done(h: &mut Harness, id: JobId, timeout: u64) -> Result<(), String> {
-    let mine = |e: &Event| matches!(e, Event::JobDone { id: i, .. } if *i == id);
-    let done = match h.events.iter().rev().find(|(_, e)| mine(e)).copied() {
-        Some(hit) => Some(hit),
-        None => h.run_until_event(timeout, mine),
-    };
-    match done {
-        Some((_, Event::JobDone { result: Ok(_), .. })) => Ok(()),
-        other => Err(format!("job {id:?}: {other:?}")),
-    }
 }

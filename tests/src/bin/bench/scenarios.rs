@@ -85,6 +85,24 @@ pub(crate) fn request_latency(seed: u64, requests: u32) -> Result<LatencyResult,
 }
 
 /// Run until job `id` finishes (or `timeout` µs pass); its result.
+/// Home `axis` at the motor end (coordinates then run from 0 to -stroke): the job.
+pub(crate) fn start_homing(h: &mut Harness, axis: Axis) -> Result<JobId, String> {
+    h.engine
+        .submit(Job {
+            axis,
+            kind: JobKind::Home(HomeDirection::MotorEnd),
+        })
+        .map_err(|e| format!("home refused: {e:?}"))
+}
+
+/// Wait for a homing job to succeed.
+pub(crate) fn homed(h: &mut Harness, home: JobId) -> Result<(), String> {
+    match wait_job(h, home, 30 * S) {
+        Some(Ok(_)) => Ok(()),
+        other => Err(format!("homing failed: {other:?}")),
+    }
+}
+
 fn wait_job(h: &mut Harness, id: JobId, timeout: u64) -> Option<Result<JobOutput, JobError>> {
     let mine = |e: &Event| matches!(e, Event::JobDone { id: i, .. } if *i == id);
     // It may have finished within the step that submitted it.
@@ -177,17 +195,8 @@ pub(crate) struct AgeResult {
 pub(crate) fn position_age() -> Result<AgeResult, String> {
     let mut h = established(config(Baud::B115200))?;
     let mover = axis(MOVER)?;
-    let home = h
-        .engine
-        .submit(Job {
-            axis: mover,
-            kind: JobKind::Home(HomeDirection::MotorEnd),
-        })
-        .map_err(|e| format!("home refused: {e:?}"))?;
-    match wait_job(&mut h, home, 30 * S) {
-        Some(Ok(_)) => {}
-        other => return Err(format!("homing failed: {other:?}")),
-    }
+    let home = start_homing(&mut h, mover)?;
+    homed(&mut h, home)?;
     // Homed at the motor end: coordinates run from 0 to -stroke. Travel most of the stroke.
     let stroke = h
         .bus
