@@ -78,6 +78,11 @@ impl<T: Copy> AxisMap<T> {
     pub const fn new(value: T) -> AxisMap<T> {
         AxisMap([value; AXES])
     }
+
+    /// `value` for every axis, in place (no map-sized temporary: see `Node::configure`).
+    pub fn fill(&mut self, value: T) {
+        self.0.fill(value);
+    }
 }
 
 impl<T> AxisMap<T> {

@@ -201,11 +201,11 @@ impl Node {
     /// time in a `static` (with the default settings) that takes the settings loaded at
     /// start-up. Built by value instead, the node (about 10 KB) and its parts would be
     /// temporaries on the stack (measured on the MCU: 20 KB of stack at start-up).
-    pub fn configure(&mut self, config: GatewayConfig) {
+    pub fn configure(&mut self, config: &GatewayConfig) {
         self.gateway.configure(config);
         self.receiver = plc_receiver(config.plc.baud, config.plc_frame_gap);
-        self.slave = Slave::new();
-        self.reply = ReplyBuffer::new();
+        self.slave.reset();
+        self.reply.clear();
         self.pio = Pio::new(pio::Config::DEFAULT);
         self.outputs = PioOutputs::SAFE;
         self.idle_until = None;

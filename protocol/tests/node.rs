@@ -458,7 +458,7 @@ fn configure_gives_the_node_new_would() {
         format!("{fresh:?}"),
         "the history shows"
     );
-    rig.node.configure(config);
+    rig.node.configure(&config);
     assert_eq!(format!("{:?}", rig.node), format!("{fresh:?}"));
 }
 

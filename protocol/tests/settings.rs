@@ -28,6 +28,9 @@ fn a_record_round_trips() {
     let record = settings.encode();
     assert_eq!(Settings::decode(&record), Ok(settings));
     let applied = settings.apply(GatewayConfig::new(AxisSet::EMPTY));
+    let mut in_place = GatewayConfig::new(AxisSet::EMPTY);
+    settings.apply_to(&mut in_place);
+    assert_eq!(in_place, applied);
     assert_eq!(Settings::of(&applied), settings);
     assert_eq!(applied.axes[axis(2)].scale.lead.hundredths(), 1200);
 }

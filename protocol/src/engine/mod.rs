@@ -186,15 +186,9 @@ impl Engine {
     pub fn reset(&mut self, config: Config) {
         let (config, rtim) = Self::normalized(config);
         self.config = config;
-        for state in self.axes.values_mut() {
-            *state = AxisState::new(rtim);
-        }
-        for active in self.active.values_mut() {
-            *active = None;
-        }
-        for stop in self.stops.values_mut() {
-            *stop = None;
-        }
+        self.axes.fill(AxisState::new(rtim));
+        self.active.fill(None);
+        self.stops.fill(None);
         self.queue.clear();
         self.events.clear();
         self.in_flight = None;
@@ -206,7 +200,7 @@ impl Engine {
         self.break_until = None;
         self.phase = Self::first_phase(&config);
         self.settle_until = Instant::ZERO;
-        self.schedule = Schedule::new(config.position_reads_per_cycle);
+        self.schedule.reset(config.position_reads_per_cycle);
         self.rejoin = Rejoin::new();
         self.job_cursor = 0;
         self.next_id = 0;

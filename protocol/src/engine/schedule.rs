@@ -70,6 +70,19 @@ impl Schedule {
         }
     }
 
+    /// The same as [`Schedule::new`], in place (see `Engine::reset`).
+    pub(super) fn reset(&mut self, position_reads_per_cycle: u8) {
+        self.last_poll.fill(Instant::ZERO);
+        self.cursor = 0;
+        self.position_credit = position_reads_per_cycle;
+        self.credit_refill = Instant::ZERO;
+        self.position_due = AxisSet::EMPTY;
+        self.probes.fill(Probe {
+            due: Instant::ZERO,
+            backoff: FIRST_PROBE,
+        });
+    }
+
     /// Read the axis' position soon.
     pub(super) fn position_due(&mut self, axis: Axis) {
         self.position_due = self.position_due.with(axis);

@@ -88,6 +88,25 @@ pub struct SlaveCounters {
 }
 
 impl SlaveCounters {
+    const ZERO: SlaveCounters = SlaveCounters {
+        frames: 0,
+        crc_errors: 0,
+        too_short: 0,
+        too_long: 0,
+        bad_gaps: 0,
+        ignored: 0,
+        broadcasts: 0,
+        broadcast_errors: 0,
+        illegal_function: 0,
+        illegal_data_address: 0,
+        illegal_data_value: 0,
+        server_device_failure: 0,
+        replies: 0,
+        malformed: 0,
+        served: 0,
+        unanswered: 0,
+    };
+
     /// The number of replies with `exception`.
     pub fn exceptions(&self, exception: Exception) -> u32 {
         match exception {
@@ -127,6 +146,12 @@ impl Default for ReplyBuffer {
 }
 
 impl ReplyBuffer {
+    /// The same as [`ReplyBuffer::new`], in place.
+    pub fn clear(&mut self) {
+        self.bytes.fill(0);
+        self.len = 0;
+    }
+
     /// An empty buffer.
     pub const fn new() -> ReplyBuffer {
         ReplyBuffer {
@@ -175,27 +200,19 @@ impl Slave {
         Slave {
             bits: [0; MAX_READ_BITS.div_ceil(8) as usize],
             registers: [0; MAX_READ_REGISTERS as usize],
-            counters: SlaveCounters {
-                frames: 0,
-                crc_errors: 0,
-                too_short: 0,
-                too_long: 0,
-                bad_gaps: 0,
-                ignored: 0,
-                broadcasts: 0,
-                broadcast_errors: 0,
-                illegal_function: 0,
-                illegal_data_address: 0,
-                illegal_data_value: 0,
-                server_device_failure: 0,
-                replies: 0,
-                malformed: 0,
-                served: 0,
-                unanswered: 0,
-            },
+            counters: SlaveCounters::ZERO,
             cleared: LineCounts::ZERO,
             listen_only: false,
         }
+    }
+
+    /// The same as [`Slave::new`], in place (no slave-sized temporary on the stack).
+    pub fn reset(&mut self) {
+        self.bits.fill(0);
+        self.registers.fill(0);
+        self.counters = SlaveCounters::ZERO;
+        self.cleared = LineCounts::ZERO;
+        self.listen_only = false;
     }
 
     /// Whether Listen Only mode is in force (FC08 sub-function 04, left with 01).

@@ -132,17 +132,15 @@ impl Gateway {
     }
 
     /// The same gateway as [`Gateway::new`]`(config)`, made in place (see [`Engine::reset`]).
-    pub fn configure(&mut self, config: GatewayConfig) {
+    pub fn configure(&mut self, config: &GatewayConfig) {
         self.engine.reset(config.bus);
-        self.config = config;
-        for axis in self.axes.values_mut() {
-            *axis = PlcAxis::new();
-        }
+        self.config = *config;
+        self.axes.fill(PlcAxis::new());
         self.failsafe = FailSafe::new();
         self.sync = SyncStart::new();
         self.channel = Channel::new();
-        self.points = PointCache::new();
-        self.persist = Persist::new(&config);
+        self.points.clear();
+        self.persist = Persist::new(config);
         self.plc_line_changed = false;
         self.now = Instant::ZERO;
         self.events_lost = 0;

@@ -108,6 +108,12 @@ impl Settings {
     /// `config` with these settings in force.
     #[must_use]
     pub fn apply(&self, mut config: GatewayConfig) -> GatewayConfig {
+        self.apply_to(&mut config);
+        config
+    }
+
+    /// [`Settings::apply`] in place (the firmware's start-up keeps one configuration, no copies).
+    pub fn apply_to(&self, config: &mut GatewayConfig) {
         config.unit = self.unit;
         config.plc = self.plc;
         config.watchdog = self.watchdog;
@@ -118,7 +124,6 @@ impl Settings {
         config.pio_axis = self.pio_axis;
         config.bus.axes = self.axes;
         config.axes = self.axis_config;
-        config
     }
 
     /// The record, as stored.
