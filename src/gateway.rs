@@ -49,7 +49,9 @@ static NODE: ConstStaticCell<Node> = ConstStaticCell::new(Node::new(crate::node:
 #[inline(never)]
 fn start_node(settings: &mut Settings, inputs: protocol::pio::PioInputs) -> &'static mut Node {
     let node = NODE.take();
-    node.configure(settings.load(inputs));
+    let mut config = crate::node::default_config();
+    settings.load(inputs, &mut config);
+    node.configure(&config);
     node
 }
 

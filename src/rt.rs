@@ -27,7 +27,7 @@ fn __pender(_context: *mut ()) {
 /// Runs `init` to spawn the tasks, then the executor, forever.
 pub fn run(init: impl FnOnce(Spawner)) -> ! {
     let executor: &'static raw::Executor = EXECUTOR.init(raw::Executor::new(core::ptr::null_mut()));
-    init(executor.spawner());
+    start(executor.spawner(), init);
     #[cfg(feature = "emulator")]
     let mut load = load::Meter::start();
     loop {
@@ -47,6 +47,14 @@ pub fn run(init: impl FnOnce(Spawner)) -> ! {
             }
         });
     }
+}
+
+/// `init`, in a frame of its own: the peripherals and the board it builds are moved into the
+/// tasks and gone when it returns, instead of staying under every poll of the loop below
+/// (measured: 832 bytes of stack under the whole firmware).
+#[inline(never)]
+fn start(spawner: Spawner, init: impl FnOnce(Spawner)) {
+    init(spawner)
 }
 
 /// The emulator build only: how much of the time the CPU is not asleep in WFI, for

@@ -53,22 +53,21 @@ impl Settings {
     /// so that the store's code is in the firmware once rather than inlined into the gateway
     /// task's state machine at every call.
     #[inline(never)]
-    pub fn load(&mut self, inputs: PioInputs) -> GatewayConfig {
-        let mut config = default_config();
+    pub fn load(&mut self, inputs: PioInputs, config: &mut GatewayConfig) {
+        *config = default_config();
         let factory = inputs.contains(FACTORY_RESET_INPUTS);
         #[cfg(feature = "hw")]
-        if let Some(store) = self.store.as_mut() {
+        if self.store.is_some() {
             if factory {
                 warn!("settings: factory reset (HOME and RES held at power-up)");
-                if block_on(store.factory_reset()).is_err() {
-                    error!("settings: the factory reset could not be written");
+                self.factory_reset();
+            }
+            if let Some(loaded) = self.stored() {
+                if let Some(settings) = loaded.settings {
+                    settings.apply_to(config);
                 }
+                config.boot = loaded.boot;
             }
-            let loaded = block_on(store.load());
-            if let Some(settings) = loaded.settings {
-                config = settings.apply(config);
-            }
-            config.boot = loaded.boot;
         }
         #[cfg(feature = "emulator")]
         let _ = factory;
@@ -77,7 +76,16 @@ impl Settings {
             "settings: source {}, {} saves, reset cause {}",
             config.boot.source as u8, config.boot.save_count, config.boot.reset as u8
         );
-        config
+    }
+
+    /// What the store holds. Not inlined, like each store operation here: each one's future
+    /// (the store's buffers and its nested calls) is then on the stack only while it runs, not
+    /// all of them at once under [`Settings::load`].
+    #[cfg(feature = "hw")]
+    #[inline(never)]
+    fn stored(&mut self) -> Option<settings_store::Loaded> {
+        let store = self.store.as_mut()?;
+        Some(block_on(store.load()))
     }
 
     /// SAVE: store `record`; the saves so far, or `Err` if there is no store or it failed.
