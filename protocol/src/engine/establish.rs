@@ -92,6 +92,8 @@ impl Engine {
                 self.axes[axis].rtim = rtim;
             }
             self.bus.establishments = self.bus.establishments.wrapping_add(1);
+            // Polling starts now: no axis is overdue for the time establishment took.
+            self.schedule.start_cycle(now);
             self.emit(super::Event::Established);
             return None;
         }

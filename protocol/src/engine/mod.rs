@@ -39,10 +39,12 @@
 //! | [`job`] | Jobs as programs of frames and waits |
 //! | `run` | Running the jobs: activation, responses, waits, completion |
 //! | `schedule` | Polling: status round robin, position reads, probes of offline axes |
+//! | `approach` | When a mover is expected at its target (the schedule polls it then) |
 //! | `transaction` | One frame and its answer: time-out, matching, resends |
 //! | `establish`, `rejoin` | §6-1 for the whole bus, and for one power-cycled axis |
 //! | [`timing`] | §2 and §5 timing formulas |
 
+mod approach;
 mod axis;
 mod config;
 mod establish;
@@ -241,6 +243,12 @@ impl Engine {
         &self.axes[axis]
     }
 
+    /// When the axis' move in progress is expected at its target (`approach`), if the engine
+    /// has an estimate: the schedule polls its status from just before then.
+    pub fn expected_arrival(&self, axis: Axis) -> Option<Instant> {
+        self.schedule.eta(axis)
+    }
+
     /// Whether `axis` is on the bus (configured).
     pub fn configured(&self, axis: Axis) -> bool {
         self.config.axes.contains(axis)
@@ -400,8 +408,22 @@ impl Engine {
         if let (true, Some(position)) = (reads_pnow, reply.position()) {
             // Whoever asked (polling, a job), PNOW is PNOW.
             let state = &mut self.axes[axis];
+            let previous = state.position.zip(state.position_at);
             state.position = Some(position);
             state.position_at = Some(now);
+            let approach = self.schedule.approach(axis);
+            approach.position_read(now, position, previous);
+            // The first estimate comes from where the move started (late: it includes the
+            // acceleration); one more read during the move measures its speed.
+            if approach.needs_read() && self.hot(axis) {
+                self.schedule.position_due(axis);
+            }
+        }
+        if flight.origin == Origin::Job && reply.rejection().is_none() {
+            let at = self.axes[axis].position;
+            self.schedule
+                .approach(axis)
+                .command_accepted(now, &flight.request.command, at);
         }
         match flight.origin {
             Origin::Poll | Origin::Probe | Origin::Position | Origin::Cancelled => {}
@@ -433,6 +455,7 @@ impl Engine {
             }
             Link::Offline => {
                 self.schedule.went_offline(now, axis);
+                self.schedule.approach(axis).clear();
                 self.emit(Event::Offline(axis));
                 // A job that waits on an axis that no longer answers cannot finish, and one
                 // waiting its turn must not run minutes later when the axis is back.
@@ -449,9 +472,18 @@ impl Engine {
         let was_moving = state.moving();
         state.report = Some(report);
         state.report_at = Some(now);
-        if state.moving() || was_moving {
-            // Moving, or just stopped: its position is worth reading.
+        let moving = state.moving();
+        self.schedule.approach(axis).status_seen();
+        // Just stopped: its position is worth reading. Moving: until its arrival is estimated,
+        // then now and then (the estimate needs no more, and the bus is better spent on the
+        // status polls that see it arrive).
+        let stopped = was_moving && !moving;
+        let read_anyway = stopped && !self.job_reads_position(axis);
+        if read_anyway || (moving && self.schedule.approach(axis).needs_read()) {
             self.schedule.position_due(axis);
+        }
+        if stopped {
+            self.schedule.approach(axis).clear();
         }
         if changed {
             self.emit(Event::Status { axis, report });
@@ -536,7 +568,10 @@ impl Engine {
         if let Some(retry) = self.retry.take() {
             return Some((retry.request, retry.origin, retry.attempt));
         }
-        // 3. Job frames.
+        // 3. A mover at its expected arrival (a few in a row at most), then job frames.
+        if let Some(poll) = self.arrival_poll(now) {
+            return Some(poll);
+        }
         self.activate_jobs(now);
         if let Some(next) = self.next_job_frame() {
             return Some(next);

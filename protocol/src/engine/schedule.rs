@@ -1,38 +1,58 @@
-//! Polling: what the engine sends when no stop, resend or job frame is waiting.
+//! Polling: the status polls, position reads and probes that go between stops, resends and job frames.
 //!
-//! What a PLC waits for is the moment a move is seen complete, so axes that move (or have a job
-//! running) are polled as often as the bus allows, and idle axes only as often as they must:
+//! What a PLC waits for is the moment a move is seen complete, so the bus goes where that moment
+//! is near, and idle axes get only as much as their bound needs. In this order (after stops and
+//! resends, `Engine::next_transaction`):
 //!
-//! - **Status (`n`), earliest deadline first.** An axis that moves or has a job is due again as
-//!   soon as it has been polled; an idle axis is due [`IDLE_PERIOD_CYCLES`] all-axes cycles after
-//!   its last poll (a cycle is one transaction per axis that answers, the wire limit). The axis
-//!   due first goes; ties go to the one polled longest ago, then in axis order from a rotating
-//!   cursor. Work-conserving: when all are idle nobody waits for a deadline, so the axes are
-//!   polled round robin at the wire limit; when some move, each idle axis still gets its poll
-//!   within [`IDLE_PERIOD_CYCLES`] cycles plus a few transactions (no axis starves), and the
-//!   moving ones share everything else.
-//! - **Position reads (R4 PNOW)**, oldest first, for axes that move, just stopped or just came
-//!   online: at most [`Config::position_reads_per_cycle`] per all-axes cycle, so that they
-//!   cannot crowd out the status polls that see a move end.
-//! - **Offline axes** are probed when their probe is due, with a doubling back-off from
-//!   [`FIRST_PROBE`] up to [`Config::probe_interval`], so that an axis lost to a burst of noise
-//!   is back quickly and a dead one costs little. Now and then a probe is a rejoin try at the
-//!   power-up settings instead ([`rejoin`](super::rejoin)): one such try costs up to 300 ms of
-//!   bus time (9.6 kbit/s, RTIM 255 ms), so it is started only while no axis moves or runs a job
-//!   (unless [`Config::rejoin_while_moving`]).
+//! 1. **Arriving movers**, even before job frames. A mover whose arrival is estimated
+//!    ([`approach`](super::approach): its target, and its speed between two position reads) is
+//!    polled from that moment on, for up to a cycle, the one polled longest ago first; at most
+//!    [`ARRIVAL_RUN`] polls in a row before one other frame.
+//! 2. Job frames, a rejoining axis' next step (the engine), then the polls below.
+//! 3. **Idle axes that are due**: [`IDLE_PERIOD_CYCLES`] cycles after their last poll (a cycle
+//!    is one transaction per axis that answers, the wire limit), the longest waiting first.
+//! 4. **Movers a cycle after their last poll** (and axes with a job), the longest waiting
+//!    first: never less than a round robin would give them.
+//! 5. **Position reads (R4 PNOW)**: first for a mover's estimate (a move's first reads; not
+//!    counted), then for movers whose position is a cycle old, axes that just stopped (unless
+//!    their move job reads it) or came online: at most [`Config::position_reads_per_cycle`]
+//!    of these per cycle.
+//! 6. **Offline axes** are probed when their probe is due, with a doubling back-off from
+//!    [`FIRST_PROBE`] up to [`Config::probe_interval`], so that an axis lost to a burst of noise
+//!    is back quickly and a dead one costs little. Now and then a probe is a rejoin try at the
+//!    power-up settings instead ([`rejoin`](super::rejoin)): one such try costs up to 300 ms of
+//!    bus time (9.6 kbit/s, RTIM 255 ms), so it is started only while no axis moves or runs a job
+//!    (unless [`Config::rejoin_while_moving`]).
+//! 7. **Status (`n`), earliest deadline first**, among the others: an idle axis, and a mover
+//!    whose arrival is estimated but not near, is due [`IDLE_PERIOD_CYCLES`] cycles after its
+//!    last poll; a mover whose estimate is a read away twice a cycle; one whose arrival cannot
+//!    be estimated (a point's or a home's move, a job without a move) or is overdue as soon as
+//!    it has been polled. Ties go to the one polled longest ago, then in axis order from a
+//!    rotating cursor. Work-conserving: when all are idle nobody waits for a deadline, so the
+//!    axes are polled round robin at the wire limit.
+//!
+//! Measured by `scripts/bench.sh` (scenario 5: four of 16 axes moving at 115.2 kbit/s).
 //!
 //! [`Config::position_reads_per_cycle`]: super::Config::position_reads_per_cycle
 //! [`Config::probe_interval`]: super::Config::probe_interval
 //! [`Config::rejoin_while_moving`]: super::Config::rejoin_while_moving
 
+use super::approach::Approach;
 use super::{timing, Engine, Link, Next, Origin, FIRST_PROBE};
 use crate::axes::{AxisMap, AxisSet};
 use crate::memory::PNOW;
 use crate::time::{earliest, Duration, Instant};
 use crate::{Axis, Command, Request};
 
-/// An idle axis is due this many all-axes cycles after its last poll (as a fraction: 3/2).
+/// An idle axis is due this many all-axes cycles after its last poll (as a fraction: 3/2); once
+/// due, it goes before every other poll and read. The half cycle left to its bound (an idle
+/// axis' status age within two cycles) is for what still goes first: stops, resends, job frames
+/// and runs of arrival polls.
 pub const IDLE_PERIOD_CYCLES: (u64, u64) = (3, 2);
+
+/// A mover is polled first from its expected arrival on, for at most this many status polls in
+/// a row (among the arriving axes); then one other frame goes.
+pub const ARRIVAL_RUN: u8 = 3;
 
 /// When an offline axis is probed next, and the wait after an unanswered probe.
 #[derive(Clone, Copy, Debug)]
@@ -53,6 +73,10 @@ pub(super) struct Schedule {
     credit_refill: Instant,
     position_due: AxisSet,
     probes: AxisMap<Probe>,
+    /// Each mover's expected arrival.
+    approach: AxisMap<Approach>,
+    /// Status polls in a row that went to arriving axes.
+    arrival_run: u8,
 }
 
 impl Schedule {
@@ -67,6 +91,8 @@ impl Schedule {
                 due: Instant::ZERO,
                 backoff: FIRST_PROBE,
             }),
+            approach: AxisMap::new(Approach::NONE),
+            arrival_run: 0,
         }
     }
 
@@ -81,6 +107,22 @@ impl Schedule {
             due: Instant::ZERO,
             backoff: FIRST_PROBE,
         });
+        self.approach.fill(Approach::NONE);
+        self.arrival_run = 0;
+    }
+
+    /// Count every axis' status age from `now` (the bus was busy with something else before).
+    pub(super) fn start_cycle(&mut self, now: Instant) {
+        self.last_poll.fill(now);
+    }
+
+    pub(super) fn eta(&self, axis: Axis) -> Option<Instant> {
+        self.approach[axis].eta()
+    }
+
+    /// The expected arrival of the axis' move.
+    pub(super) fn approach(&mut self, axis: Axis) -> &mut Approach {
+        &mut self.approach[axis]
     }
 
     /// Read the axis' position soon.
@@ -114,11 +156,11 @@ impl Engine {
     /// Whether the axis moves or has a job running or waiting: it is polled as often as the bus
     /// allows.
     pub(super) fn hot(&self, axis: Axis) -> bool {
-        self.axes[axis].moving() || self.busy(axis)
+        self.axes[axis].moving() || self.busy(axis) || self.schedule.approach[axis].unseen()
     }
 
     /// One status poll of every axis that answers (or may), at the wire limit.
-    fn cycle_time(&self) -> Duration {
+    pub(super) fn cycle_time(&self) -> Duration {
         let polled = self
             .config
             .axes
@@ -136,37 +178,123 @@ impl Engine {
             self.schedule.position_credit = self.config.position_reads_per_cycle;
             self.schedule.credit_refill = now + cycle;
         }
-        if self.schedule.position_credit > 0 {
-            if let Some(axis) = self.oldest_position_due() {
-                self.schedule.position_credit -= 1;
-                self.schedule.position_due = self.schedule.position_due.without(axis);
-                let read = Command::ReadMemory { address: PNOW };
-                return Some((Request::new(axis, read), Origin::Position, 0));
-            }
+        let (num, den) = IDLE_PERIOD_CYCLES;
+        let idle_period = Duration(cycle.0.saturating_mul(num) / den);
+        if let Some(read) = self.position_read(now, true) {
+            return Some(read);
+        }
+        if let Some(axis) = self.idle_due(now, idle_period) {
+            return Some(self.status_poll(now, axis));
+        }
+        if let Some(read) = self.position_read(now, false) {
+            return Some(read);
+        }
+        if let Some(axis) = self.mover_at_limit(now, cycle) {
+            return Some(self.status_poll(now, axis));
         }
         if let Some(probe) = self.next_probe(now) {
             return Some(probe);
         }
-        let (num, den) = IDLE_PERIOD_CYCLES;
-        let idle_period = Duration(cycle.0.saturating_mul(num) / den);
         let cursor = self.schedule.cursor;
         let axis = self
             .config
             .axes
             .iter()
             .filter(|&a| self.axes[a].link != Link::Offline && !self.rejoining(a))
+            // Arriving axes had their turn above; this is the other one.
+            .filter(|&a| !self.is_arriving(a, now, cycle))
             .min_by_key(|&a| {
                 let last = self.schedule.last_poll[a];
-                let due = if self.hot(a) {
-                    last
-                } else {
+                let due = if !self.hot(a) {
                     last + idle_period
+                } else {
+                    let approach = &self.schedule.approach[a];
+                    let ahead = approach.eta().is_none_or(|eta| now < eta);
+                    match approach.eta() {
+                        // Arriving later: supervised as an idle axis until it is about to (then it
+                        // is polled above, as arriving).
+                        Some(eta) if now < eta && approach.estimated() => last + idle_period,
+                        // Its estimate (or a measured one) is a position read away (those go
+                        // first): meanwhile twice a cycle.
+                        _ if ahead && approach.has_target() => last + Duration(cycle.0 / 2),
+                        // No estimate possible (a point's or a home's move, a job without a
+                        // move), or past its estimate: as often as the bus allows.
+                        _ => last,
+                    }
                 };
                 (due, last, a.get().wrapping_sub(cursor) % 16)
-            })?;
+            })
+            .or_else(|| self.arriving(now, cycle))?;
+        Some(self.status_poll(now, axis))
+    }
+
+    /// The status poll of an arriving mover, unless [`ARRIVAL_RUN`] went in a row: it goes
+    /// before job frames (of other axes: a frame of its own job waits at most that long too), since
+    /// it is what shows a move complete, and a new command is no later than that.
+    pub(super) fn arrival_poll(&mut self, now: Instant) -> Option<Next> {
+        if self.schedule.arrival_run < ARRIVAL_RUN {
+            if let Some(axis) = self.arriving(now, self.cycle_time()) {
+                self.schedule.arrival_run += 1;
+                return Some(self.status_poll(now, axis));
+            }
+        }
+        self.schedule.arrival_run = 0;
+        None
+    }
+
+    fn status_poll(&mut self, now: Instant, axis: Axis) -> Next {
         self.schedule.last_poll[axis] = now;
         self.schedule.cursor = (axis.get() + 1) % 16;
-        Some((Request::new(axis, Command::Status), Origin::Poll, 0))
+        (Request::new(axis, Command::Status), Origin::Poll, 0)
+    }
+
+    /// The mover (or axis with a job) polled longest ago, if that is a `cycle` ago or more:
+    /// never supervised less often than by a round robin, whatever else is due.
+    fn mover_at_limit(&self, now: Instant, cycle: Duration) -> Option<Axis> {
+        self.config
+            .axes
+            .iter()
+            .filter(|&a| self.axes[a].link != Link::Offline && !self.rejoining(a) && self.hot(a))
+            .filter(|&a| self.schedule.last_poll[a] + cycle <= now)
+            .min_by_key(|&a| self.waiting_longest(a))
+    }
+
+    /// The key that puts the axis polled longest ago first, ties in turn from the cursor.
+    fn waiting_longest(&self, axis: Axis) -> (Instant, u8) {
+        let cursor = self.schedule.cursor;
+        (
+            self.schedule.last_poll[axis],
+            axis.get().wrapping_sub(cursor) % 16,
+        )
+    }
+
+    /// The idle axis polled longest ago, if that is `limit` ago or more.
+    fn idle_due(&self, now: Instant, limit: Duration) -> Option<Axis> {
+        self.config
+            .axes
+            .iter()
+            .filter(|&a| self.axes[a].link != Link::Offline && !self.rejoining(a))
+            .filter(|&a| self.schedule.last_poll[a] + limit <= now)
+            .min_by_key(|&a| self.waiting_longest(a))
+    }
+
+    /// A mover expected at its target since (for up to a `cycle`), the one polled longest ago:
+    /// what shows its move complete soonest.
+    fn arriving(&self, now: Instant, cycle: Duration) -> Option<Axis> {
+        self.config
+            .axes
+            .iter()
+            .filter(|&a| self.is_arriving(a, now, cycle))
+            .min_by_key(|&a| self.schedule.last_poll[a])
+    }
+
+    fn is_arriving(&self, axis: Axis, now: Instant, cycle: Duration) -> bool {
+        self.axes[axis].link == Link::Online
+            && self.hot(axis)
+            && !self.job_resending(axis)
+            && self.schedule.approach[axis]
+                .eta()
+                .is_some_and(|eta| now >= eta && now <= eta + cycle)
     }
 
     /// The probe (or rejoin try) of an offline axis whose time has come, earliest first.
@@ -191,12 +319,34 @@ impl Engine {
         }
     }
 
-    fn oldest_position_due(&self) -> Option<Axis> {
-        self.schedule
-            .position_due
-            .iter()
+    /// A position read that is due: for an estimate (few per move, and they save many status
+    /// polls) beyond the per-cycle share, any other within it.
+    fn position_read(&mut self, now: Instant, estimates: bool) -> Option<Next> {
+        let (axis, estimate) = self.oldest_position_due(now)?;
+        if estimates && !estimate {
+            return None;
+        }
+        if !estimate {
+            self.schedule.position_credit = self.schedule.position_credit.checked_sub(1)?;
+        }
+        self.schedule.position_due = self.schedule.position_due.without(axis);
+        let read = Command::ReadMemory { address: PNOW };
+        Some((Request::new(axis, read), Origin::Position, 0))
+    }
+
+    /// Movers waiting for their estimate first, then the one read longest ago; and whether the
+    /// read is for an estimate.
+    fn oldest_position_due(&self, now: Instant) -> Option<(Axis, bool)> {
+        let cycle = self.cycle_time();
+        // A mover's position at most a cycle old (as a round robin of reads would have it).
+        let stale = self.config.axes.iter().filter(|&a| {
+            self.axes[a].moving() && self.axes[a].position_at.is_none_or(|at| at + cycle <= now)
+        });
+        let due = stale.fold(self.schedule.position_due, AxisSet::with);
+        due.iter()
             .filter(|&a| self.axes[a].link == Link::Online)
-            .min_by_key(|&a| self.axes[a].position_at.map_or(0, |t| t.0))
+            .map(|a| (a, self.schedule.approach[a].needs_read() && self.hot(a)))
+            .min_by_key(|&(a, estimate)| (!estimate, self.axes[a].position_at.map_or(0, |t| t.0)))
     }
 
     /// The next moment something is due while nothing is to be sent: a probe of an offline

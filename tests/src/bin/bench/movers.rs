@@ -14,6 +14,19 @@ use crate::{DEAD, MS, S, WARM_UP, WINDOW};
 /// The moving axes: spread over the address range, so that none is next to another in a
 /// round robin.
 pub(crate) const MOVERS: [u8; 4] = [2, 6, 10, 14];
+/// Their travel, in % of the stroke, when their moves are of different lengths: their moves then
+/// end at moments that drift apart and together again, as on a machine.
+pub(crate) const TRAVEL_PERCENT: [i32; 4] = [90, 75, 60, 45];
+
+/// How the movers' moves relate.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Ends {
+    /// Travels of [`TRAVEL_PERCENT`]: the moves end apart, sometimes together.
+    Staggered,
+    /// All over 90 % of the stroke from the same start: every move of the four ends at the same
+    /// moment (the worst case: the k-th of k is seen k transactions after the first at best).
+    Together,
+}
 
 pub(crate) struct MoversResult {
     /// From the moment a move is complete on the controller (PFIN: in its band) to the moment
@@ -36,7 +49,7 @@ struct Mover {
 }
 
 /// Scenario 5 at 115.2 kbit/s, RTIM 3 ms; with `dead`, axis [`DEAD`] silent throughout.
-pub(crate) fn movers(dead: bool) -> Result<MoversResult, String> {
+pub(crate) fn movers(dead: bool, ends: Ends) -> Result<MoversResult, String> {
     let mut h = established(config(Baud::B115200))?;
     let mut movers = Vec::new();
     for n in MOVERS {
@@ -68,9 +81,15 @@ pub(crate) fn movers(dead: bool) -> Result<MoversResult, String> {
         .config()
         .actuator
         .stroke;
-    let margin = i32::try_from(stroke / 20).unwrap_or(0);
-    let far = margin - i32::try_from(stroke).map_err(|_| "stroke too long")?;
-    let near = -margin;
+    let stroke = i32::try_from(stroke).map_err(|_| "stroke too long")?;
+    let near = -stroke / 20;
+    let far = |i: usize| {
+        let percent = match ends {
+            Ends::Staggered => TRAVEL_PERCENT.get(i).copied().unwrap_or(90),
+            Ends::Together => 90,
+        };
+        near - stroke / 100 * percent
+    };
 
     let from = h.now;
     let mut complete = Vec::new();
@@ -84,7 +103,7 @@ pub(crate) fn movers(dead: bool) -> Result<MoversResult, String> {
             })
             .collect();
         done_seen = h.events.len();
-        for m in &mut movers {
+        for (i, m) in movers.iter_mut().enumerate() {
             let c = h.bus.controller(m.axis).ok_or("no moving controller")?;
             if m.in_band_at.is_none()
                 && c.last_move_start()
@@ -108,7 +127,7 @@ pub(crate) fn movers(dead: bool) -> Result<MoversResult, String> {
                 m.job = None;
             }
             if m.job.is_none() && m.seen {
-                let to = if m.toward_far { far } else { near };
+                let to = if m.toward_far { far(i) } else { near };
                 m.toward_far = !m.toward_far;
                 let id = h
                     .engine

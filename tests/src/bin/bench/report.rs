@@ -6,7 +6,7 @@ use protocol::time::Duration;
 use serde_json::{json, Value};
 
 use crate::measure::{config, round3, transaction, trt, Row};
-use crate::movers::{movers, MOVERS};
+use crate::movers::{movers, Ends, MOVERS, TRAVEL_PERCENT};
 use crate::scenarios::{dead_axis, position_age, request_latency, status_cycle};
 use crate::{Args, AXES, DEAD, MOVER, MS, S, WINDOW};
 
@@ -221,8 +221,9 @@ pub(crate) fn run(args: &Args) -> Result<Report, String> {
     ));
 
     // 5.
-    let moving = movers(false)?;
-    let with_dead = movers(true)?;
+    let moving = movers(false, Ends::Staggered)?;
+    let together = movers(false, Ends::Together)?;
+    let with_dead = movers(true, Ends::Staggered)?;
     let cycle_limit = (u64::from(AXES) * t115) as f64;
     let rows5 = [
         (
@@ -232,6 +233,14 @@ pub(crate) fn run(args: &Args) -> Result<Report, String> {
             t115 as f64,
             "T",
             MOVE_COMPLETE_TARGET,
+        ),
+        (
+            "move_complete_together_p99",
+            "move complete -> gateway, p99, four ending together",
+            together.complete.p99 as f64,
+            t115 as f64,
+            "T",
+            f64::NAN,
         ),
         (
             "idle_age_p99",
@@ -258,18 +267,22 @@ pub(crate) fn run(args: &Args) -> Result<Report, String> {
             measured_us: measured,
             limit_us: limit,
             limit_is,
-            target: Some(target),
+            target: (!target.is_nan()).then_some(target),
         });
     }
     notes.push(format!(
-        "5. axes {MOVERS:?} move back and forth over 90 % of the stroke for {} s: {} moves seen \
-         complete (controller in its band -> a status report with PFIN in the gateway: mean {:.0} \
-         us, max {} us); idle axes' status age max {} us; all live axes' longest status gap {} us, \
-         {} us with axis {DEAD} dead ({} moves)",
+        "5. axes {MOVERS:?} move back and forth over {TRAVEL_PERCENT:?} % of the stroke for {} s: \
+         {} moves seen complete (controller in its band -> a status report with PFIN in the \
+         gateway: mean {:.0} us, max {} us; all four over 90 %, ending together: {} moves, mean \
+         {:.0} us, p99 {} us); idle axes' status age max {} us; all live axes' longest status \
+         gap {} us, {} us with axis {DEAD} dead ({} moves)",
         WINDOW / S,
         moving.moves,
         moving.complete.mean,
         moving.complete.max,
+        together.moves,
+        together.complete.mean,
+        together.complete.p99,
         moving.idle_age.max,
         moving.live_max,
         with_dead.live_max,
@@ -376,7 +389,12 @@ pub(crate) fn run(args: &Args) -> Result<Report, String> {
             "four_moving": {
                 "axes": MOVERS,
                 "moves": moving.moves,
+                "travel_percent": TRAVEL_PERCENT,
                 "move_complete": moving.complete.json(),
+                "ending_together": {
+                    "moves": together.moves,
+                    "move_complete": together.complete.json(),
+                },
                 "idle_status_age": moving.idle_age.json(),
                 "live_max_gap_us": moving.live_max,
                 "with_dead_axis": {

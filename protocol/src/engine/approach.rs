@@ -1,0 +1,239 @@
+//! When a moving axis will arrive: the estimate that lets the schedule poll a mover's status
+//! around the moment its move completes, and rarely before.
+//!
+//! A status poll is what shows a move complete (PEND/PFIN in the OUT byte, complete edition
+//! §4-3-1), so the sooner one follows the completion, the sooner the PLC sees it. Polling every
+//! mover all the time cannot do it with several movers (four movers polled in turn: each every
+//! four transactions at best, and idle axes starved); polling a mover when it is about to arrive
+//! can. The estimate comes from what the engine sees anyway: the target of the move command it
+//! sent (`a` absolute, `m` relative, complete edition §4-4-8/§4-4-11) and two successive
+//! position reads (R4 PNOW) during the move, their speed extrapolated to the target. Constant
+//! speed ignores the deceleration, so the estimate is early by about half the braking time:
+//! the safe side, since an axis due is polled until it is seen in position.
+//!
+//! Until a second read, the first one and the position at the command give a provisional
+//! estimate, at twice their mean speed (an even acceleration from a standstill): also early.
+//! The reads an estimate needs are few (`ESTIMATE_READS` per move), so the schedule sends them
+//! first and outside the per-cycle share of position reads. A mover whose command was accepted
+//! counts as moving until a status says otherwise (`unseen`): its last status, from before the
+//! command, says it stands.
+
+use crate::time::{Duration, Instant};
+use crate::{Command, Pulses};
+
+/// What the engine expects of one axis' move.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Approach {
+    /// Where the move in progress goes, if a command the engine sent says so.
+    target: Option<Pulses>,
+    /// When its command was answered: position reads before it belong to an earlier move.
+    since: Instant,
+    /// Where it was then (the last position read), the first point of its speed.
+    start: Option<Pulses>,
+    /// When it is expected at its target.
+    eta: Option<Instant>,
+    /// Whether `eta` comes from two reads during the move (at its speed), not from its start.
+    measured: bool,
+    /// Position reads since the command: bounds the reads an estimate may ask for.
+    reads: u8,
+    /// A move command was accepted and no status seen since: the axis moves although its last
+    /// status says it stands.
+    unseen: bool,
+}
+
+/// The position reads a move's estimate may ask for beyond the per-cycle share (one from its
+/// start, one at its speed, one spare for a read that came before the axis started).
+const ESTIMATE_READS: u8 = 3;
+
+impl Approach {
+    pub(super) const NONE: Approach = Approach {
+        target: None,
+        since: Instant::ZERO,
+        start: None,
+        eta: None,
+        measured: false,
+        reads: 0,
+        unseen: false,
+    };
+
+    /// A move command was accepted at `now`, with the position last read (for a relative
+    /// move). Other commands leave the estimate alone.
+    pub(super) fn command_accepted(&mut self, now: Instant, command: &Command, at: Option<Pulses>) {
+        let target = match *command {
+            Command::MoveAbsolute(to) => Some(to),
+            Command::MoveRelative(by) => at.map(|from| Pulses(from.0.saturating_add(by.0))),
+            // A point's or a home's position is not in the command: no estimate.
+            Command::MoveToPoint(_) | Command::Home(_) => None,
+            _ => return,
+        };
+        *self = Approach {
+            target,
+            since: now,
+            start: at,
+            eta: None,
+            measured: false,
+            reads: 0,
+            unseen: true,
+        };
+    }
+
+    /// A position read answered at `now` (`position`), after the one before (`previous`): the
+    /// speed between them (or since the move started, from where it started: slower than the
+    /// speed it reaches, so the first estimate is late, and the next read corrects it),
+    /// extrapolated to the target.
+    pub(super) fn position_read(
+        &mut self,
+        now: Instant,
+        position: Pulses,
+        previous: Option<(Pulses, Instant)>,
+    ) {
+        let Some(target) = self.target else {
+            return;
+        };
+        self.reads = self.reads.saturating_add(1);
+        let (from, measured) = match previous {
+            Some((before, at)) if at >= self.since => (Some((before, at)), true),
+            _ => (self.start.map(|start| (start, self.since)), false),
+        };
+        if let Some((before, at)) = from {
+            let elapsed = now.0.saturating_sub(at.0);
+            // From a standstill at the command, accelerating evenly: twice the mean speed. Never
+            // more than the speed it has, so this estimate errs early, like the measured one.
+            let elapsed = if measured { elapsed } else { elapsed / 2 };
+            self.eta = arrival(now, position, target, before, elapsed);
+            self.measured = measured && self.eta.is_some();
+        }
+    }
+
+    /// Whether the axis' move has a target, so that position reads can estimate its arrival.
+    pub(super) fn has_target(&self) -> bool {
+        self.target.is_some()
+    }
+
+    /// A status report came in: from now on it says whether the axis moves.
+    pub(super) fn status_seen(&mut self) {
+        self.unseen = false;
+    }
+
+    /// Whether a move was commanded since the last status report.
+    pub(super) fn unseen(&self) -> bool {
+        self.unseen
+    }
+
+    /// Whether a position read would give (or correct) the estimate: the move has a target, its
+    /// speed is not measured yet, and it has not had its share of reads.
+    pub(super) fn needs_read(&self) -> bool {
+        self.target.is_some() && !self.measured && self.reads < ESTIMATE_READS
+    }
+
+    /// Whether the axis' arrival is estimated from its speed (its position need not be read as
+    /// often any more).
+    pub(super) fn estimated(&self) -> bool {
+        self.measured
+    }
+
+    /// The axis is not moving any more (or never started): nothing to expect.
+    pub(super) fn clear(&mut self) {
+        *self = Approach::NONE;
+    }
+
+    /// When the axis is expected at its target, if that is known.
+    pub(super) fn eta(&self) -> Option<Instant> {
+        self.eta
+    }
+}
+
+/// When an axis at `position` (now) reaches `target`, having come from `before` in `elapsed_us`
+/// µs at the same speed; `None` if it does not move toward the target.
+fn arrival(
+    now: Instant,
+    position: Pulses,
+    target: Pulses,
+    before: Pulses,
+    elapsed_us: u64,
+) -> Option<Instant> {
+    let moved = i64::from(position.0) - i64::from(before.0);
+    let remaining = i64::from(target.0) - i64::from(position.0);
+    if remaining == 0 {
+        return Some(now);
+    }
+    if moved == 0 || (moved > 0) != (remaining > 0) {
+        return None;
+    }
+    // remaining / moved > 0; the product stays far from overflow (|remaining| < 2^33,
+    // elapsed < 2^31 µs in practice; saturating for the rest).
+    let us = remaining
+        .unsigned_abs()
+        .saturating_mul(elapsed_us)
+        .checked_div(moved.unsigned_abs())?;
+    Some(now + Duration(us))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: u64 = 1_000;
+
+    #[test]
+    fn extrapolates_the_speed_between_two_reads_to_the_target() {
+        let mut a = Approach::NONE;
+        a.command_accepted(Instant(0), &Command::MoveAbsolute(Pulses(10_000)), None);
+        // 1000 pulses in 100 ms, 6000 to go: 600 ms.
+        a.position_read(
+            Instant(200 * MS),
+            Pulses(4_000),
+            Some((Pulses(3_000), Instant(100 * MS))),
+        );
+        assert_eq!(a.eta(), Some(Instant(800 * MS)));
+        // Backwards, relative.
+        a.command_accepted(
+            Instant(0),
+            &Command::MoveRelative(Pulses(-5_000)),
+            Some(Pulses(10_000)),
+        );
+        a.position_read(
+            Instant(50 * MS),
+            Pulses(9_000),
+            Some((Pulses(9_500), Instant(25 * MS))),
+        );
+        assert_eq!(a.eta(), Some(Instant(50 * MS + 200 * MS)));
+    }
+
+    #[test]
+    fn no_estimate_without_a_target_a_sample_of_this_move_or_progress() {
+        let mut a = Approach::NONE;
+        a.command_accepted(
+            Instant(0),
+            &Command::MoveToPoint(crate::PositionNo::MIN),
+            None,
+        );
+        a.position_read(Instant(20), Pulses(5), Some((Pulses(0), Instant(10))));
+        assert_eq!(a.eta(), None, "a point's position is unknown here");
+        a.command_accepted(Instant(100), &Command::MoveAbsolute(Pulses(1_000)), None);
+        a.position_read(Instant(120), Pulses(5), Some((Pulses(0), Instant(90))));
+        assert_eq!(a.eta(), None, "the earlier read is from before the move");
+        a.position_read(Instant(140), Pulses(5), Some((Pulses(5), Instant(120))));
+        assert_eq!(a.eta(), None, "standing still");
+        a.position_read(Instant(160), Pulses(0), Some((Pulses(5), Instant(140))));
+        assert_eq!(a.eta(), None, "moving away");
+        a.position_read(Instant(180), Pulses(1_000), Some((Pulses(0), Instant(160))));
+        assert_eq!(a.eta(), Some(Instant(180)), "there");
+        a.clear();
+        assert_eq!(a.eta(), None);
+    }
+
+    #[test]
+    fn other_commands_keep_the_estimate_and_extremes_do_not_overflow() {
+        let mut a = Approach::NONE;
+        a.command_accepted(Instant(0), &Command::MoveAbsolute(Pulses(i32::MAX)), None);
+        a.position_read(
+            Instant(u64::MAX / 2),
+            Pulses(i32::MIN + 1),
+            Some((Pulses(i32::MIN), Instant(0))),
+        );
+        assert_eq!(a.eta(), Some(Instant(u64::MAX)), "saturates");
+        a.command_accepted(Instant(1), &Command::Status, None);
+        assert_eq!(a.eta(), Some(Instant(u64::MAX)));
+    }
+}
