@@ -14,9 +14,9 @@
 //! 4. **Movers a cycle after their last poll** (and axes with a job), the longest waiting
 //!    first: never less than a round robin would give them.
 //! 5. **Position reads (R4 PNOW)**: first for a mover's estimate (a move's first reads; not
-//!    counted), then for movers whose position is a cycle old, axes that just stopped (unless
-//!    their move job reads it) or came online: at most [`Config::position_reads_per_cycle`]
-//!    of these per cycle.
+//!    counted), then for movers (each as often as its part of the share allows, once a cycle
+//!    at least), axes that just stopped (unless their move job reads it) or came online: at
+//!    most [`Config::position_reads_per_cycle`] of these per cycle.
 //! 6. **Offline axes** are probed when their probe is due, with a doubling back-off from
 //!    [`FIRST_PROBE`] up to [`Config::probe_interval`], so that an axis lost to a burst of noise
 //!    is back quickly and a dead one costs little. Now and then a probe is a rejoin try at the
@@ -337,10 +337,19 @@ impl Engine {
     /// Movers waiting for their estimate first, then the one read longest ago; and whether the
     /// read is for an estimate.
     fn oldest_position_due(&self, now: Instant) -> Option<(Axis, bool)> {
+        // A mover's position is read as often as its part of the share of reads allows, once a
+        // cycle at least (as a round robin of reads would).
+        let movers = self
+            .config
+            .axes
+            .iter()
+            .filter(|&a| self.axes[a].moving())
+            .count();
+        let share = u64::from(self.config.position_reads_per_cycle.max(1));
         let cycle = self.cycle_time();
-        // A mover's position at most a cycle old (as a round robin of reads would have it).
+        let period = Duration(cycle.0.saturating_mul(movers as u64) / share).min(cycle);
         let stale = self.config.axes.iter().filter(|&a| {
-            self.axes[a].moving() && self.axes[a].position_at.is_none_or(|at| at + cycle <= now)
+            self.axes[a].moving() && self.axes[a].position_at.is_none_or(|at| at + period <= now)
         });
         let due = stale.fold(self.schedule.position_due, AxisSet::with);
         due.iter()
