@@ -9,21 +9,25 @@
 //!    polled from that moment on, for up to a cycle, the one polled longest ago first; at most
 //!    [`ARRIVAL_RUN`] polls in a row before one other frame.
 //! 2. Job frames, a rejoining axis' next step (the engine), then the polls below.
-//! 3. **Idle axes that are due**: [`IDLE_PERIOD_CYCLES`] cycles after their last poll (a cycle
-//!    is one transaction per axis that answers, the wire limit), the longest waiting first.
-//! 4. **Movers a cycle after their last poll** (and axes with a job), the longest waiting
+//! 3. **Urgent position reads (R4 PNOW)**, not counted in the share below: a mover's estimate
+//!    (a move's first reads), and an axis whose position was never read (every position register
+//!    of the axis waits for it).
+//! 4. **Idle axes that are due**: [`IDLE_PERIOD_CYCLES`] cycles after their last poll (a cycle
+//!    is one transaction per axis that answers, the wire limit), the longest waiting first; but
+//!    not more than [`IDLE_RUN`] in a row before one of the rest (on a bus slower than its
+//!    nominal transaction time every idle axis would always be due).
+//! 5. **Other position reads**: movers (each as often as its part of the share allows, once a
+//!    cycle at least) and axes that just stopped (unless their move job reads it); at most
+//!    [`Config::position_reads_per_cycle`] per cycle.
+//! 6. **Movers a cycle after their last poll** (and axes with a job), the longest waiting
 //!    first: never less than a round robin would give them.
-//! 5. **Position reads (R4 PNOW)**: first for a mover's estimate (a move's first reads; not
-//!    counted), then for movers (each as often as its part of the share allows, once a cycle
-//!    at least), axes that just stopped (unless their move job reads it) or came online: at
-//!    most [`Config::position_reads_per_cycle`] of these per cycle.
-//! 6. **Offline axes** are probed when their probe is due, with a doubling back-off from
+//! 7. **Offline axes** are probed when their probe is due, with a doubling back-off from
 //!    [`FIRST_PROBE`] up to [`Config::probe_interval`], so that an axis lost to a burst of noise
 //!    is back quickly and a dead one costs little. Now and then a probe is a rejoin try at the
 //!    power-up settings instead ([`rejoin`](super::rejoin)): one such try costs up to 300 ms of
 //!    bus time (9.6 kbit/s, RTIM 255 ms), so it is started only while no axis moves or runs a job
 //!    (unless [`Config::rejoin_while_moving`]).
-//! 7. **Status (`n`), earliest deadline first**, among the others: an idle axis, and a mover
+//! 8. **Status (`n`), earliest deadline first**, among the others: an idle axis, and a mover
 //!    whose arrival is estimated but not near, is due [`IDLE_PERIOD_CYCLES`] cycles after its
 //!    last poll; a mover whose estimate is a read away twice a cycle; one whose arrival cannot
 //!    be estimated (a point's or a home's move, a job without a move) or is overdue as soon as
@@ -50,6 +54,10 @@ use crate::{Axis, Command, Request};
 /// and runs of arrival polls.
 pub const IDLE_PERIOD_CYCLES: (u64, u64) = (3, 2);
 
+/// Idle axes that are due are polled at most this many times in a row before one frame of the
+/// rules after them (position reads, movers at their limit, probes, the rest).
+pub const IDLE_RUN: u8 = 8;
+
 /// A mover is polled first from its expected arrival on, for at most this many status polls in
 /// a row (among the arriving axes); then one other frame goes.
 pub const ARRIVAL_RUN: u8 = 3;
@@ -59,6 +67,19 @@ pub const ARRIVAL_RUN: u8 = 3;
 struct Probe {
     due: Instant,
     backoff: Duration,
+}
+
+/// What a pass of the schedule works from ([`Engine::pass`]).
+struct Pass {
+    now: Instant,
+    /// One status poll of every axis that answers.
+    cycle: Duration,
+    /// Axes that move, have a job, or were just told to move.
+    hot: AxisSet,
+    /// Axes whose status says they move.
+    moving: AxisSet,
+    /// Movers at their expected arrival (for up to a cycle), polled first.
+    arriving: AxisSet,
 }
 
 /// The polling state.
@@ -77,6 +98,8 @@ pub(super) struct Schedule {
     approach: AxisMap<Approach>,
     /// Status polls in a row that went to arriving axes.
     arrival_run: u8,
+    /// Polls of idle axes that were due, in a row.
+    idle_run: u8,
 }
 
 impl Schedule {
@@ -93,6 +116,7 @@ impl Schedule {
             }),
             approach: AxisMap::new(Approach::NONE),
             arrival_run: 0,
+            idle_run: 0,
         }
     }
 
@@ -109,6 +133,7 @@ impl Schedule {
         });
         self.approach.fill(Approach::NONE);
         self.arrival_run = 0;
+        self.idle_run = 0;
     }
 
     /// Count every axis' status age from `now` (the bus was busy with something else before).
@@ -172,27 +197,62 @@ impl Engine {
         Duration(transaction.0.saturating_mul(polled as u64))
     }
 
-    pub(super) fn next_poll(&mut self, now: Instant) -> Option<Next> {
+    /// What one pass of the schedule looks at, worked out once (every rule below looks at every
+    /// axis: this keeps a pass to a few passes over 16 axes).
+    fn pass(&self, now: Instant) -> Pass {
         let cycle = self.cycle_time();
+        let mut pass = Pass {
+            now,
+            cycle,
+            hot: AxisSet::EMPTY,
+            moving: AxisSet::EMPTY,
+            arriving: AxisSet::EMPTY,
+        };
+        for a in self.config.axes.iter() {
+            if self.axes[a].moving() {
+                pass.moving = pass.moving.with(a);
+            }
+            if self.hot(a) {
+                pass.hot = pass.hot.with(a);
+                let window = self.schedule.approach[a]
+                    .eta()
+                    .is_some_and(|eta| now >= eta && now <= eta + cycle);
+                if window && self.axes[a].link == Link::Online && !self.job_resending(a) {
+                    pass.arriving = pass.arriving.with(a);
+                }
+            }
+        }
+        pass
+    }
+
+    pub(super) fn next_poll(&mut self, now: Instant) -> Option<Next> {
+        let pass = self.pass(now);
+        let cycle = pass.cycle;
         if now >= self.schedule.credit_refill {
             self.schedule.position_credit = self.config.position_reads_per_cycle;
             self.schedule.credit_refill = now + cycle;
         }
         let (num, den) = IDLE_PERIOD_CYCLES;
         let idle_period = Duration(cycle.0.saturating_mul(num) / den);
-        if let Some(read) = self.position_read(now, true) {
+        if let Some(read) = self.position_read(&pass, true) {
             return Some(read);
         }
-        if let Some(axis) = self.idle_due(now, idle_period) {
-            return Some(self.status_poll(now, axis));
+        if self.schedule.idle_run < IDLE_RUN {
+            if let Some(axis) = self.idle_due(now, idle_period) {
+                self.schedule.idle_run += 1;
+                return Some(self.status_poll(now, axis));
+            }
         }
-        if let Some(read) = self.position_read(now, false) {
+        // Not forever: on a bus slower than its nominal transaction time every idle axis is
+        // always due, and nothing below would ever go.
+        self.schedule.idle_run = 0;
+        if let Some(read) = self.position_read(&pass, false) {
             return Some(read);
         }
-        if let Some(axis) = self.mover_at_limit(now, cycle) {
+        if let Some(axis) = self.mover_at_limit(&pass) {
             return Some(self.status_poll(now, axis));
         }
-        if let Some(probe) = self.next_probe(now) {
+        if let Some(probe) = self.next_probe(&pass) {
             return Some(probe);
         }
         let cursor = self.schedule.cursor;
@@ -202,10 +262,10 @@ impl Engine {
             .iter()
             .filter(|&a| self.axes[a].link != Link::Offline && !self.rejoining(a))
             // Arriving axes had their turn above; this is the other one.
-            .filter(|&a| !self.is_arriving(a, now, cycle))
+            .filter(|&a| !pass.arriving.contains(a))
             .min_by_key(|&a| {
                 let last = self.schedule.last_poll[a];
-                let due = if !self.hot(a) {
+                let due = if !pass.hot.contains(a) {
                     last + idle_period
                 } else {
                     let approach = &self.schedule.approach[a];
@@ -224,7 +284,7 @@ impl Engine {
                 };
                 (due, last, a.get().wrapping_sub(cursor) % 16)
             })
-            .or_else(|| self.arriving(now, cycle))?;
+            .or_else(|| self.arriving(&pass))?;
         Some(self.status_poll(now, axis))
     }
 
@@ -233,7 +293,7 @@ impl Engine {
     /// it is what shows a move complete, and a new command is no later than that.
     pub(super) fn arrival_poll(&mut self, now: Instant) -> Option<Next> {
         if self.schedule.arrival_run < ARRIVAL_RUN {
-            if let Some(axis) = self.arriving(now, self.cycle_time()) {
+            if let Some(axis) = self.arriving(&self.pass(now)) {
                 self.schedule.arrival_run += 1;
                 return Some(self.status_poll(now, axis));
             }
@@ -250,12 +310,11 @@ impl Engine {
 
     /// The mover (or axis with a job) polled longest ago, if that is a `cycle` ago or more:
     /// never supervised less often than by a round robin, whatever else is due.
-    fn mover_at_limit(&self, now: Instant, cycle: Duration) -> Option<Axis> {
-        self.config
-            .axes
+    fn mover_at_limit(&self, pass: &Pass) -> Option<Axis> {
+        pass.hot
             .iter()
-            .filter(|&a| self.axes[a].link != Link::Offline && !self.rejoining(a) && self.hot(a))
-            .filter(|&a| self.schedule.last_poll[a] + cycle <= now)
+            .filter(|&a| self.axes[a].link != Link::Offline && !self.rejoining(a))
+            .filter(|&a| self.schedule.last_poll[a] + pass.cycle <= pass.now)
             .min_by_key(|&a| self.waiting_longest(a))
     }
 
@@ -280,25 +339,15 @@ impl Engine {
 
     /// A mover expected at its target since (for up to a `cycle`), the one polled longest ago:
     /// what shows its move complete soonest.
-    fn arriving(&self, now: Instant, cycle: Duration) -> Option<Axis> {
-        self.config
-            .axes
+    fn arriving(&self, pass: &Pass) -> Option<Axis> {
+        pass.arriving
             .iter()
-            .filter(|&a| self.is_arriving(a, now, cycle))
             .min_by_key(|&a| self.schedule.last_poll[a])
     }
 
-    fn is_arriving(&self, axis: Axis, now: Instant, cycle: Duration) -> bool {
-        self.axes[axis].link == Link::Online
-            && self.hot(axis)
-            && !self.job_resending(axis)
-            && self.schedule.approach[axis]
-                .eta()
-                .is_some_and(|eta| now >= eta && now <= eta + cycle)
-    }
-
     /// The probe (or rejoin try) of an offline axis whose time has come, earliest first.
-    fn next_probe(&mut self, now: Instant) -> Option<Next> {
+    fn next_probe(&mut self, pass: &Pass) -> Option<Next> {
+        let now = pass.now;
         loop {
             let axis = self
                 .config
@@ -308,8 +357,7 @@ impl Engine {
                 .filter(|&a| self.schedule.probes[a].due <= now)
                 .min_by_key(|&a| self.schedule.probes[a].due)?;
             // A rejoin try holds the bus up to 300 ms: only while nothing moves, by default.
-            let quiet =
-                self.config.rejoin_while_moving || !self.config.axes.iter().any(|a| self.hot(a));
+            let quiet = self.config.rejoin_while_moving || pass.hot.is_empty();
             if quiet && self.start_rejoin(now, axis) {
                 let max = self.config.probe_interval;
                 self.schedule.probe_failed(now, axis, max);
@@ -319,10 +367,11 @@ impl Engine {
         }
     }
 
-    /// A position read that is due: for an estimate (few per move, and they save many status
-    /// polls) beyond the per-cycle share, any other within it.
-    fn position_read(&mut self, now: Instant, estimates: bool) -> Option<Next> {
-        let (axis, estimate) = self.oldest_position_due(now)?;
+    /// A position read that is due: an urgent one (a mover's estimate: few per move, and they
+    /// save many status polls; a position never read) beyond the per-cycle share, any other
+    /// within it. Only urgent ones if `estimates`.
+    fn position_read(&mut self, pass: &Pass, estimates: bool) -> Option<Next> {
+        let (axis, estimate) = self.oldest_position_due(pass)?;
         if estimates && !estimate {
             return None;
         }
@@ -334,27 +383,28 @@ impl Engine {
         Some((Request::new(axis, read), Origin::Position, 0))
     }
 
-    /// Movers waiting for their estimate first, then the one read longest ago; and whether the
-    /// read is for an estimate.
-    fn oldest_position_due(&self, now: Instant) -> Option<(Axis, bool)> {
+    /// Urgent reads first (a mover's estimate, a position never read), then the one read
+    /// longest ago; and whether the read is urgent.
+    fn oldest_position_due(&self, pass: &Pass) -> Option<(Axis, bool)> {
         // A mover's position is read as often as its part of the share of reads allows, once a
         // cycle at least (as a round robin of reads would).
-        let movers = self
-            .config
-            .axes
-            .iter()
-            .filter(|&a| self.axes[a].moving())
-            .count();
         let share = u64::from(self.config.position_reads_per_cycle.max(1));
-        let cycle = self.cycle_time();
-        let period = Duration(cycle.0.saturating_mul(movers as u64) / share).min(cycle);
-        let stale = self.config.axes.iter().filter(|&a| {
-            self.axes[a].moving() && self.axes[a].position_at.is_none_or(|at| at + period <= now)
+        let movers = pass.moving.len() as u64;
+        let period = Duration(pass.cycle.0.saturating_mul(movers) / share).min(pass.cycle);
+        let stale = pass.moving.iter().filter(|&a| {
+            self.axes[a]
+                .position_at
+                .is_none_or(|at| at + period <= pass.now)
         });
         let due = stale.fold(self.schedule.position_due, AxisSet::with);
         due.iter()
             .filter(|&a| self.axes[a].link == Link::Online)
-            .map(|a| (a, self.schedule.approach[a].needs_read() && self.hot(a)))
+            .map(|a| {
+                // Urgent: a mover's estimate, and a position never read (every position
+                // register of the axis waits for it).
+                let estimate = self.schedule.approach[a].needs_read() && pass.hot.contains(a);
+                (a, estimate || self.axes[a].position.is_none())
+            })
             .min_by_key(|&(a, estimate)| (!estimate, self.axes[a].position_at.map_or(0, |t| t.0)))
     }
 

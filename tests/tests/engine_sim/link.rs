@@ -5,6 +5,9 @@ use protocol::engine::*;
 use protocol::line::Baud;
 use protocol::*;
 
+use rc_host::harness::Harness;
+use rc_host::sim::{Bus, BusConfig};
+
 use crate::{axis, established, MS, S};
 
 #[test]
@@ -198,4 +201,44 @@ fn sixteen_axes_are_all_polled() {
             "axis {a}: {polled} polls in 1 s"
         );
     }
+}
+
+/// On a bus slower than its nominal transaction time (every reply 6 ms late: about twice the
+/// transaction time at 115.2 kbit/s) every idle axis is always due; the polls of idle axes must
+/// still leave room for the rest: each axis' first position read (its position registers wait
+/// for it) and the probes of an absent axis.
+#[test]
+fn a_slow_bus_starves_neither_position_reads_nor_probes() {
+    let present: Vec<Axis> = (0..15).map(axis).collect();
+    let mut bus = Bus::with_axes(BusConfig::default(), &present);
+    bus.set_faults(rc_host::sim::Faults {
+        reply_delay: 1.0,
+        reply_delay_us: 6 * MS,
+        ..Default::default()
+    });
+    let engine = Engine::new(Config {
+        axes: AxisSet::first(16),
+        baud: Baud::B115200,
+        rtim: Rtim::MIN,
+        establish: true,
+        ..Config::default()
+    });
+    let mut h = Harness::new(engine, bus);
+    h.run_until_event(20 * S, |e| *e == Event::Established)
+        .expect("establishment finishes");
+    let start = h.sent.len();
+    h.run_until(h.now + 2 * S);
+    for &a in &present {
+        assert_eq!(h.engine.axis(a).link, Link::Online, "axis {a:?}");
+        assert!(
+            h.engine.axis(a).position.is_some(),
+            "axis {a:?}: position never read"
+        );
+    }
+    let absent = axis(15);
+    let probes = h.sent[start..]
+        .iter()
+        .filter(|(_, r)| r.axis == absent)
+        .count();
+    assert!(probes >= 2, "absent axis probed {probes} times in 2 s");
 }
