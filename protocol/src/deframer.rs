@@ -173,6 +173,18 @@ impl Deframer {
         });
     }
 
+    /// How many more bytes complete what has started: the echo being swallowed, or the
+    /// candidate being collected; 0 between frames. A receiver may leave that many character
+    /// times' worth of bytes in its UART buffer and take them in one go
+    /// ([`Engine::frame_due`](crate::engine::Engine::frame_due)).
+    pub fn missing(&self) -> usize {
+        match self.echo {
+            Some(echo) if echo.matched > 0 => FRAME_LEN.saturating_sub(echo.matched),
+            _ if self.len > 0 => FRAME_LEN.saturating_sub(self.len),
+            _ => 0,
+        }
+    }
+
     /// Whether an expected echo has not come back whole yet.
     pub fn echo_pending(&self) -> bool {
         self.echo.is_some()

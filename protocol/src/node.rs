@@ -317,6 +317,14 @@ impl Node {
         earliest(self.idle_until, self.receiver.next_deadline())
     }
 
+    /// Until when the bus line's received bytes may stay in the UART buffer: the frame that has
+    /// started is due whole then ([`Engine::frame_due`](crate::engine::Engine::frame_due)).
+    /// `None`: read each byte as it comes. (The PLC line is read at once: Modbus frames end by
+    /// silence, timed per byte.)
+    pub fn bus_frame_due(&self) -> Option<Instant> {
+        self.gateway.engine().frame_due()
+    }
+
     /// The PIO output pins (bit n = PCON pattern 0 port OUTn): all OFF while the PIO axis has
     /// not answered, or none is configured.
     pub fn outputs(&self) -> PioOutputs {

@@ -90,6 +90,38 @@ fn one_frame_is_delivered_on_its_last_byte() {
     );
 }
 
+/// `missing` counts down the candidate and the echo, so that a receiver may wait for the rest
+/// of a frame instead of waking for every byte of it.
+#[test]
+fn missing_counts_what_completes_the_frame_or_the_echo() {
+    let mut d = Deframer::new();
+    assert_eq!(d.missing(), 0, "between frames: wake on the first byte");
+    let reply = status_reply(3).to_bytes();
+    for (n, &byte) in reply.iter().enumerate() {
+        assert_eq!(d.missing(), if n == 0 { 0 } else { FRAME_LEN - n });
+        let _ = d.push(byte);
+    }
+    assert_eq!(d.missing(), 0, "complete");
+    // Noise outside a candidate starts nothing.
+    let _ = d.push(b'x');
+    assert_eq!(d.missing(), 0);
+    // The echo: nothing until it starts, then the rest of it.
+    let sent = status_request(3).to_bytes();
+    d.expect_echo(&sent);
+    assert_eq!(d.missing(), 0);
+    for (n, &byte) in sent.iter().enumerate().take(5) {
+        assert_eq!(d.missing(), if n == 0 { 0 } else { FRAME_LEN - n });
+        let _ = d.push(byte);
+    }
+    assert_eq!(d.missing(), FRAME_LEN - 5);
+    // A collision: the echo is abandoned, its bytes become a candidate, still counting.
+    let _ = d.push(b'Z');
+    assert_eq!(d.missing(), FRAME_LEN - 6);
+    // A half frame abandoned by the next STX: the new candidate counts from 1.
+    let _ = d.push(STX);
+    assert_eq!(d.missing(), FRAME_LEN - 1);
+}
+
 #[test]
 fn two_frames_back_to_back() {
     let mut d = Deframer::default();

@@ -138,6 +138,8 @@ pub struct Engine {
     /// A transaction parked while the line changes rate for it.
     pending: Option<Next>,
     deframer: Deframer,
+    /// When the last bytes came in.
+    received_at: Instant,
     line_baud: Baud,
     /// No command before this (host gap, a break, a broadcast on the wire).
     free_at: Instant,
@@ -167,6 +169,7 @@ impl Engine {
             retry: None,
             pending: None,
             deframer: Deframer::new(),
+            received_at: Instant::ZERO,
             line_baud: config.baud,
             free_at: Instant::ZERO,
             break_until: None,
@@ -197,6 +200,7 @@ impl Engine {
         self.retry = None;
         self.pending = None;
         self.deframer = Deframer::new();
+        self.received_at = Instant::ZERO;
         self.line_baud = config.baud;
         self.free_at = Instant::ZERO;
         self.break_until = None;
@@ -267,6 +271,18 @@ impl Engine {
     /// Counters of the receive path (noise, echoes, rejected candidates).
     pub fn deframer(&self) -> &Deframer {
         &self.deframer
+    }
+
+    /// When the frame whose first bytes came in will have arrived whole (the rest at the line's
+    /// character time after the last bytes given to [`receive`](Self::receive)); `None` between
+    /// frames. Until then a caller may leave the bytes in its UART buffer and take them in one
+    /// go: a wake per frame instead of one per byte, the same frames at the same moments.
+    pub fn frame_due(&self) -> Option<Instant> {
+        let missing = self.deframer.missing() as u64;
+        (missing > 0).then(|| {
+            let char_time = timing::char_time(self.line_baud).0;
+            self.received_at + Duration(char_time.saturating_mul(missing))
+        })
     }
 
     /// The line rate the engine has the UART at.
@@ -371,6 +387,7 @@ impl Engine {
     /// polls only when something changed may skip its poll (bytes arrive one interrupt at a
     /// time, 32 per transaction).
     pub fn receive(&mut self, now: Instant, bytes: &[u8]) -> bool {
+        self.received_at = now;
         let mut changed = false;
         for &byte in bytes {
             match self.deframer.push(byte) {

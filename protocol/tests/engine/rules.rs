@@ -365,3 +365,27 @@ fn establishment_follows_section_6_1() {
     assert!(events(&mut engine).contains(&Event::Established));
     assert!(!engine.establishing());
 }
+
+/// A receiver may leave the rest of a started frame in its UART buffer until `frame_due`: then
+/// the frame is complete and taken in one go, as if byte by byte.
+#[test]
+fn the_rest_of_a_started_answer_is_due_at_the_line_rate() {
+    let mut engine = Engine::new(config(1));
+    let mut now = Instant(0);
+    let request = next_frame(&mut engine, &mut now);
+    assert_eq!(
+        engine.frame_due(),
+        None,
+        "nothing started: read the first byte at once"
+    );
+    let bytes = ready(&request).emit().to_bytes();
+    now = now + answer_delay(&engine, request.axis);
+    let char_time = timing::char_time(engine.line_baud());
+    engine.receive(now, &bytes[..3]);
+    let due = engine.frame_due().expect("a frame has started");
+    assert_eq!(due, now + Duration(char_time.0 * 13));
+    // Taken at that moment, the rest completes the answer.
+    assert!(engine.receive(due, &bytes[3..]), "the answer completes");
+    assert_eq!(engine.frame_due(), None);
+    assert!(engine.axis(axis(0)).report.is_some());
+}
