@@ -75,7 +75,7 @@ ranged_u8!(
 impl Axis {
     /// Every axis, 0 to 15.
     pub fn all() -> impl Iterator<Item = Axis> {
-        (0..=15).map(Axis)
+        (0..16).map(Axis)
     }
 
     /// The hex digit that addresses this axis.

@@ -316,7 +316,7 @@ impl Engine {
     pub fn busy(&self, axis: Axis) -> bool {
         self.active[axis].is_some()
             || self.stops[axis].is_some()
-            || self.queue.iter().any(|(_, job)| job.axis == axis)
+            || (!self.queue.is_empty() && self.queue.iter().any(|(_, job)| job.axis == axis))
     }
 
     /// Whether job `id` is still running or waiting.

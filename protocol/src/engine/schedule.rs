@@ -43,7 +43,7 @@
 
 use super::approach::Approach;
 use super::{timing, Engine, Link, Next, Origin, FIRST_PROBE};
-use crate::axes::{AxisMap, AxisSet};
+use crate::axes::{least, AxisMap, AxisSet};
 use crate::memory::PNOW;
 use crate::time::{earliest, Duration, Instant};
 use crate::{Axis, Command, Request};
@@ -214,15 +214,26 @@ impl Engine {
             }
             if self.hot(a) {
                 pass.hot = pass.hot.with(a);
-                let window = self.schedule.approach[a]
-                    .eta()
-                    .is_some_and(|eta| now >= eta && now <= eta + cycle);
-                if window && self.axes[a].link == Link::Online && !self.job_resending(a) {
-                    pass.arriving = pass.arriving.with(a);
-                }
             }
         }
+        pass.arriving = self.arriving_set(now, cycle);
         pass
+    }
+
+    /// Movers at their expected arrival (for up to a `cycle`) that a status poll may go to now.
+    fn arriving_set(&self, now: Instant, cycle: Duration) -> AxisSet {
+        let mut set = AxisSet::EMPTY;
+        for a in self.config.axes.iter() {
+            // The estimate first: most axes have none, and the rest is dearer.
+            let window = self.schedule.approach[a]
+                .eta()
+                .is_some_and(|eta| now >= eta && now <= eta + cycle);
+            if window && self.hot(a) && self.axes[a].link == Link::Online && !self.job_resending(a)
+            {
+                set = set.with(a);
+            }
+        }
+        set
     }
 
     pub(super) fn next_poll(&mut self, now: Instant) -> Option<Next> {
@@ -256,35 +267,35 @@ impl Engine {
             return Some(probe);
         }
         let cursor = self.schedule.cursor;
-        let axis = self
+        let others = self
             .config
             .axes
             .iter()
             .filter(|&a| self.axes[a].link != Link::Offline && !self.rejoining(a))
             // Arriving axes had their turn above; this is the other one.
-            .filter(|&a| !pass.arriving.contains(a))
-            .min_by_key(|&a| {
-                let last = self.schedule.last_poll[a];
-                let due = if !pass.hot.contains(a) {
-                    last + idle_period
-                } else {
-                    let approach = &self.schedule.approach[a];
-                    let ahead = approach.eta().is_none_or(|eta| now < eta);
-                    match approach.eta() {
-                        // Arriving later: supervised as an idle axis until it is about to (then it
-                        // is polled above, as arriving).
-                        Some(eta) if now < eta && approach.estimated() => last + idle_period,
-                        // Its estimate (or a measured one) is a position read away (those go
-                        // first): meanwhile twice a cycle.
-                        _ if ahead && approach.has_target() => last + Duration(cycle.0 / 2),
-                        // No estimate possible (a point's or a home's move, a job without a
-                        // move), or past its estimate: as often as the bus allows.
-                        _ => last,
-                    }
-                };
-                (due, last, a.get().wrapping_sub(cursor) % 16)
-            })
-            .or_else(|| self.arriving(&pass))?;
+            .filter(|&a| !pass.arriving.contains(a));
+        let axis = least(others, |a| {
+            let last = self.schedule.last_poll[a];
+            let due = if !pass.hot.contains(a) {
+                last + idle_period
+            } else {
+                let approach = &self.schedule.approach[a];
+                let ahead = approach.eta().is_none_or(|eta| now < eta);
+                match approach.eta() {
+                    // Arriving later: supervised as an idle axis until it is about to (then it
+                    // is polled above, as arriving).
+                    Some(eta) if now < eta && approach.estimated() => last + idle_period,
+                    // Its estimate (or a measured one) is a position read away (those go
+                    // first): meanwhile twice a cycle.
+                    _ if ahead && approach.has_target() => last + Duration(cycle.0 / 2),
+                    // No estimate possible (a point's or a home's move, a job without a
+                    // move), or past its estimate: as often as the bus allows.
+                    _ => last,
+                }
+            };
+            (due, last, a.get().wrapping_sub(cursor) % 16)
+        })
+        .or_else(|| self.arriving(pass.arriving))?;
         Some(self.status_poll(now, axis))
     }
 
@@ -293,7 +304,7 @@ impl Engine {
     /// it is what shows a move complete, and a new command is no later than that.
     pub(super) fn arrival_poll(&mut self, now: Instant) -> Option<Next> {
         if self.schedule.arrival_run < ARRIVAL_RUN {
-            if let Some(axis) = self.arriving(&self.pass(now)) {
+            if let Some(axis) = self.arriving(self.arriving_set(now, self.cycle_time())) {
                 self.schedule.arrival_run += 1;
                 return Some(self.status_poll(now, axis));
             }
@@ -311,11 +322,12 @@ impl Engine {
     /// The mover (or axis with a job) polled longest ago, if that is a `cycle` ago or more:
     /// never supervised less often than by a round robin, whatever else is due.
     fn mover_at_limit(&self, pass: &Pass) -> Option<Axis> {
-        pass.hot
+        let movers = pass
+            .hot
             .iter()
             .filter(|&a| self.axes[a].link != Link::Offline && !self.rejoining(a))
-            .filter(|&a| self.schedule.last_poll[a] + pass.cycle <= pass.now)
-            .min_by_key(|&a| self.waiting_longest(a))
+            .filter(|&a| self.schedule.last_poll[a] + pass.cycle <= pass.now);
+        least(movers, |a| self.waiting_longest(a))
     }
 
     /// The key that puts the axis polled longest ago first, ties in turn from the cursor.
@@ -329,33 +341,32 @@ impl Engine {
 
     /// The idle axis polled longest ago, if that is `limit` ago or more.
     fn idle_due(&self, now: Instant, limit: Duration) -> Option<Axis> {
-        self.config
+        let due = self
+            .config
             .axes
             .iter()
             .filter(|&a| self.axes[a].link != Link::Offline && !self.rejoining(a))
-            .filter(|&a| self.schedule.last_poll[a] + limit <= now)
-            .min_by_key(|&a| self.waiting_longest(a))
+            .filter(|&a| self.schedule.last_poll[a] + limit <= now);
+        least(due, |a| self.waiting_longest(a))
     }
 
     /// A mover expected at its target since (for up to a `cycle`), the one polled longest ago:
     /// what shows its move complete soonest.
-    fn arriving(&self, pass: &Pass) -> Option<Axis> {
-        pass.arriving
-            .iter()
-            .min_by_key(|&a| self.schedule.last_poll[a])
+    fn arriving(&self, arriving: AxisSet) -> Option<Axis> {
+        least(arriving.iter(), |a| self.schedule.last_poll[a])
     }
 
     /// The probe (or rejoin try) of an offline axis whose time has come, earliest first.
     fn next_probe(&mut self, pass: &Pass) -> Option<Next> {
         let now = pass.now;
         loop {
-            let axis = self
+            let due = self
                 .config
                 .axes
                 .iter()
                 .filter(|&a| self.axes[a].link == Link::Offline && !self.rejoining(a))
-                .filter(|&a| self.schedule.probes[a].due <= now)
-                .min_by_key(|&a| self.schedule.probes[a].due)?;
+                .filter(|&a| self.schedule.probes[a].due <= now);
+            let axis = least(due, |a| self.schedule.probes[a].due)?;
             // A rejoin try holds the bus up to 300 ms: only while nothing moves, by default.
             let quiet = self.config.rejoin_while_moving || pass.hot.is_empty();
             if quiet && self.start_rejoin(now, axis) {
@@ -397,15 +408,17 @@ impl Engine {
                 .is_none_or(|at| at + period <= pass.now)
         });
         let due = stale.fold(self.schedule.position_due, AxisSet::with);
-        due.iter()
-            .filter(|&a| self.axes[a].link == Link::Online)
-            .map(|a| {
-                // Urgent: a mover's estimate, and a position never read (every position
-                // register of the axis waits for it).
-                let estimate = self.schedule.approach[a].needs_read() && pass.hot.contains(a);
-                (a, estimate || self.axes[a].position.is_none())
-            })
-            .min_by_key(|&(a, estimate)| (!estimate, self.axes[a].position_at.map_or(0, |t| t.0)))
+        // Urgent: a mover's estimate, and a position never read (every position register of
+        // the axis waits for it).
+        let urgent = |a: Axis| {
+            let estimate = self.schedule.approach[a].needs_read() && pass.hot.contains(a);
+            estimate || self.axes[a].position.is_none()
+        };
+        let online = due.iter().filter(|&a| self.axes[a].link == Link::Online);
+        let axis = least(online, |a| {
+            (!urgent(a), self.axes[a].position_at.map_or(0, |t| t.0))
+        })?;
+        Some((axis, urgent(axis)))
     }
 
     /// The next moment something is due while nothing is to be sent: a probe of an offline

@@ -259,14 +259,17 @@ impl Gateway {
             return;
         }
         for axis in self.config.bus.axes.iter() {
-            let plc = self.axes[axis];
+            // Runs on every poll: the PLC's own state first, the engine's only for SON ON.
+            let plc = &self.axes[axis];
+            if !plc.son() || plc.job.is_some() || now < plc.son_retry {
+                continue;
+            }
             let state = self.engine.axis(axis);
             let servo_off = state.link == Link::Online
                 && state
                     .report
                     .is_some_and(|r| !r.status.servo() && !r.outputs.alarm_active());
-            let idle = plc.job.is_none() && !self.engine.busy(axis);
-            if plc.son() && servo_off && idle && now >= plc.son_retry {
+            if servo_off && !self.engine.busy(axis) {
                 self.axes[axis].son_retry = now + SON_RETRY;
                 // Not a PLC command: CMST and CMCT keep showing the PLC's own.
                 let _ = self.engine.submit(Job {
