@@ -1,0 +1,118 @@
+"""Where the firmware's CPU time goes: an exact instruction profile of the real firmware ELF (its
+emulator build) in QEMU under the same load as cpu_load.py (16 simulated axes at 115.2 kbit/s,
+the PLC silent).
+
+How: QEMU runs with `-d in_asm,nochain`, which logs each translated block's instructions once;
+for --seconds of wall time, `exec` logging is switched on over QMP as well, which logs every block
+executed (`nochain` makes every execution go through the logger). Instructions per function are
+the executions of each block times its length, the block attributed to the function its first
+instruction is in (llvm-symbolizer). Logging slows the guest down, so the profile gives shares,
+not a load: cpu_load.py measures that.
+
+Output: the functions with the most instructions and their share of all instructions traced.
+"""
+
+import argparse
+import collections
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "tests" / "pyshared"))
+
+from emu import Emulator, modbus_only  # noqa: E402
+
+TRACE = re.compile(r"^Trace \d+: \S+ \[[0-9a-f]+/([0-9a-f]+)/")
+INSN = re.compile(r"^0x([0-9a-f]{8}):")
+# The bus UART's interrupt handler on the emulated board (src/board/l475.rs).
+BUS_IRQ = "UART4"
+
+
+def record(elf, log, seconds, axes):
+    with tempfile.TemporaryDirectory() as workdir:
+        emu = Emulator(elf, workdir, f"0-{axes - 1}", plc=False,
+                       qemu_args=["-icount", "shift=4,sleep=on", "-d", "in_asm,nochain", "-D", str(log)])
+        try:
+            emu.start(stop_closed=True)
+            modbus_only(emu, list(range(axes)))
+            time.sleep(1.0)
+            monitor = lambda line: emu.qmp.execute("human-monitor-command", **{"command-line": line})  # noqa: E731
+            monitor("log in_asm,nochain,exec")
+            time.sleep(seconds)
+            monitor("log in_asm,nochain")
+        finally:
+            emu.stop()
+
+
+def parse(log):
+    """Block length (instructions) by start address, and executions by start address."""
+    length, executed = {}, collections.Counter()
+    start = None
+    with open(log, errors="replace") as f:
+        for line in f:
+            trace = TRACE.match(line)
+            if trace:
+                executed[int(trace.group(1), 16)] += 1
+                continue
+            insn = INSN.match(line)
+            if insn:
+                pc = int(insn.group(1), 16)
+                if start is None:
+                    start = pc
+                length[start] = length.get(start, 0) + 1
+            else:
+                start = None
+    return length, executed
+
+
+def entry(elf, symbol):
+    """The address of `symbol` (Thumb bit cleared)."""
+    out = subprocess.run(["llvm-nm", elf], capture_output=True, text=True, check=True).stdout
+    for line in out.splitlines():
+        fields = line.split()
+        if len(fields) == 3 and fields[2] == symbol:
+            return int(fields[0], 16) & ~1
+    sys.exit(f"cpu-profile: no {symbol} in {elf}")
+
+
+def functions(elf, addresses):
+    """The function each address is in (the outermost, not an inlined one)."""
+    out = subprocess.run(["llvm-symbolizer", f"--obj={elf}", "--functions=linkage", "--inlining=false",
+                          "--demangle"],
+                         input="\n".join(hex(a) for a in addresses), capture_output=True, text=True,
+                         check=True).stdout
+    names = [block.split("\n")[0] for block in out.strip().split("\n\n")]
+    return dict(zip(addresses, names))
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("elf")
+    parser.add_argument("--seconds", type=float, default=3.0, help="wall time traced (default 3)")
+    parser.add_argument("--axes", type=int, default=16, choices=range(1, 17), metavar="N")
+    parser.add_argument("--top", type=int, default=30, help="functions listed (default 30)")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        log = Path(tmp) / "qemu.log"
+        record(args.elf, log, args.seconds, args.axes)
+        length, executed = parse(log)
+    if not executed:
+        sys.exit("cpu-profile: nothing was traced")
+    names = functions(args.elf, list(executed))
+    per_function = collections.Counter()
+    for pc, count in executed.items():
+        per_function[re.sub(r"::h[0-9a-f]{16}$", "", names[pc])] += count * length.get(pc, 1)
+    total = sum(per_function.values())
+    frames = executed[entry(args.elf, BUS_IRQ)] / 33
+    print(f"{total} instructions traced, about {frames:.0f} transactions (bus UART interrupts / 33; "
+          f"logging slows the guest, so the 1 ms input ticks per transaction are more than "
+          f"under scripts/cpu-load.sh: read the shares, not the sums)")
+    for name, count in per_function.most_common(args.top):
+        print(f"{100 * count / total:5.1f} %  {count:9d}  {name[:110]}")
+
+if __name__ == "__main__":
+    main()
