@@ -170,3 +170,59 @@ impl<T> IndexMut<Axis> for AxisMap<T> {
         &mut self.0[usize::from(axis.get()) & (AXES - 1)]
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A few thousand sets, from a fixed xorshift sequence (every bit pattern class: empty,
+    /// full, single axes, sparse and dense).
+    fn sets() -> impl Iterator<Item = AxisSet> {
+        let mut x: u32 = 0x9e37_79b9;
+        let random = core::iter::from_fn(move || {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            Some(AxisSet(x as u16))
+        });
+        [AxisSet::EMPTY, AxisSet::ALL, AxisSet(1), AxisSet(0x8000)]
+            .into_iter()
+            .chain(random.take(4000))
+    }
+
+    #[test]
+    fn iter_gives_the_members_lowest_first() {
+        for set in sets() {
+            let members = set.iter();
+            assert_eq!(members.size_hint(), (set.len(), Some(set.len())));
+            let bits = members.fold(AxisSet::EMPTY, |seen, a| {
+                assert!(set.contains(a), "{a:?} not in {set:?}");
+                assert!(
+                    seen.0 >> a.get() == 0,
+                    "{a:?} after a higher axis in {set:?}"
+                );
+                seen.with(a)
+            });
+            assert_eq!(bits, set);
+        }
+    }
+
+    #[test]
+    fn least_is_min_by_key_first_of_equals() {
+        // Keys with many ties (so "the first of equals" is exercised) and without.
+        let keys: [fn(Axis) -> u32; 3] = [
+            |a| u32::from(a.get() % 3),
+            |a| u32::from(15 - a.get()),
+            |a| u32::from(a.get()).wrapping_mul(0x9e37_79b9) >> 28,
+        ];
+        for set in sets() {
+            for key in keys {
+                assert_eq!(
+                    least(set.iter(), key),
+                    set.iter().min_by_key(|&a| key(a)),
+                    "{set:?}"
+                );
+            }
+        }
+    }
+}
