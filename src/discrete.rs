@@ -82,6 +82,8 @@ pub struct Leds {
     link: Output<'static>,
     alarm: Output<'static>,
     next_blink: Instant,
+    /// The gateway task's progress count at the last blink.
+    progress: u32,
 }
 
 impl Leds {
@@ -92,16 +94,19 @@ impl Leds {
             link,
             alarm,
             next_blink: Instant::from_ticks(0),
+            progress: 0,
         }
     }
 
-    /// Shows (bus link good, alarm) and blinks the run LED.
-    pub fn show(&mut self, now: Instant, indicators: protocol::node::Indicators) {
+    /// Shows (bus link good, alarm), and blinks the run LED if the gateway task's `progress`
+    /// count moved since the last blink (a stuck task leaves it as it is).
+    pub fn show(&mut self, now: Instant, indicators: protocol::node::Indicators, progress: u32) {
         self.link.set_level(Level::from(indicators.link));
         self.alarm.set_level(Level::from(indicators.alarm));
-        if now >= self.next_blink {
+        if now >= self.next_blink && progress != self.progress {
             self.run.toggle();
             self.next_blink = now + RUN_BLINK;
+            self.progress = progress;
         }
     }
 }

@@ -1,22 +1,25 @@
 //! The gateway task: the only owner of the protocol [`Node`] and of the lines and pins around it.
 //!
 //! One loop, no locks (every node call is synchronous and short):
-//! wait for bus bytes, PLC bytes, the 1 ms input tick or the node's own deadline; feed what came
-//! and everything else already waiting (ingress before egress); then carry out the node's actions
-//! until it has none; show outputs and LEDs; feed the watchdog.
+//! wait for bus bytes, PLC bytes, an input sample from the I/O task ([`io`](crate::io)) or the
+//! node's own deadline; feed what came and everything else already waiting (ingress before
+//! egress); then carry out the node's actions until it has none; tell the I/O task what the
+//! outputs and LEDs show; feed the watchdog.
 
 use embassy_futures::select::{select4, Either4};
-use embassy_time::{Duration, Ticker, Timer};
+use embassy_time::Timer;
 
 use crate::board::Board;
+use crate::io::{self, Sample, SAMPLES};
 use crate::node::{Action, Instant, Node};
 use crate::settings::Settings;
 use protocol::line::LineAction;
 use protocol::plc::Store;
 use static_cell::ConstStaticCell;
 
-/// The PIO inputs are sampled this often (the node debounces them).
-const SAMPLE_PERIOD: Duration = Duration::from_millis(1);
+/// The loop passes at least this often, whatever happens on the lines: it feeds the watchdog
+/// and blinks the run LED (through the I/O task).
+const HEARTBEAT: protocol::time::Duration = protocol::time::Duration::from_millis(100);
 
 /// Now, as the protocol counts time (µs since boot).
 fn now() -> Instant {
@@ -67,12 +70,11 @@ fn start_node(settings: &mut Settings, inputs: protocol::pio::PioInputs) -> &'st
 
 /// Runs the gateway forever.
 #[embassy_executor::task]
-pub async fn run(mut board: Board) -> ! {
+pub async fn run(mut board: Board, boot: Sample) -> ! {
     let mut settings = Settings::new(board.settings_flash.take());
-    let node = start_node(&mut settings, board.inputs.sample());
+    let node = start_node(&mut settings, boot.inputs);
     let mut bus_buf = [0u8; 64];
     let mut plc_buf = [0u8; 64];
-    let mut ticker = Ticker::every(SAMPLE_PERIOD);
     // The UARTs start at the node's settings.
     let baud = node.gateway().engine().line_baud();
     board.bus.set_baud(baud.bits_per_second()).await;
@@ -83,30 +85,32 @@ pub async fn run(mut board: Board) -> ! {
         .await;
     // The harness waits for this line: both UARTs receive at their settings from now on.
     info!("ready");
-    let mut stop = board.inputs.stop_active();
+    let first = SAMPLES.try_take().unwrap_or(boot);
+    let mut stop = first.stop;
     node.set_stop_input(now(), stop);
-    node.sample_inputs(now(), board.inputs.sample());
+    node.sample_inputs(now(), first.inputs);
 
     loop {
         let hold = node.bus_frame_due();
         let event = select4(
             bus_read(&mut board.bus, &mut bus_buf, hold),
             board.plc.read(&mut plc_buf),
-            ticker.next(),
-            deadline(node.poll_at()),
+            SAMPLES.wait(),
+            deadline(protocol::time::earliest(
+                node.poll_at(),
+                Some(now() + HEARTBEAT),
+            )),
         )
         .await;
-        let sampled = matches!(event, Either4::Third(()));
         match event {
             Either4::First(n) => node.bus_received(now(), bytes(&bus_buf, n)),
             Either4::Second(n) => node.plc_received(now(), bytes(&plc_buf, n)),
-            Either4::Third(()) => {
-                let active = board.inputs.stop_active();
-                if active != stop {
-                    stop = active;
+            Either4::Third(sample) => {
+                if sample.stop != stop {
+                    stop = sample.stop;
                     node.set_stop_input(now(), stop);
                 }
-                node.sample_inputs(now(), board.inputs.sample());
+                node.sample_inputs(now(), sample.inputs);
             }
             Either4::Fourth(()) => {}
         }
@@ -161,14 +165,10 @@ pub async fn run(mut board: Board) -> ! {
             }
         }
 
-        // The pins follow at the next input sample (1 ms): a wake for each byte on a line need
-        // not rewrite them all (measured: a quarter of the CPU time per transaction).
-        if sampled {
-            board.outputs.write(node.outputs());
-            board
-                .leds
-                .show(embassy_time::Instant::now(), node.indicators());
-        }
+        // The I/O task shows them at its next sample (1 ms). Every sample while a PIO axis is
+        // configured (its logic debounces and times by samples), only changes otherwise.
+        let pio = node.gateway().config().pio_axis.is_some();
+        io::show(node.outputs(), node.indicators(), pio);
         board.watchdog.pet();
     }
 }

@@ -15,6 +15,7 @@
 //! | [`discrete`] | PIO inputs and outputs as pins; LEDs |
 //! | [`node`] | The protocol node and the settings it starts with |
 //! | [`gateway`] | The one task that owns the node |
+//! | [`io`] | The task that samples the inputs and drives the outputs and LEDs |
 //! | [`settings`] | The settings at start-up and on SAVE, factory reset, reset cause |
 //! | [`rt`] | Executor loop, panic and HardFault handlers (all the `unsafe`) |
 //! | `systick` | The emulator's time driver |
@@ -40,6 +41,7 @@ mod log;
 mod board;
 mod discrete;
 mod gateway;
+mod io;
 mod node;
 mod pins;
 #[allow(unsafe_code)]
@@ -61,7 +63,7 @@ fn main() -> ! {
     rt::run(start)
 }
 
-/// Brings the chip up and spawns the gateway task.
+/// Brings the chip up and spawns the gateway and I/O tasks.
 fn start(spawner: Spawner) {
     let p = embassy_stm32::init(board::clock_config());
     #[cfg(feature = "emulator")]
@@ -70,15 +72,22 @@ fn start(spawner: Spawner) {
     }
     info!("rc-gateway {} starting", VERSION);
 
-    let board = match board::board(p, node::default_config().plc) {
-        Ok(board) => board,
+    let (board, pins) = match board::board(p, node::default_config().plc) {
+        Ok(parts) => parts,
         Err(_) => {
             // Only a baud rate the kernel clock cannot make: a build error, not a field fault.
             error!("UART configuration refused");
             return;
         }
     };
-    match gateway::run(board) {
+    // The pins at power-up (a factory reset is an input held at boot), before the I/O task
+    // takes them.
+    let boot = io::Sample::of(&pins.inputs);
+    match io::run(pins) {
+        Ok(token) => spawner.spawn(token),
+        Err(_) => error!("I/O task not started"),
+    }
+    match gateway::run(board, boot) {
         Ok(token) => spawner.spawn(token),
         Err(_) => error!("gateway task not started"),
     }

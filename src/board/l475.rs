@@ -57,6 +57,7 @@ use super::{
     BUS_TX, BUS_TX_CAPACITY, INPUT_ON, OUTPUT_ON, PLC_RX, PLC_TX, PLC_TX_CAPACITY,
 };
 use crate::discrete::{Inputs, Leds, Outputs};
+use crate::io::Pins;
 use crate::pins::{self, LineBreak, PinId};
 use crate::serial::Rs485;
 
@@ -130,7 +131,10 @@ pub fn reset_cause() -> protocol::plc::ResetCause {
 }
 
 /// Takes the peripherals this board uses. Fails only if a UART rejects its configuration.
-pub fn board(p: Peripherals, plc_line: protocol::plc::PlcLine) -> Result<Board, ConfigError> {
+pub fn board(
+    p: Peripherals,
+    plc_line: protocol::plc::PlcLine,
+) -> Result<(Board, Pins), ConfigError> {
     // Outputs first, driven OFF, so that nothing is ever ON before the gateway says so.
     let outputs = Outputs::new(
         [
@@ -191,13 +195,18 @@ pub fn board(p: Peripherals, plc_line: protocol::plc::PlcLine) -> Result<Board, 
         line_config(plc_line.baud, plc_line.parity),
     )?;
 
-    Ok(Board {
+    let board = Board {
         bus: Rs485::new(bus, BUS_TX_CAPACITY, Some(line_break), None),
         plc: Rs485::new(plc, PLC_TX_CAPACITY, None, None),
-        inputs,
-        outputs,
-        leds,
         watchdog: Watchdog::new(p.IWDG),
         settings_flash: settings_flash(p.FLASH),
-    })
+    };
+    Ok((
+        board,
+        Pins {
+            inputs,
+            outputs,
+            leds,
+        },
+    ))
 }

@@ -30,7 +30,7 @@ use embassy_stm32::usart;
 use embassy_stm32::Peri;
 use static_cell::ConstStaticCell;
 
-use crate::discrete::{opposite, Inputs, Leds, Outputs};
+use crate::discrete::opposite;
 use crate::pins::{self, PinId};
 use crate::serial::Rs485;
 
@@ -62,12 +62,6 @@ pub struct Board {
     pub bus: Rs485,
     /// The RS485 line to the PLC (Modbus RTU).
     pub plc: Rs485,
-    /// The PIO inputs and the stop input.
-    pub inputs: Inputs,
-    /// The PIO outputs.
-    pub outputs: Outputs,
-    /// Run, bus link and alarm LEDs.
-    pub leds: Leds,
     /// Fed by the gateway task's progress.
     pub watchdog: Watchdog,
     /// The flash for the settings store, taken by the gateway task.
