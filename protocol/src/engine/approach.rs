@@ -30,8 +30,10 @@ pub(super) struct Approach {
     since: Instant,
     /// Where it was then (the last position read), the first point of its speed.
     start: Option<Pulses>,
-    /// When it is expected at its target.
-    eta: Option<Instant>,
+    /// When it is expected at its target, if `eta_known` (an `Option<Instant>` would take 8
+    /// bytes more per axis, in a node the F103 budget holds to the byte).
+    eta: Instant,
+    eta_known: bool,
     /// Whether `eta` comes from two reads during the move (at its speed), not from its start.
     measured: bool,
     /// Position reads since the command: bounds the reads an estimate may ask for.
@@ -50,7 +52,8 @@ impl Approach {
         target: None,
         since: Instant::ZERO,
         start: None,
-        eta: None,
+        eta: Instant::ZERO,
+        eta_known: false,
         measured: false,
         reads: 0,
         unseen: false,
@@ -70,7 +73,8 @@ impl Approach {
             target,
             since: now,
             start: at,
-            eta: None,
+            eta: Instant::ZERO,
+            eta_known: false,
             measured: false,
             reads: 0,
             unseen: true,
@@ -100,8 +104,10 @@ impl Approach {
             // From a standstill at the command, accelerating evenly: twice the mean speed. Never
             // more than the speed it has, so this estimate errs early, like the measured one.
             let elapsed = if measured { elapsed } else { elapsed / 2 };
-            self.eta = arrival(now, position, target, before, elapsed);
-            self.measured = measured && self.eta.is_some();
+            let eta = arrival(now, position, target, before, elapsed);
+            self.eta = eta.unwrap_or(Instant::ZERO);
+            self.eta_known = eta.is_some();
+            self.measured = measured && self.eta_known;
         }
     }
 
@@ -139,7 +145,7 @@ impl Approach {
 
     /// When the axis is expected at its target, if that is known.
     pub(super) fn eta(&self) -> Option<Instant> {
-        self.eta
+        self.eta_known.then_some(self.eta)
     }
 }
 
