@@ -62,8 +62,11 @@ def parse(log):
             if insn:
                 pc = int(insn.group(1), 16)
                 if start is None:
-                    start = pc
-                length[start] = length.get(start, 0) + 1
+                    start, n = pc, 0
+                n += 1
+                # A block may be translated again (another CPU mode, an invalidation): its
+                # length is that of one translation.
+                length[start] = n
             else:
                 start = None
     return length, executed
