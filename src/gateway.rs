@@ -89,6 +89,7 @@ pub async fn run(mut board: Board, boot: Sample) -> ! {
     let mut stop = first.stop;
     node.set_stop_input(now(), stop);
     node.sample_inputs(now(), first.inputs);
+    let mut indicators_at = embassy_time::Instant::from_ticks(0);
 
     loop {
         let hold = node.bus_frame_due();
@@ -168,7 +169,12 @@ pub async fn run(mut board: Board, boot: Sample) -> ! {
         // The I/O task shows them at its next sample (1 ms). Every sample while a PIO axis is
         // configured (its logic debounces and times by samples), only changes otherwise.
         let pio = node.gateway().config().pio_axis.is_some();
-        io::show(node.outputs(), node.indicators(), pio);
+        io::show_outputs(node.outputs(), pio);
+        let t = embassy_time::Instant::now();
+        if t >= indicators_at {
+            io::show_indicators(node.indicators());
+            indicators_at = t + io::INDICATORS_PERIOD;
+        }
         board.watchdog.pet();
     }
 }

@@ -55,10 +55,19 @@ static EVERY_SAMPLE: AtomicBool = AtomicBool::new(false);
 /// Passes of the gateway task's loop: the run LED blinks while this moves.
 static PROGRESS: AtomicU32 = AtomicU32::new(0);
 
-/// Called by the gateway task on every pass of its loop: what the pins show, and whether it
-/// needs every sample (a PIO axis is configured) or only changes.
-pub fn show(outputs: PioOutputs, indicators: Indicators, every_sample: bool) {
-    let mut shown = u32::from(outputs.bits());
+/// Called by the gateway task on every pass of its loop: the PIO outputs, and whether it needs
+/// every sample (a PIO axis is configured) or only changes.
+pub fn show_outputs(outputs: PioOutputs, every_sample: bool) {
+    let indicators = SHOWN.load(Ordering::Relaxed) & (LINK | ALARM);
+    SHOWN.store(indicators | u32::from(outputs.bits()), Ordering::Relaxed);
+    EVERY_SAMPLE.store(every_sample, Ordering::Relaxed);
+    PROGRESS.fetch_add(1, Ordering::Relaxed);
+}
+
+/// Called by the gateway task now and then ([`INDICATORS_PERIOD`]): what the LEDs show. (Working
+/// them out looks at every axis: not on every pass.)
+pub fn show_indicators(indicators: Indicators) {
+    let mut shown = SHOWN.load(Ordering::Relaxed) & !(LINK | ALARM);
     if indicators.link {
         shown |= LINK;
     }
@@ -66,9 +75,10 @@ pub fn show(outputs: PioOutputs, indicators: Indicators, every_sample: bool) {
         shown |= ALARM;
     }
     SHOWN.store(shown, Ordering::Relaxed);
-    EVERY_SAMPLE.store(every_sample, Ordering::Relaxed);
-    PROGRESS.fetch_add(1, Ordering::Relaxed);
 }
+
+/// How often the gateway task updates the LEDs: fast for an eye, slow for the CPU.
+pub const INDICATORS_PERIOD: Duration = Duration::from_millis(20);
 
 /// The pins, for [`run`].
 pub struct Pins {

@@ -68,7 +68,7 @@ fn start(spawner: Spawner) {
     let p = embassy_stm32::init(board::clock_config());
     #[cfg(feature = "emulator")]
     if let Some(core) = cortex_m::Peripherals::take() {
-        systick::init(core.SYST, board::SYSCLK_HZ);
+        systick::init(core.SYST);
     }
     info!("rc-gateway {} starting", VERSION);
 

@@ -16,6 +16,11 @@ use embassy_time_driver::Driver;
 use embassy_time_queue_utils::Queue;
 
 const TICKS_PER_MS: u64 = embassy_time_driver::TICK_HZ / 1000;
+/// Core cycles in a millisecond (SysTick's period) and in a tick, as constants: `now()` runs on
+/// every timer poll, and `scripts/cpu-load.sh` counts it.
+const CYCLES_PER_MS: u32 = crate::board::SYSCLK_HZ / 1000;
+const CYCLES_PER_TICK: u32 = CYCLES_PER_MS / TICKS_PER_MS as u32;
+const _: () = assert!(CYCLES_PER_TICK * TICKS_PER_MS as u32 == CYCLES_PER_MS);
 
 struct SysTickDriver {
     /// Milliseconds counted by the interrupt.
@@ -28,10 +33,10 @@ embassy_time_driver::time_driver_impl!(static DRIVER: SysTickDriver = SysTickDri
     queue: Mutex::new(RefCell::new(Queue::new())),
 });
 
-/// Starts the 1 ms interrupt; `core_hz` is the processor clock.
-pub fn init(mut syst: SYST, core_hz: u32) {
+/// Starts the 1 ms interrupt (SysTick counts [`crate::board::SYSCLK_HZ`] core cycles).
+pub fn init(mut syst: SYST) {
     syst.set_clock_source(SystClkSource::Core);
-    syst.set_reload(core_hz / 1000 - 1);
+    syst.set_reload(CYCLES_PER_MS - 1);
     syst.clear_current();
     syst.enable_interrupt();
     syst.enable_counter();
@@ -48,11 +53,7 @@ impl Driver for SysTickDriver {
                 ms += 1;
                 current = SYST::get_current();
             }
-            // In 32 bits (reload + 1 is the core clock's kHz, 80,000 here; times 1,000 fits):
-            // one hardware divide, not a 64-bit library one. `now` runs on every timer poll,
-            // and `scripts/cpu-load.sh` counts it.
-            let reload = SYST::get_reload() + 1;
-            let within = (reload - 1 - current) * TICKS_PER_MS as u32 / reload;
+            let within = (CYCLES_PER_MS - 1).saturating_sub(current) / CYCLES_PER_TICK;
             ms * TICKS_PER_MS + u64::from(within)
         })
     }

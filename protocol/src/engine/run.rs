@@ -79,7 +79,9 @@ impl Engine {
 
     pub(super) fn expire_waits(&mut self, now: Instant) {
         for axis in Axis::all() {
+            // By reference: a job's state is large, and this runs on every poll.
             let expired = self.active[axis]
+                .as_ref()
                 .and_then(|a| a.wait_deadline)
                 .is_some_and(|deadline| now >= deadline);
             if expired {
