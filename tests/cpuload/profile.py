@@ -2,12 +2,13 @@
 emulator build) in QEMU under the same load as cpu_load.py (16 simulated axes at 115.2 kbit/s,
 the PLC silent).
 
-How: QEMU runs with `-d in_asm,nochain`, which logs each translated block's instructions once;
-for --seconds of wall time, `exec` logging is switched on over QMP as well, which logs every block
-executed (`nochain` makes every execution go through the logger). Instructions per function are
-the executions of each block times its length, the block attributed to the function its first
-instruction is in (llvm-symbolizer). Logging slows the guest down, so the profile gives shares,
-not a load: cpu_load.py measures that.
+How: QEMU runs with `-accel tcg,one-insn-per-tb=on` (every translated block is one instruction) and
+`-d nochain` (every block executed goes through the logger); for --seconds of wall time, `exec`
+logging is switched on over QMP, which logs every block executed: every instruction, with its
+address. Instructions per function are those addresses, attributed to the function they are in
+(llvm-symbolizer). (Counting blocks times their length instead goes wrong for blocks that touch
+I/O: under -icount QEMU translates them again, shorter.) Logging slows the guest down, so the
+profile gives shares, not a load: cpu_load.py measures that.
 
 Output: the functions with the most instructions and their share of all instructions traced.
 """
@@ -27,7 +28,6 @@ sys.path.insert(0, str(ROOT / "tests" / "pyshared"))
 from emu import Emulator, modbus_only  # noqa: E402
 
 TRACE = re.compile(r"^Trace \d+: \S+ \[[0-9a-f]+/([0-9a-f]+)/")
-INSN = re.compile(r"^0x([0-9a-f]{8}):")
 # The bus UART's interrupt handler on the emulated board (src/board/l475.rs).
 BUS_IRQ = "UART4"
 
@@ -35,41 +35,29 @@ BUS_IRQ = "UART4"
 def record(elf, log, seconds, axes):
     with tempfile.TemporaryDirectory() as workdir:
         emu = Emulator(elf, workdir, f"0-{axes - 1}", plc=False,
-                       qemu_args=["-icount", "shift=4,sleep=on", "-d", "in_asm,nochain", "-D", str(log)])
+                       qemu_args=["-icount", "shift=4,sleep=on", "-d", "nochain", "-D", str(log)],
+                       accel="tcg,one-insn-per-tb=on")
         try:
             emu.start(stop_closed=True)
             modbus_only(emu, list(range(axes)))
             time.sleep(1.0)
             monitor = lambda line: emu.qmp.execute("human-monitor-command", **{"command-line": line})  # noqa: E731
-            monitor("log in_asm,nochain,exec")
+            monitor("log nochain,exec")
             time.sleep(seconds)
-            monitor("log in_asm,nochain")
+            monitor("log nochain")
         finally:
             emu.stop()
 
 
 def parse(log):
-    """Block length (instructions) by start address, and executions by start address."""
-    length, executed = {}, collections.Counter()
-    start = None
+    """Executions by address (each block is one instruction)."""
+    executed = collections.Counter()
     with open(log, errors="replace") as f:
         for line in f:
             trace = TRACE.match(line)
             if trace:
                 executed[int(trace.group(1), 16)] += 1
-                continue
-            insn = INSN.match(line)
-            if insn:
-                pc = int(insn.group(1), 16)
-                if start is None:
-                    start, n = pc, 0
-                n += 1
-                # A block may be translated again (another CPU mode, an invalidation): its
-                # length is that of one translation.
-                length[start] = n
-            else:
-                start = None
-    return length, executed
+    return executed
 
 
 def entry(elf, symbol):
@@ -102,13 +90,13 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "qemu.log"
         record(args.elf, log, args.seconds, args.axes)
-        length, executed = parse(log)
+        executed = parse(log)
     if not executed:
         sys.exit("cpu-profile: nothing was traced")
     names = functions(args.elf, list(executed))
     per_function = collections.Counter()
     for pc, count in executed.items():
-        per_function[re.sub(r"::h[0-9a-f]{16}$", "", names[pc])] += count * length.get(pc, 1)
+        per_function[re.sub(r"::h[0-9a-f]{16}$", "", names[pc])] += count
     total = sum(per_function.values())
     frames = executed[entry(args.elf, BUS_IRQ)] / 33
     print(f"{total} instructions traced, about {frames:.0f} transactions (bus UART interrupts / 33; "

@@ -217,7 +217,7 @@ class Plc(PlcMaster):
 class Emulator:
     """A running QEMU with the firmware, rc-sim on its bus, and the host ends of its pins."""
 
-    def __init__(self, elf, workdir, axes, sim_args=(), control=False, plc=True, qemu_args=()):
+    def __init__(self, elf, workdir, axes, sim_args=(), control=False, plc=True, qemu_args=(), accel="tcg"):
         """`axes`: rc-sim's --axes; `sim_args`: more rc-sim options (--baud, --drop ...);
         `control`: rc-sim reads faults to inject ([`inject`]); `plc`: connect pymodbus to the PLC
         line ([`plc`]) - without it the line's TCP port ([`plc_port`]) is free for another
@@ -229,6 +229,7 @@ class Emulator:
         self.with_control = control
         self.with_plc = plc
         self.qemu_args = list(qemu_args)
+        self.accel = accel
         self.plc_port = None
         self.log_lines = []
         self.log_lock = threading.Lock()
@@ -266,7 +267,7 @@ class Emulator:
         qmp_path = self.workdir / "qmp.sock"
         self.stderr_path = self.workdir / "qemu.stderr"
         args = [
-            QEMU, "-M", "b-l475e-iot01a", "-accel", "tcg",
+            QEMU, "-M", "b-l475e-iot01a", "-accel", self.accel,
             "-nographic", "-monitor", "none", "-S",
             "-kernel", str(self.elf),
             "-semihosting-config", "enable=on,target=native",
