@@ -171,13 +171,15 @@ impl Engine {
     /// attempts go in a row, nothing else to that axis between them (§5: the axis is offline
     /// after 1 + Nrt of them).
     pub(super) fn job_resending(&self, axis: Axis) -> bool {
-        self.active[axis].is_some_and(|active| active.attempt > 0)
+        self.active[axis]
+            .as_ref()
+            .is_some_and(|active| active.attempt > 0)
     }
 
     /// Whether the axis' job reads its position once it is in position (a move job): the
     /// schedule need not read it as well.
     pub(super) fn job_reads_position(&self, axis: Axis) -> bool {
-        self.active[axis].is_some_and(|active| {
+        self.active[axis].as_ref().is_some_and(|active| {
             let reads = |op: Option<Op>| match op {
                 Some(Op::Await(job::Condition::InPosition)) => true,
                 Some(Op::Send(step)) => {

@@ -245,8 +245,10 @@ impl Engine {
         }
         let (num, den) = IDLE_PERIOD_CYCLES;
         let idle_period = Duration(cycle.0.saturating_mul(num) / den);
-        if let Some(read) = self.position_read(&pass, true) {
-            return Some(read);
+        // Found once, taken below by its rule: urgent first, the others after idle axes due.
+        let read = self.oldest_position_due(&pass);
+        if let Some((axis, true)) = read {
+            return Some(self.position_read(axis));
         }
         if self.schedule.idle_run < IDLE_RUN {
             if let Some(axis) = self.idle_due(now, idle_period) {
@@ -257,8 +259,11 @@ impl Engine {
         // Not forever: on a bus slower than its nominal transaction time every idle axis is
         // always due, and nothing below would ever go.
         self.schedule.idle_run = 0;
-        if let Some(read) = self.position_read(&pass, false) {
-            return Some(read);
+        if let Some((axis, false)) = read {
+            if let Some(credit) = self.schedule.position_credit.checked_sub(1) {
+                self.schedule.position_credit = credit;
+                return Some(self.position_read(axis));
+            }
         }
         if let Some(axis) = self.mover_at_limit(&pass) {
             return Some(self.status_poll(now, axis));
@@ -378,24 +383,16 @@ impl Engine {
         }
     }
 
-    /// A position read that is due: an urgent one (a mover's estimate: few per move, and they
-    /// save many status polls; a position never read) beyond the per-cycle share, any other
-    /// within it. Only urgent ones if `estimates`.
-    fn position_read(&mut self, pass: &Pass, estimates: bool) -> Option<Next> {
-        let (axis, estimate) = self.oldest_position_due(pass)?;
-        if estimates && !estimate {
-            return None;
-        }
-        if !estimate {
-            self.schedule.position_credit = self.schedule.position_credit.checked_sub(1)?;
-        }
+    /// The axis' position read (R4 PNOW), no longer due.
+    fn position_read(&mut self, axis: Axis) -> Next {
         self.schedule.position_due = self.schedule.position_due.without(axis);
         let read = Command::ReadMemory { address: PNOW };
-        Some((Request::new(axis, read), Origin::Position, 0))
+        (Request::new(axis, read), Origin::Position, 0)
     }
 
-    /// Urgent reads first (a mover's estimate, a position never read), then the one read
-    /// longest ago; and whether the read is urgent.
+    /// The position read to go next: urgent ones first (a mover's estimate: few per move, and
+    /// they save many status polls; a position never read), which go beyond the per-cycle
+    /// share, then the one read longest ago, within it; and whether it is urgent.
     fn oldest_position_due(&self, pass: &Pass) -> Option<(Axis, bool)> {
         // A mover's position is read as often as its part of the share of reads allows, once a
         // cycle at least (as a round robin of reads would).
