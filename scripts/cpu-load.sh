@@ -5,12 +5,18 @@
 #
 #   scripts/cpu-load.sh            # one line
 #   scripts/cpu-load.sh --json     # one JSON object (scripts/bench.sh reads cpu_load_percent)
+#   scripts/cpu-load.sh --profile  # where it goes instead: scripts/cpu-profile.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
+measure=tests/cpuload/cpu_load.py
+if [[ ${1:-} == --profile ]]; then
+    measure=tests/cpuload/profile.py
+    shift
+fi
 scripts/qemu-install.sh >&2
 rustup toolchain install >/dev/null 2>&1 || rustup toolchain install >&2
 elf=$(scripts/emu-build.sh)
 cargo build --locked --quiet -p rc-host --bin rc-sim >&2
 python=$(scripts/py-env.sh)
 export PYTHONDONTWRITEBYTECODE=1
-exec timeout --kill-after=10 300 "$python" tests/cpuload/cpu_load.py "$elf" "$@"
+exec timeout --kill-after=10 300 "$python" "$measure" "$elf" "$@"
