@@ -232,7 +232,7 @@ pub(crate) fn run(args: &Args) -> Result<Report, String> {
             moving.complete.p99 as f64,
             t115 as f64,
             "T",
-            MOVE_COMPLETE_TARGET,
+            Some(MOVE_COMPLETE_TARGET),
         ),
         (
             "move_complete_together_p99",
@@ -240,7 +240,7 @@ pub(crate) fn run(args: &Args) -> Result<Report, String> {
             together.complete.p99 as f64,
             t115 as f64,
             "T",
-            f64::NAN,
+            None,
         ),
         (
             "idle_age_p99",
@@ -248,7 +248,7 @@ pub(crate) fn run(args: &Args) -> Result<Report, String> {
             moving.idle_age.p99 as f64,
             cycle_limit,
             "16 x T",
-            IDLE_AGE_TARGET,
+            Some(IDLE_AGE_TARGET),
         ),
         (
             "dead_moving_max",
@@ -256,7 +256,7 @@ pub(crate) fn run(args: &Args) -> Result<Report, String> {
             with_dead.live_max as f64,
             moving.live_max as f64,
             "same, no dead",
-            DEAD_AXIS_TARGET,
+            Some(DEAD_AXIS_TARGET),
         ),
     ];
     for (id, what, measured, limit, limit_is, target) in rows5 {
@@ -267,7 +267,7 @@ pub(crate) fn run(args: &Args) -> Result<Report, String> {
             measured_us: measured,
             limit_us: limit,
             limit_is,
-            target: (!target.is_nan()).then_some(target),
+            target,
         });
     }
     notes.push(format!(
