@@ -1,4 +1,5 @@
-//! The gateway task: the only owner of the protocol [`Node`] and of the lines and pins around it.
+//! The gateway task: the only owner of the protocol [`Node`] and of the two lines around it (the
+//! pins are the I/O task's).
 //!
 //! One loop, no locks (every node call is synchronous and short):
 //! wait for bus bytes, PLC bytes, an input sample from the I/O task ([`io`](crate::io)) or the
