@@ -1,5 +1,6 @@
-//! The gateway task: the only owner of the protocol [`Node`] and of the two lines around it (the
-//! pins are the I/O task's).
+//! The gateway task: the only user of the protocol [`Node`] (built in place at start-up and lent
+//! to this task for good: [`rt::run`](crate::rt::run)) and the owner of the two lines around it
+//! (the pins are the I/O task's).
 //!
 //! One loop, no locks (every node call is synchronous and short):
 //! wait for bus bytes, PLC bytes, an input sample from the I/O task ([`io`](crate::io)) or the
@@ -16,7 +17,6 @@ use crate::node::{Action, Instant, Node};
 use crate::settings::Settings;
 use protocol::line::LineAction;
 use protocol::plc::Store;
-use static_cell::ConstStaticCell;
 
 /// The loop passes at least this often, whatever happens on the lines: it feeds the watchdog
 /// and blinks the run LED (through the I/O task).
@@ -52,28 +52,21 @@ async fn bus_read(bus: &mut crate::serial::Rs485, buf: &mut [u8], hold: Option<I
 #[used]
 static EMU_PANIC: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
 
-/// The protocol node (about 10 KB): built at compile time with the default settings, in a
-/// static, and given the settings loaded at start-up in place ([`Node::configure`]). Built at
-/// run time by value, it and its parts were temporaries on the stack (measured: 20 KB of stack
-/// at start-up); its price here is its initial image in flash (`.data`).
-static NODE: ConstStaticCell<Node> = ConstStaticCell::new(Node::new(crate::node::default_config()));
-
-/// The node with the settings loaded at start-up. Not inlined: the settings' temporaries then
-/// live in this frame, gone before the loop runs, instead of in the task's frame all along.
+/// The node with the settings loaded at start-up, given in place ([`Node::configure`]). Not
+/// inlined: the settings' temporaries then live in this frame, gone before the loop runs,
+/// instead of in the task's frame all along.
 #[inline(never)]
-fn start_node(settings: &mut Settings, inputs: protocol::pio::PioInputs) -> &'static mut Node {
-    let node = NODE.take();
+fn start_node(node: &mut Node, settings: &mut Settings, inputs: protocol::pio::PioInputs) {
     let mut config = crate::node::default_config();
     settings.load(inputs, &mut config);
     node.configure(&config);
-    node
 }
 
 /// Runs the gateway forever.
 #[embassy_executor::task]
-pub async fn run(mut board: Board, boot: Sample) -> ! {
+pub async fn run(mut board: Board, boot: Sample, node: &'static mut Node) -> ! {
     let mut settings = Settings::new(board.settings_flash.take());
-    let node = start_node(&mut settings, boot.inputs);
+    start_node(node, &mut settings, boot.inputs);
     let mut bus_buf = [0u8; 64];
     let mut plc_buf = [0u8; 64];
     // The UARTs start at the node's settings.

@@ -60,11 +60,11 @@ const VERSION: &str = env!("CARGO_PKG_VERSION");
 
 #[cortex_m_rt::entry]
 fn main() -> ! {
-    rt::run(start)
+    rt::run(node::new, start)
 }
 
-/// Brings the chip up and spawns the gateway and I/O tasks.
-fn start(spawner: Spawner) {
+/// Brings the chip up and spawns the gateway and I/O tasks; the gateway task drives `node`.
+fn start(spawner: Spawner, node: &'static mut node::Node) {
     let p = embassy_stm32::init(board::clock_config());
     #[cfg(feature = "emulator")]
     if let Some(core) = cortex_m::Peripherals::take() {
@@ -87,7 +87,7 @@ fn start(spawner: Spawner) {
         Ok(token) => spawner.spawn(token),
         Err(_) => error!("I/O task not started"),
     }
-    match gateway::run(board, boot) {
+    match gateway::run(board, boot, node) {
         Ok(token) => spawner.spawn(token),
         Err(_) => error!("gateway task not started"),
     }

@@ -24,10 +24,24 @@ fn __pender(_context: *mut ()) {
     WORK.store(true, Ordering::Release);
 }
 
-/// Runs `init` to spawn the tasks, then the executor, forever.
-pub fn run(init: impl FnOnce(Spawner)) -> ! {
+/// Builds the one large value the tasks share with `make`, runs `init` to spawn the tasks,
+/// then the executor, forever.
+///
+/// The value (the protocol node, 11 KB) lives in this function's frame, built there in place
+/// (`make`'s result is written straight into it), and is lent to the tasks for good. Rust has
+/// no placement into a `static`: a `StaticCell` would build it on the stack first and copy it
+/// (measured: 23 KB of stack at start-up), and a `static` with a const initializer costs its
+/// image in flash (11.4 KB of `.data`, a fifth of the F103's flash budget), though the node is
+/// nearly all zeros. Here it costs its size in RAM, as in `.bss`, counted in the measured
+/// stack.
+pub fn run<T: 'static>(make: impl FnOnce() -> T, init: impl FnOnce(Spawner, &'static mut T)) -> ! {
     let executor: &'static raw::Executor = EXECUTOR.init(raw::Executor::new(core::ptr::null_mut()));
-    start(executor.spawner(), init);
+    let mut value = make();
+    // SAFETY: `run` never returns and the firmware never unwinds (panics abort on these
+    // targets, and the handler halts), so this frame and `value` in it outlive every task.
+    // `value` is not named again: the reference handed out is the only way to it.
+    let value: &'static mut T = unsafe { &mut *core::ptr::addr_of_mut!(value) };
+    start(executor.spawner(), value, init);
     #[cfg(feature = "emulator")]
     let mut load = load::Meter::start();
     loop {
@@ -53,8 +67,12 @@ pub fn run(init: impl FnOnce(Spawner)) -> ! {
 /// tasks and gone when it returns, instead of staying under every poll of the loop below
 /// (measured: 832 bytes of stack under the whole firmware).
 #[inline(never)]
-fn start(spawner: Spawner, init: impl FnOnce(Spawner)) {
-    init(spawner)
+fn start<T: 'static>(
+    spawner: Spawner,
+    value: &'static mut T,
+    init: impl FnOnce(Spawner, &'static mut T),
+) {
+    init(spawner, value)
 }
 
 /// The emulator build only: how much of the time the CPU is not asleep in WFI, for

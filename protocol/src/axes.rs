@@ -114,7 +114,10 @@ impl FromIterator<Axis> for AxisSet {
 pub struct AxisMap<T>([T; AXES]);
 
 impl<T: Copy> AxisMap<T> {
-    /// `value` for every axis.
+    /// `value` for every axis. Not inlined: the map is then made in the callee's frame and
+    /// copied once into the result, instead of taking a temporary in the frame of the
+    /// constructor that holds it, next to its other maps (see `Engine::new`).
+    #[inline(never)]
     pub const fn new(value: T) -> AxisMap<T> {
         AxisMap([value; AXES])
     }

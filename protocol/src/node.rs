@@ -71,7 +71,7 @@
 //!     }
 //! }
 //!
-//! // In the firmware the node lives in a `static` (it is about 10 KB): `Node::new` is const.
+//! // In the firmware the node (about 11 KB) is built once, in place, and lives as long as it.
 //! let mut config = GatewayConfig::new(AxisSet::first(2));
 //! config.bus.establish = false;
 //! let mut node = Node::new(config);
@@ -180,10 +180,16 @@ const fn plc_receiver(baud: u32, gap: Option<Duration>) -> Receiver {
 }
 
 impl Node {
-    /// A node for `config`. Const, so that it can be built in a `static` rather than on a
-    /// task's stack. The Modbus receiver's t3.5 follows `config.plc.baud`; its t1.5 gap check
-    /// is off, since byte stamps taken when a task reads the UART are not accurate to the
+    /// A node for `config`. The Modbus receiver's t3.5 follows `config.plc.baud`; its t1.5 gap
+    /// check is off, since byte stamps taken when a task reads the UART are not accurate to the
     /// 750 µs it needs (the CRC still rejects a garbled frame).
+    ///
+    /// Built where its caller's result goes, without a node-sized temporary: not inlined, so
+    /// that the caller hands its destination over as the return slot, and so are
+    /// [`Gateway::new`] and [`Engine::new`](crate::engine::Engine::new) below it (measured on
+    /// the MCU: inlined, the constructors' parts were temporaries, 6 to 11 KB of stack). Const
+    /// as well, for a node in a `static` where flash is no object.
+    #[inline(never)]
     pub const fn new(config: GatewayConfig) -> Node {
         Node {
             gateway: Gateway::new(config),
@@ -197,10 +203,9 @@ impl Node {
         }
     }
 
-    /// The same node as [`Node::new`]`(config)`, made in place: for a node built at compile
-    /// time in a `static` (with the default settings) that takes the settings loaded at
-    /// start-up. Built by value instead, the node (about 10 KB) and its parts would be
-    /// temporaries on the stack (measured on the MCU: 20 KB of stack at start-up).
+    /// The same node as [`Node::new`]`(config)`, made in place: for a node built once (with
+    /// the default settings) that takes the settings loaded at start-up. Built again by value
+    /// and moved, the node (about 11 KB) would be a temporary on the stack.
     pub fn configure(&mut self, config: &GatewayConfig) {
         self.gateway.configure(config);
         self.receiver = plc_receiver(config.plc.baud, config.plc_frame_gap);

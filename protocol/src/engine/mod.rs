@@ -156,6 +156,9 @@ pub struct Engine {
 
 impl Engine {
     /// An engine for `config`. With [`Config::establish`], the first outputs run §6-1.
+    ///
+    /// Not inlined: built in its caller's result (see [`Node::new`](crate::node::Node::new)).
+    #[inline(never)]
     pub const fn new(config: Config) -> Engine {
         let (config, rtim) = Self::normalized(config);
         Engine {
@@ -184,9 +187,9 @@ impl Engine {
     }
 
     /// The same engine as [`Engine::new`]`(config)`, made in place, one field at a time, so
-    /// that nothing the size of the engine is built on the stack: the firmware keeps the node
-    /// in a `static` built at compile time and applies the settings it loads at start-up
-    /// through this. Anything in progress is dropped (no frame is half sent: call it only
+    /// that nothing the size of the engine is built on the stack: the firmware builds the node
+    /// once, with the default settings, and applies the settings it loads at start-up through
+    /// this. Anything in progress is dropped (no frame is half sent: call it only
     /// between actions).
     pub fn reset(&mut self, config: Config) {
         let (config, rtim) = Self::normalized(config);

@@ -52,6 +52,10 @@ pub(super) struct PointCache {
 }
 
 impl PointCache {
+    /// Not inlined, like the other large parts of [`Gateway::new`](super::Gateway::new): the
+    /// rows' temporary (864 bytes) is then in this short frame, not in the gateway's under
+    /// the engine's construction.
+    #[inline(never)]
     pub(super) const fn new() -> PointCache {
         PointCache {
             rows: [None; CACHED_ROWS],
