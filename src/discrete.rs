@@ -1,22 +1,34 @@
 //! The 24 V discrete I/O as pins: PIO inputs sampled into a [`PioInputs`] word, the stop input,
 //! [`PioOutputs`] written to pins, and the three LEDs. Which pin is which bit is the board's choice.
 
+use embassy_stm32::exti::ExtiInput;
 use embassy_stm32::gpio::{Input, Level, Output};
+use embassy_stm32::mode::Async;
 use embassy_time::{Duration, Instant};
 
 use protocol::pio::{PioInputs, PioOutputs};
 
-/// The PIO inputs (bit number, pin) and the stop input.
+/// The PIO inputs (bit number, pin) and the stop input, which can wake a task when it changes
+/// (its EXTI line).
 pub struct Inputs {
     pins: [(u8, Input<'static>); 11],
-    stop: Input<'static>,
+    stop: ExtiInput<'static, Async>,
     on: Level,
 }
 
 impl Inputs {
     /// `on` is the pin level of a signal that is ON.
-    pub fn new(pins: [(u8, Input<'static>); 11], stop: Input<'static>, on: Level) -> Inputs {
+    pub fn new(
+        pins: [(u8, Input<'static>); 11],
+        stop: ExtiInput<'static, Async>,
+        on: Level,
+    ) -> Inputs {
         Inputs { pins, stop, on }
+    }
+
+    /// Until the stop input changes level (from the moment this is first polled).
+    pub async fn stop_changed(&mut self) {
+        self.stop.wait_for_any_edge().await
     }
 
     /// The inputs now, bit n = port INn.

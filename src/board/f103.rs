@@ -20,9 +20,10 @@
 //! | OUT13 LINK, OUT14 *ALM | PB4, PA15 | |
 //! | LED run / bus link / alarm | PC13 (on board, blinks) / PC14 / PC15 | PC14/PC15 sink or source 3 mA at most: drive an LED through 1 kΩ |
 
+use embassy_stm32::exti::{self, ExtiInput};
 use embassy_stm32::peripherals::{USART1, USART2};
 use embassy_stm32::usart::{self, BufferedInterruptHandler, BufferedUart, ConfigError};
-use embassy_stm32::{bind_interrupts, Peripherals};
+use embassy_stm32::{bind_interrupts, interrupt, Peripherals};
 
 use super::{
     driver_enable, indicator_on_fault, input, line_config, output, settings_flash, Board, Watchdog,
@@ -45,6 +46,7 @@ pub const SETTINGS_RANGE: core::ops::Range<u32> = 0x0000_F000..0x0001_0000;
 bind_interrupts!(struct Irqs {
     USART1 => BufferedInterruptHandler<USART1>;
     USART2 => BufferedInterruptHandler<USART2>;
+    EXTI4 => exti::InterruptHandler<interrupt::typelevel::EXTI4>;
 });
 
 /// The clock tree of [`SYSCLK_HZ`]: HSE 8 MHz x 9, APB1 at 36 MHz (its maximum).
@@ -137,7 +139,7 @@ pub fn board(
             (14, input(p.PB1)),
             (15, input(p.PA0)),
         ],
-        input(p.PA4),
+        ExtiInput::from_input(input(p.PA4), p.EXTI4, Irqs),
         INPUT_ON,
     );
 

@@ -48,9 +48,10 @@
 //! outputs from the GPIO registers. QEMU ignores DE (CR3.DEM) and does not wire USART TX to
 //! its GPIO pin, so a break shows only as the pins' mode and output registers.
 
+use embassy_stm32::exti::{self, ExtiInput};
 use embassy_stm32::peripherals::{UART4, USART2};
 use embassy_stm32::usart::{self, BufferedInterruptHandler, BufferedUart, ConfigError};
-use embassy_stm32::{bind_interrupts, Peripherals};
+use embassy_stm32::{bind_interrupts, interrupt, Peripherals};
 
 use super::{
     indicator_on_fault, input, line_config, output, settings_flash, Board, Watchdog, BUS_RX,
@@ -80,6 +81,7 @@ const DE_TIME: u8 = 8;
 bind_interrupts!(struct Irqs {
     UART4 => BufferedInterruptHandler<UART4>;
     USART2 => BufferedInterruptHandler<USART2>;
+    EXTI4 => exti::InterruptHandler<interrupt::typelevel::EXTI4>;
 });
 
 /// The clock tree of [`SYSCLK_HZ`].
@@ -167,7 +169,7 @@ pub fn board(
             (14, input(p.PB4)),
             (15, input(p.PB1)),
         ],
-        input(p.PA4),
+        ExtiInput::from_input(input(p.PA4), p.EXTI4, Irqs),
         INPUT_ON,
     );
 

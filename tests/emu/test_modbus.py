@@ -166,6 +166,29 @@ def test_direct_move_then_stop(emu):
     assert plc.read(unit(0), CMCT)[0] == 4, "SON, HOME, two moves (a stop is not counted)"
 
 
+def test_with_no_pio_axis_the_stop_input_wakes_the_firmware_by_its_interrupt(emu):
+    """With no PIO axis the I/O task no longer samples every millisecond: it sleeps until the
+    stop input's pin-change interrupt (EXTI) or its 20 ms LED tick. Opening the stop input
+    mid-move stops the axis and latches FAILSAFE bit 1, and the interrupt is what woke the task
+    (EMU_STOP_WAKES counts those wakes: the LED tick alone would stop the axis too)."""
+    plc = online(emu)
+    plc.home(0)
+    wakes = emu.qtest.readl(emu.symbols["EMU_STOP_WAKES"])
+    plc.direct(0, 70_00, speed=10_00)
+    wait_for(lambda: plc.pnow(0) > 2_00, 10, "moving")
+    before = len(emu.bus_changes(0))
+    emu.set_pin(STOP_INPUT, False)  # the stop chain opens
+    wait_for(lambda: plc.read(GATEWAY_UNIT, G_FAILSAFE)[0] & 2, 5, "the stop latched")
+    wait_for(lambda: plc.cmst(0)[0] != 1, 10, "the move ends")
+    assert "CancelMotion" in [c[2] for c in emu.bus_changes(0)[before:]]
+    assert emu.qtest.readl(emu.symbols["EMU_STOP_WAKES"]) > wakes, "woken by the interrupt"
+    time.sleep(0.5)
+    stopped = plc.pnow(0)
+    time.sleep(0.5)
+    assert plc.pnow(0) == stopped, "standing still"
+    assert stopped < 70_00, stopped
+
+
 def test_alarm_and_reset(emu):
     plc = online(emu)
     plc.home(0)
