@@ -25,7 +25,7 @@ pub use l475::SYSCLK_HZ;
 #[cfg(feature = "board-l475")]
 pub use l475::{board, clock_config, reset_cause, uart_config, MODEL_NAME};
 
-use embassy_stm32::gpio::{Input, Level, Output, Pin, Pull, Speed};
+use embassy_stm32::gpio::{AnyPin, Input, Level, Output, Pin, Pull, Speed};
 use embassy_stm32::usart;
 use embassy_stm32::Peri;
 use static_cell::ConstStaticCell;
@@ -47,9 +47,10 @@ pub const OUTPUT_ON: Level = Level::High;
 const WATCHDOG_TIMEOUT_US: u32 = 1_000_000;
 
 // UART ring buffers, in .bss. Each holds at least what the task writes or may leave unread at
-// once: a 16-byte bus frame, a Modbus RTU ADU (at most 256 bytes).
+// once: a 16-byte bus frame (the task takes a bus frame once it is whole: four fit), a Modbus RTU
+// ADU (at most 256 bytes).
 pub(crate) static BUS_TX: ConstStaticCell<[u8; 32]> = ConstStaticCell::new([0; 32]);
-pub(crate) static BUS_RX: ConstStaticCell<[u8; 128]> = ConstStaticCell::new([0; 128]);
+pub(crate) static BUS_RX: ConstStaticCell<[u8; 64]> = ConstStaticCell::new([0; 64]);
 pub(crate) static PLC_TX: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 pub(crate) static PLC_RX: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 /// The TX rings' sizes: a write never exceeds them (the driver refuses longer writes).
@@ -93,27 +94,45 @@ pub fn line_config(baud: u32, parity: protocol::plc::Parity) -> usart::Config {
     config
 }
 
+// The pin helpers below take any pin and set it up in one function for all (`AnyPin`): the
+// board sets up 30 pins, and one copy of each set-up per pin type cost about 1 KB of flash.
+
 /// A PIO output, OFF, registered to be forced OFF on a fault.
 pub(crate) fn output(pin: Peri<'static, impl Pin>) -> Output<'static> {
-    pins::on_fault_drive(PinId::of(&*pin), OUTPUT_ON == Level::Low);
-    Output::new(pin, opposite(OUTPUT_ON), Speed::Low)
+    let off = opposite(OUTPUT_ON);
+    fault_driven(pin.into(), off, off, Speed::Low)
 }
 
 /// An LED that a fault turns on (the alarm LED).
 pub(crate) fn indicator_on_fault(pin: Peri<'static, impl Pin>) -> Output<'static> {
-    pins::on_fault_drive(PinId::of(&*pin), true);
-    Output::new(pin, Level::Low, Speed::Low)
+    fault_driven(pin.into(), Level::Low, Level::High, Speed::Low)
 }
 
 /// A driver-enable pin driven by software (a board without hardware DE), off, and off on a fault.
 #[cfg_attr(feature = "board-l475", allow(dead_code))]
 pub(crate) fn driver_enable(pin: Peri<'static, impl Pin>) -> Output<'static> {
-    pins::on_fault_drive(PinId::of(&*pin), false);
-    Output::new(pin, Level::Low, Speed::VeryHigh)
+    fault_driven(pin.into(), Level::Low, Level::Low, Speed::VeryHigh)
+}
+
+/// An output at `initial`, registered to be driven to `on_fault` on a fault.
+#[inline(never)]
+fn fault_driven(
+    pin: Peri<'static, AnyPin>,
+    initial: Level,
+    on_fault: Level,
+    speed: Speed,
+) -> Output<'static> {
+    pins::on_fault_drive(PinId::of(&*pin), on_fault == Level::High);
+    Output::new(pin, initial, speed)
 }
 
 /// A PIO input, pulled toward OFF so that an open wire reads OFF (and the stop input "stop").
 pub(crate) fn input(pin: Peri<'static, impl Pin>) -> Input<'static> {
+    pulled_off(pin.into())
+}
+
+#[inline(never)]
+fn pulled_off(pin: Peri<'static, AnyPin>) -> Input<'static> {
     let pull = match INPUT_ON {
         Level::High => Pull::Down,
         Level::Low => Pull::Up,
