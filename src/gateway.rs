@@ -22,6 +22,10 @@ use protocol::plc::Store;
 /// and blinks the run LED (through the I/O task).
 const HEARTBEAT: protocol::time::Duration = protocol::time::Duration::from_millis(100);
 
+/// [`io::INDICATORS_PERIOD`] as the node counts time.
+const INDICATORS_PERIOD: protocol::time::Duration =
+    protocol::time::Duration(io::INDICATORS_PERIOD.as_micros());
+
 /// Now, as the protocol counts time (µs since boot).
 fn now() -> Instant {
     Instant(embassy_time::Instant::now().as_micros())
@@ -52,23 +56,18 @@ async fn bus_read(bus: &mut crate::serial::Rs485, buf: &mut [u8], hold: Option<I
 #[used]
 static EMU_PANIC: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
 
-/// The node with the settings loaded at start-up, given in place ([`Node::configure`]). Not
-/// inlined: the settings' temporaries then live in this frame, gone before the loop runs,
-/// instead of in the task's frame all along.
-#[inline(never)]
-fn start_node(node: &mut Node, settings: &mut Settings, inputs: protocol::pio::PioInputs) {
-    let mut config = crate::node::default_config();
-    settings.load(inputs, &mut config);
-    node.configure(&config);
-}
-
 /// Runs the gateway forever.
 #[embassy_executor::task]
-pub async fn run(mut board: Board, boot: Sample, node: &'static mut Node) -> ! {
-    let mut settings = Settings::new(board.settings_flash.take());
-    start_node(node, &mut settings, boot.inputs);
-    let mut bus_buf = [0u8; 64];
-    let mut plc_buf = [0u8; 64];
+pub async fn run(
+    board: &'static mut Board,
+    settings: &'static mut Settings,
+    boot: Sample,
+    node: &'static mut Node,
+) -> ! {
+    // What one read takes out of a UART's ring buffer: a bus frame is 16 bytes (read once it is
+    // whole), and a long PLC request comes in a few reads (the loop below reads until empty).
+    let mut bus_buf = [0u8; 32];
+    let mut plc_buf = [0u8; 32];
     // The UARTs start at the node's settings.
     let baud = node.gateway().engine().line_baud();
     board.bus.set_baud(baud.bits_per_second()).await;
@@ -83,7 +82,11 @@ pub async fn run(mut board: Board, boot: Sample, node: &'static mut Node) -> ! {
     let mut stop = first.stop;
     node.set_stop_input(now(), stop);
     node.sample_inputs(now(), first.inputs);
-    let mut indicators_at = embassy_time::Instant::from_ticks(0);
+    let mut indicators_at = Instant::ZERO;
+    // The clock as the last pass left it: the heartbeat and the indicators' period count from
+    // there, so that a pass reads the clock only where the node needs it (each reading costs a
+    // critical section; `scripts/cpu-load.sh` counts them).
+    let mut clock = now();
 
     loop {
         let hold = node.bus_frame_due();
@@ -93,7 +96,7 @@ pub async fn run(mut board: Board, boot: Sample, node: &'static mut Node) -> ! {
             SAMPLES.wait(),
             deadline(protocol::time::earliest(
                 node.poll_at(),
-                Some(now() + HEARTBEAT),
+                Some(clock + HEARTBEAT),
             )),
         )
         .await;
@@ -128,7 +131,8 @@ pub async fn run(mut board: Board, boot: Sample, node: &'static mut Node) -> ! {
             }
         }
 
-        while let Some(action) = node.poll(now()) {
+        clock = now();
+        while let Some(action) = node.poll(clock) {
             match action {
                 Action::Bus(frame) => board.bus.send(&frame).await,
                 Action::Reply(reply) => board.plc.send(reply).await,
@@ -158,16 +162,16 @@ pub async fn run(mut board: Board, boot: Sample, node: &'static mut Node) -> ! {
                     cortex_m::peripheral::SCB::sys_reset();
                 }
             }
+            clock = now();
         }
 
         // The I/O task shows them at its next sample (1 ms). Every sample while a PIO axis is
         // configured (its logic debounces and times by samples), only changes otherwise.
         let pio = node.gateway().config().pio_axis.is_some();
         io::show_outputs(node.outputs(), pio);
-        let t = embassy_time::Instant::now();
-        if t >= indicators_at {
+        if clock >= indicators_at {
             io::show_indicators(node.indicators());
-            indicators_at = t + io::INDICATORS_PERIOD;
+            indicators_at = clock + INDICATORS_PERIOD;
         }
         board.watchdog.pet();
     }

@@ -108,16 +108,16 @@ static EMU_STOP_WAKES: AtomicU32 = AtomicU32::new(0);
 /// Samples the inputs and drives the outputs and LEDs, forever: every millisecond while a PIO
 /// axis is configured, else on a change of the stop input and every [`INDICATORS_PERIOD`].
 #[embassy_executor::task]
-pub async fn run(pins: Pins) -> ! {
+pub async fn run(pins: &'static mut Pins) -> ! {
     let Pins {
-        mut inputs,
-        mut outputs,
-        mut leds,
+        inputs,
+        outputs,
+        leds,
     } = pins;
     let mut ticker = Ticker::every(SAMPLE_PERIOD);
     let mut sent: Option<Sample> = None;
     loop {
-        let sample = Sample::of(&inputs);
+        let sample = Sample::of(inputs);
         let every_sample = EVERY_SAMPLE.load(Ordering::Relaxed);
         if sent != Some(sample) || every_sample {
             SAMPLES.signal(sample);

@@ -54,17 +54,56 @@ mod systick;
 #[cfg(feature = "hw")]
 use defmt_rtt as _;
 use embassy_executor::Spawner;
+use static_cell::StaticCell;
 
 /// Firmware version, from `Cargo.toml`.
 const VERSION: &str = env!("CARGO_PKG_VERSION");
 
 #[cortex_m_rt::entry]
 fn main() -> ! {
-    rt::run(node::new, start)
+    rt::run(start, spawn)
 }
 
-/// Brings the chip up and spawns the gateway and I/O tasks; the gateway task drives `node`.
-fn start(spawner: Spawner, node: &'static mut node::Node) {
+/// What the tasks work with, for as long as the firmware runs (in [`rt::run`]'s frame).
+struct Started {
+    /// Built with the stored settings. First, so that it is built in place (see
+    /// `protocol::node::Node::new`): nothing is written into this struct between its
+    /// construction and its move here.
+    node: node::Node,
+    /// `None` if the board could not be set up.
+    parts: Option<&'static mut Parts>,
+}
+
+/// The board's side of [`Started`], in a `static`: its size is the board's (the settings store
+/// is not in the emulator build), and the size report counts statics per board, the stack from
+/// the emulator.
+static PARTS: StaticCell<Parts> = StaticCell::new();
+
+/// The board's side of [`Started`].
+struct Parts {
+    board: board::Board,
+    pins: io::Pins,
+    settings: settings::Settings,
+    /// The pins at power-up.
+    boot: io::Sample,
+}
+
+/// Brings the chip up, loads the settings (a factory reset first if the inputs held at power-up
+/// ask for one) and builds the node with them.
+#[inline(never)]
+fn start() -> Started {
+    let mut config = node::default_config();
+    let parts = bring_up(&mut config);
+    Started {
+        parts,
+        node: node::Node::new(config),
+    }
+}
+
+/// The chip, the board and the settings, into `config`. Not inlined: its temporaries are gone
+/// before the node is built (under [`start`], the deepest stack at start-up).
+#[inline(never)]
+fn bring_up(config: &mut protocol::plc::GatewayConfig) -> Option<&'static mut Parts> {
     let p = embassy_stm32::init(board::clock_config());
     #[cfg(feature = "emulator")]
     if let Some(core) = cortex_m::Peripherals::take() {
@@ -72,22 +111,43 @@ fn start(spawner: Spawner, node: &'static mut node::Node) {
     }
     info!("rc-gateway {} starting", VERSION);
 
-    let (board, pins) = match board::board(p, node::default_config().plc) {
-        Ok(parts) => parts,
+    match board::board(p, config.plc) {
+        Ok((mut board, pins)) => {
+            let boot = io::Sample::of(&pins.inputs);
+            let mut settings = settings::Settings::new(board.settings_flash.take());
+            settings.load(boot.inputs, config);
+            Some(PARTS.init(Parts {
+                board,
+                pins,
+                settings,
+                boot,
+            }))
+        }
         Err(_) => {
             // Only a baud rate the kernel clock cannot make: a build error, not a field fault.
             error!("UART configuration refused");
-            return;
+            None
         }
+    }
+}
+
+/// Spawns the I/O task and the gateway task, which drives the node.
+fn spawn(spawner: Spawner, started: &'static mut Started) {
+    let Started { node, parts } = started;
+    let Some(Parts {
+        board,
+        pins,
+        settings,
+        boot,
+    }) = parts
+    else {
+        return;
     };
-    // The pins at power-up (a factory reset is an input held at boot), before the I/O task
-    // takes them.
-    let boot = io::Sample::of(&pins.inputs);
     match io::run(pins) {
         Ok(token) => spawner.spawn(token),
         Err(_) => error!("I/O task not started"),
     }
-    match gateway::run(board, boot, node) {
+    match gateway::run(board, settings, *boot, node) {
         Ok(token) => spawner.spawn(token),
         Err(_) => error!("gateway task not started"),
     }

@@ -40,10 +40,3 @@ pub const fn default_config() -> GatewayConfig {
     }
     config
 }
-
-/// A node with the default settings (the gateway task gives it the stored ones). Not inlined:
-/// the settings are a temporary of this frame, not of the one the node lives in.
-#[inline(never)]
-pub fn new() -> Node {
-    Node::new(default_config())
-}

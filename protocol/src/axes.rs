@@ -122,7 +122,7 @@ impl<T: Copy> AxisMap<T> {
         AxisMap([value; AXES])
     }
 
-    /// `value` for every axis, in place (no map-sized temporary: see `Node::configure`).
+    /// `value` for every axis, in place (no map-sized temporary).
     pub fn fill(&mut self, value: T) {
         self.0.fill(value);
     }

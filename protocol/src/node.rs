@@ -203,20 +203,6 @@ impl Node {
         }
     }
 
-    /// The same node as [`Node::new`]`(config)`, made in place: for a node built once (with
-    /// the default settings) that takes the settings loaded at start-up. Built again by value
-    /// and moved, the node (about 11 KB) would be a temporary on the stack.
-    pub fn configure(&mut self, config: &GatewayConfig) {
-        self.gateway.configure(config);
-        self.receiver = plc_receiver(config.plc.baud, config.plc_frame_gap);
-        self.slave.reset();
-        self.reply.clear();
-        self.pio = Pio::new(pio::Config::DEFAULT);
-        self.outputs = PioOutputs::SAFE;
-        self.idle_until = None;
-        self.dirty = true;
-    }
-
     /// Bytes received on the RS485 bus at `now`.
     pub fn bus_received(&mut self, now: Instant, bytes: &[u8]) {
         // Only a completed frame (or a rejected candidate) gives `poll` something new to do:

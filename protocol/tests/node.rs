@@ -439,29 +439,6 @@ fn the_whole_state_fits_12_kib() {
     assert!(std::mem::size_of::<Node>() <= protocol::node::RAM_BUDGET);
 }
 
-/// `Node::configure` is `Node::new` made in place (the firmware builds its node at compile time
-/// and applies the settings loaded at start-up with it): after any history, the same node.
-#[test]
-fn configure_gives_the_node_new_would() {
-    let mut rig = Rig::ready(2, |_| {});
-    assert_eq!(rig.read(1, LINK, 1), Ok(vec![1]));
-    assert_eq!(rig.write(1, DRG1, &[DRG1_SON]), Ok(()));
-    rig.run_for(50 * MS);
-    let mut config = GatewayConfig::new(AxisSet::first(3));
-    config.unit = 17;
-    config.bus.retries = 9; // capped at 3, as `new` does
-    config.pio_axis = Some(axis(2));
-    config.watchdog = Duration::from_millis(250);
-    let fresh = Node::new(config);
-    assert_ne!(
-        format!("{:?}", rig.node),
-        format!("{fresh:?}"),
-        "the history shows"
-    );
-    rig.node.configure(&config);
-    assert_eq!(format!("{:?}", rig.node), format!("{fresh:?}"));
-}
-
 /// A request whose bytes come in two bursts further apart than t3.5 (a socket, not a wire):
 /// split in two, it gets no answer; with `plc_frame_gap` longer than the pause, it is one
 /// request and answered.

@@ -186,36 +186,6 @@ impl Engine {
         }
     }
 
-    /// The same engine as [`Engine::new`]`(config)`, made in place, one field at a time, so
-    /// that nothing the size of the engine is built on the stack: the firmware builds the node
-    /// once, with the default settings, and applies the settings it loads at start-up through
-    /// this. Anything in progress is dropped (no frame is half sent: call it only
-    /// between actions).
-    pub fn reset(&mut self, config: Config) {
-        let (config, rtim) = Self::normalized(config);
-        self.config = config;
-        self.axes.fill(AxisState::new(rtim));
-        self.active.fill(None);
-        self.stops.fill(None);
-        self.queue.clear();
-        self.events.clear();
-        self.in_flight = None;
-        self.retry = None;
-        self.pending = None;
-        self.deframer = Deframer::new();
-        self.received_at = Instant::ZERO;
-        self.line_baud = config.baud;
-        self.free_at = Instant::ZERO;
-        self.break_until = None;
-        self.phase = Self::first_phase(&config);
-        self.settle_until = Instant::ZERO;
-        self.schedule.reset(config.position_reads_per_cycle);
-        self.rejoin = Rejoin::new();
-        self.job_cursor = 0;
-        self.next_id = 0;
-        self.bus = BusCounters::ZERO;
-    }
-
     /// `config` with its retries capped at 3, and the RTIM the axes start with.
     const fn normalized(config: Config) -> (Config, crate::Rtim) {
         let rtim = if config.establish {

@@ -120,22 +120,6 @@ impl Schedule {
         }
     }
 
-    /// The same as [`Schedule::new`], in place (see `Engine::reset`).
-    pub(super) fn reset(&mut self, position_reads_per_cycle: u8) {
-        self.last_poll.fill(Instant::ZERO);
-        self.cursor = 0;
-        self.position_credit = position_reads_per_cycle;
-        self.credit_refill = Instant::ZERO;
-        self.position_due = AxisSet::EMPTY;
-        self.probes.fill(Probe {
-            due: Instant::ZERO,
-            backoff: FIRST_PROBE,
-        });
-        self.approach.fill(Approach::NONE);
-        self.arrival_run = 0;
-        self.idle_run = 0;
-    }
-
     /// Count every axis' status age from `now` (the bus was busy with something else before).
     pub(super) fn start_cycle(&mut self, now: Instant) {
         self.last_poll.fill(now);

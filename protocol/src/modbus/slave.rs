@@ -146,12 +146,6 @@ impl Default for ReplyBuffer {
 }
 
 impl ReplyBuffer {
-    /// The same as [`ReplyBuffer::new`], in place.
-    pub fn clear(&mut self) {
-        self.bytes.fill(0);
-        self.len = 0;
-    }
-
     /// An empty buffer.
     pub const fn new() -> ReplyBuffer {
         ReplyBuffer {
@@ -204,15 +198,6 @@ impl Slave {
             cleared: LineCounts::ZERO,
             listen_only: false,
         }
-    }
-
-    /// The same as [`Slave::new`], in place (no slave-sized temporary on the stack).
-    pub fn reset(&mut self) {
-        self.bits.fill(0);
-        self.registers.fill(0);
-        self.counters = SlaveCounters::ZERO;
-        self.cleared = LineCounts::ZERO;
-        self.listen_only = false;
     }
 
     /// Whether Listen Only mode is in force (FC08 sub-function 04, left with 01).

@@ -135,21 +135,6 @@ impl Gateway {
         }
     }
 
-    /// The same gateway as [`Gateway::new`]`(config)`, made in place (see [`Engine::reset`]).
-    pub fn configure(&mut self, config: &GatewayConfig) {
-        self.engine.reset(config.bus);
-        self.config = *config;
-        self.axes.fill(PlcAxis::new());
-        self.failsafe = FailSafe::new();
-        self.sync = SyncStart::new();
-        self.channel = Channel::new();
-        self.points.clear();
-        self.persist = Persist::new(config);
-        self.plc_line_changed = false;
-        self.now = Instant::ZERO;
-        self.events_lost = 0;
-    }
-
     /// The bus master.
     pub fn engine(&self) -> &Engine {
         &self.engine

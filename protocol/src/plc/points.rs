@@ -65,14 +65,6 @@ impl PointCache {
         }
     }
 
-    /// The same as [`PointCache::new`], in place.
-    pub(super) fn clear(&mut self) {
-        self.rows.fill(None);
-        self.clock = 0;
-        self.reads.fill(None);
-        self.writes.fill(None);
-    }
-
     fn slot(&self, axis: Axis, point: PositionNo) -> Option<usize> {
         self.rows
             .iter()
