@@ -93,17 +93,21 @@ struct Parts {
 #[inline(never)]
 fn start() -> Started {
     let mut config = node::default_config();
-    let parts = bring_up(&mut config);
+    let mut parts = bring_up(config.plc);
+    if let Some(Parts { settings, boot, .. }) = parts.as_deref_mut() {
+        settings.load(boot.inputs, &mut config);
+    }
     Started {
         parts,
         node: node::Node::new(config),
     }
 }
 
-/// The chip, the board and the settings, into `config`. Not inlined: its temporaries are gone
-/// before the node is built (under [`start`], the deepest stack at start-up).
+/// The chip, the board with its PLC line at `plc` and the settings store. Not inlined: its
+/// temporaries are gone before the settings are loaded and the node is built (the deepest stack
+/// at start-up: the settings store's, on the boards).
 #[inline(never)]
-fn bring_up(config: &mut protocol::plc::GatewayConfig) -> Option<&'static mut Parts> {
+fn bring_up(plc: protocol::plc::PlcLine) -> Option<&'static mut Parts> {
     let p = embassy_stm32::init(board::clock_config());
     #[cfg(feature = "emulator")]
     if let Some(core) = cortex_m::Peripherals::take() {
@@ -111,11 +115,10 @@ fn bring_up(config: &mut protocol::plc::GatewayConfig) -> Option<&'static mut Pa
     }
     info!("rc-gateway {} starting", VERSION);
 
-    match board::board(p, config.plc) {
+    match board::board(p, plc) {
         Ok((mut board, pins)) => {
             let boot = io::Sample::of(&pins.inputs);
-            let mut settings = settings::Settings::new(board.settings_flash.take());
-            settings.load(boot.inputs, config);
+            let settings = settings::Settings::new(board.settings_flash.take());
             Some(PARTS.init(Parts {
                 board,
                 pins,

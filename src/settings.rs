@@ -14,7 +14,6 @@ use protocol::plc::settings::RECORD_LEN;
 use protocol::plc::GatewayConfig;
 
 use crate::board::SettingsFlash;
-use crate::node::default_config;
 #[cfg(feature = "hw")]
 use embassy_futures::block_on;
 
@@ -45,8 +44,9 @@ impl Settings {
         Settings {}
     }
 
-    /// The configuration to start with: the stored settings over the defaults, or the defaults
-    /// (after a factory reset if `inputs` ask for one), and what the start found.
+    /// The configuration to start with, into `config` (which holds the defaults): the stored
+    /// settings over them, or nothing (after a factory reset if `inputs` ask for one), and
+    /// what the start found.
     ///
     /// The store's operations are async (sequential-storage), but over this chip's blocking
     /// flash they never wait: each is run to completion on the spot, in a function of its own,
@@ -54,7 +54,6 @@ impl Settings {
     /// task's state machine at every call.
     #[inline(never)]
     pub fn load(&mut self, inputs: PioInputs, config: &mut GatewayConfig) {
-        *config = default_config();
         let factory = inputs.contains(FACTORY_RESET_INPUTS);
         #[cfg(feature = "hw")]
         if self.store.is_some() {

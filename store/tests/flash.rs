@@ -8,7 +8,7 @@ use protocol::plc::settings::{Settings, RECORD_LEN};
 use protocol::plc::{ConfigSource, GatewayConfig};
 use protocol::AxisSet;
 use sequential_storage::mock_flash::{MockFlashBase, WriteCountCheck};
-use settings_store::{Store, KEY_SETTINGS};
+use settings_store::Store;
 
 /// STM32L475: 2 KiB pages, 64-bit words, written once per erase; two pages for the settings.
 type L4 = MockFlashBase<2, 8, 256>;
@@ -99,20 +99,43 @@ fn a_factory_reset_forgets_the_settings_and_keeps_the_counts() {
 }
 
 /// Power lost after every possible number of bytes written during a save: the next start finds
-/// the old settings or the new ones, never a mix, and the store keeps working.
+/// the old settings or the new ones, never a mix, and the store keeps working. With the range
+/// filled to several depths, so that the save cut short is sometimes one that must first erase
+/// the oldest page (checked: at least one depth is).
 #[test]
 fn power_loss_during_a_save_leaves_the_old_or_the_new_settings() {
+    let mut erasing = 0;
+    for saves_before in [7, 16, 17, 18, 19, 20] {
+        erasing += usize::from(cut_every_byte_of_a_save(saves_before));
+    }
+    assert!(erasing > 0, "no save cut short had to erase a page");
+}
+
+/// The power-loss check after `saves_before` saves; whether the save cut short erases a page.
+fn cut_every_byte_of_a_save(saves_before: u16) -> bool {
     let old = settings(500, 2);
     let new = settings(900, 5);
     let mut base = store(l4());
-    // Fill the range part way, so that some saves also have to erase and move a page.
-    for i in 0..7 {
+    for i in 0..saves_before {
         block_on(base.save(&settings(100 + i, 1).encode())).unwrap();
     }
     block_on(base.save(&old.encode())).unwrap();
     let base = base.into_flash();
+    let erases = {
+        let counting = Counting {
+            flash: base.clone(),
+            erases: vec![0; 2],
+            page: 2048,
+        };
+        let mut s = Store::new(counting, L4::FULL_FLASH_RANGE).unwrap();
+        block_on(s.save(&new.encode())).unwrap();
+        s.into_flash().erases.iter().sum::<u32>()
+    };
     let mut outcomes = [0usize; 2];
-    for cut in 0..(4 * RECORD_LEN as u32) {
+    // The mock flash counts an erase as the page's bytes: a save that erases first is cut
+    // during the erase for the first 2 KiB.
+    let span = if erases > 0 { 2048 } else { 0 } + 4 * RECORD_LEN as u32;
+    for cut in 0..span {
         let mut flash = base.clone();
         flash.bytes_until_shutoff = Some(cut);
         let mut s = store(flash);
@@ -137,8 +160,9 @@ fn power_loss_during_a_save_leaves_the_old_or_the_new_settings() {
     }
     assert!(
         outcomes[0] > 0 && outcomes[1] > 0,
-        "both ends reached: {outcomes:?}"
+        "both ends reached: {outcomes:?} ({saves_before} saves before)"
     );
+    erases > 0
 }
 
 /// A flash that counts the erases of each page.
@@ -196,8 +220,8 @@ fn wear_spreads_over_the_pages() {
     let erases = &counting.erases;
     let (least, most) = (*erases.iter().min().unwrap(), *erases.iter().max().unwrap());
     assert!(most - least <= 1, "uneven wear: {erases:?}");
-    // Each save appends a record and a count (about 200 bytes with headers): a 2 KiB page
-    // takes about 10 saves, so each of the 4 pages is erased about SAVES / 40 times.
+    // Each save appends one item (about 200 bytes with its header): a 2 KiB page takes about
+    // 10 saves, so each of the 4 pages is erased about SAVES / 40 times.
     let total: u32 = erases.iter().sum();
     assert!(total <= SAVES / 5, "{erases:?} erases for {SAVES} saves");
     assert!(
@@ -212,5 +236,4 @@ fn wear_spreads_over_the_pages() {
     let loaded = block_on(s.load());
     assert_eq!(loaded.settings, Some(last));
     assert_eq!(loaded.boot.save_count, SAVES);
-    let _ = KEY_SETTINGS;
 }
