@@ -10,7 +10,11 @@ address. Instructions per function are those addresses, attributed to the functi
 I/O: under -icount QEMU translates them again, shorter.) Logging slows the guest down, so the
 profile gives shares, not a load: cpu_load.py measures that.
 
-Output: the functions with the most instructions and their share of all instructions traced.
+Output: the functions with the most instructions and their share of all instructions traced;
+then, per transaction, how often the clock is read, the CPU sleeps and the gateway task is
+polled (entries of those functions, and executions of the WFI instruction). The clock reads
+include the emulator's own: its CPU-load meter reads the clock twice per sleep, and its SysTick
+driver interrupts every millisecond; the boards have neither.
 """
 
 import argparse
@@ -100,10 +104,32 @@ def main():
     total = sum(per_function.values())
     frames = executed[entry(args.elf, BUS_IRQ)] / 33
     print(f"{total} instructions traced, about {frames:.0f} transactions (bus UART interrupts / 33; "
-          f"logging slows the guest, so the 1 ms input ticks per transaction are more than "
-          f"under scripts/cpu-load.sh: read the shares, not the sums)")
+          f"logging slows the guest, so the time-driven work per transaction (SysTick, timers) is "
+          f"more than under scripts/cpu-load.sh: read the shares, not the sums)")
     for name, count in per_function.most_common(args.top):
         print(f"{100 * count / total:5.1f} %  {count:9d}  {name[:110]}")
+    if frames:
+        sleeps = sum(executed[a] for a in wfi_addresses(args.elf))
+        polls = sum(executed[a] for a in task_polls(args.elf))
+        print(f"per transaction: {executed[entry(args.elf, '_embassy_time_now')] / frames:.1f} "
+              f"clock reads ({2 * sleeps / frames:.1f} of them the emulator's meter, 2 per sleep), "
+              f"{sleeps / frames:.1f} sleeps (WFI), {polls / frames:.1f} task polls, "
+              f"{executed[entry(args.elf, 'SysTick')] / frames:.1f} SysTick interrupts")
+
+
+def wfi_addresses(elf):
+    """Where the firmware executes WFI."""
+    out = subprocess.run(["llvm-objdump", "-d", "--no-show-raw-insn", elf], capture_output=True,
+                         text=True, check=True).stdout
+    return [int(m.group(1), 16) for m in re.finditer(r"^\s+([0-9a-f]+):\s+wfi\b", out, re.M)]
+
+
+def task_polls(elf):
+    """The entries of the executor's per-task poll functions."""
+    out = subprocess.run(["llvm-nm", "--demangle", elf], capture_output=True, text=True,
+                         check=True).stdout
+    return [int(line.split()[0], 16) & ~1 for line in out.splitlines()
+            if "TaskStorage" in line and "::poll::" in line]
 
 if __name__ == "__main__":
     main()
