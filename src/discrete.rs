@@ -26,9 +26,16 @@ impl Inputs {
         Inputs { pins, stop, on }
     }
 
-    /// Until the stop input changes level (from the moment this is first polled).
-    pub async fn stop_changed(&mut self) {
-        self.stop.wait_for_any_edge().await
+    /// Until the stop input is no longer as sampled (`stop_active`, [`Inputs::stop_active`]).
+    /// The level is checked after the interrupt is armed, so a change between the sample and
+    /// this call is not lost (an edge would be: arming clears the pending one).
+    pub async fn stop_other_than(&mut self, stop_active: bool) {
+        // Active = the input OFF.
+        if stop_active == (self.on == Level::High) {
+            self.stop.wait_for_high().await
+        } else {
+            self.stop.wait_for_low().await
+        }
     }
 
     /// The inputs now, bit n = port INn.

@@ -165,8 +165,9 @@ pub async fn run(
             clock = now();
         }
 
-        // The I/O task shows them at its next sample (1 ms). Every sample while a PIO axis is
-        // configured (its logic debounces and times by samples), only changes otherwise.
+        // The I/O task shows them when it next wakes (1 ms with a PIO axis, else up to 20 ms:
+        // the outputs are all OFF then). Every sample while a PIO axis is configured (its logic
+        // debounces and times by samples), only changes otherwise.
         let pio = node.gateway().config().pio_axis.is_some();
         io::show_outputs(node.outputs(), pio);
         if clock >= indicators_at {

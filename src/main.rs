@@ -66,9 +66,9 @@ fn main() -> ! {
 
 /// What the tasks work with, for as long as the firmware runs (in [`rt::run`]'s frame).
 struct Started {
-    /// Built with the stored settings. First, so that it is built in place (see
-    /// `protocol::node::Node::new`): nothing is written into this struct between its
-    /// construction and its move here.
+    /// Built with the stored settings, in place (see `protocol::node::Node::new`): built last
+    /// in [`start`]'s struct literal, so that nothing is written into this struct between the
+    /// node's construction and its move here (checked: `start`'s frame holds no node).
     node: node::Node,
     /// `None` if the board could not be set up.
     parts: Option<&'static mut Parts>,

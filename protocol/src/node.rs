@@ -317,8 +317,12 @@ impl Node {
     }
 
     /// The PIO output pins (bit n = PCON pattern 0 port OUTn): all OFF while the PIO axis has
-    /// not answered, or none is configured.
+    /// not answered, or none is configured (at once when the PLC takes the discrete I/O off its
+    /// axis: with no PIO axis the firmware samples the inputs only when they change).
     pub fn outputs(&self) -> PioOutputs {
+        if self.gateway.config().pio_axis.is_none() {
+            return PioOutputs::SAFE;
+        }
         self.outputs
     }
 

@@ -137,6 +137,12 @@ fn the_pio_drives_its_axis_and_shows_safe_outputs_until_it_answers() {
     assert!(rig
         .commands_to(0, 0)
         .contains(&Command::MoveToPoint(point(3))));
+    // The PLC takes the discrete I/O off the axis (PIOAXIS none): every output OFF at once,
+    // with no new input sample (the firmware samples only changes then).
+    assert_ne!(rig.node.outputs(), PioOutputs::SAFE);
+    assert_eq!(rig.write(63, G_PIO_AXIS, &[0xFFFF]), Ok(()));
+    rig.run_for(MS);
+    assert_eq!(rig.node.outputs(), PioOutputs::SAFE);
 }
 
 #[test]

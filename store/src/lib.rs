@@ -12,9 +12,14 @@
 //!
 //! | Bytes | Value |
 //! |---|---|
-//! | 0-3 | saves so far (u32, little endian): kept by a factory reset |
-//! | 4-5 | starts that found the settings unreadable (u16, little endian) |
-//! | 6.. | the settings record ([`RECORD_LEN`] bytes), or nothing after a factory reset |
+//! | 0 | [`FORMAT`]: an item without it is not this store's, and is passed over |
+//! | 1-4 | saves so far (u32, little endian): kept by a factory reset |
+//! | 5-6 | starts that found the settings unreadable (u16, little endian) |
+//! | 7.. | the settings record ([`RECORD_LEN`] bytes), or nothing after a factory reset |
+//!
+//! A start whose newest item is not this store's (or not a readable record) runs the defaults and
+//! counts it. A flash that cannot be read is never written over: the counts it holds are
+//! unknown, and a later start may read it.
 //!
 //! (A queue rather than sequential-storage's map of three keys: the same guarantees in 1.2 KB
 //! less of the F103's flash, measured by `scripts/size-report.sh`.)
@@ -42,8 +47,10 @@ use protocol::plc::{Boot, ConfigSource};
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::queue::{QueueConfig, QueueStorage};
 
-/// The counts at the head of an item: saves (u32) and load errors (u16).
-const COUNTS_LEN: usize = 6;
+/// The first byte of every item this store writes.
+pub const FORMAT: u8 = 0x5A;
+/// The head of an item: the format, saves (u32) and load errors (u16).
+const COUNTS_LEN: usize = 7;
 /// The longest item: the counts and a settings record.
 pub const ITEM_LEN: usize = COUNTS_LEN + RECORD_LEN;
 
@@ -97,10 +104,16 @@ impl Item {
         record: [0; RECORD_LEN],
     };
 
-    /// An item as stored: counts, then the record. `None` if it is too short for the counts.
+    /// An item as stored: the format, the counts, then the record. `None` if it is not one of
+    /// this store's: another format, too short for the counts, or a record too long.
     fn decode(bytes: &[u8]) -> Option<Item> {
         let (counts, record) = bytes.split_at_checked(COUNTS_LEN)?;
-        let [s0, s1, s2, s3, e0, e1] = <[u8; COUNTS_LEN]>::try_from(counts).ok()?;
+        let [FORMAT, s0, s1, s2, s3, e0, e1] = <[u8; COUNTS_LEN]>::try_from(counts).ok()? else {
+            return None;
+        };
+        if record.len() > RECORD_LEN {
+            return None;
+        }
         let mut item = Item {
             saves: u32::from_le_bytes([s0, s1, s2, s3]),
             load_errors: u16::from_le_bytes([e0, e1]),
@@ -120,8 +133,9 @@ impl Item {
         };
         let saves = self.saves.to_le_bytes();
         let errors = self.load_errors.to_le_bytes();
-        for (to, from) in counts.iter_mut().zip(saves.iter().chain(errors.iter())) {
-            *to = *from;
+        let head = [FORMAT].into_iter().chain(saves).chain(errors);
+        for (to, from) in counts.iter_mut().zip(head) {
+            *to = from;
         }
         let len = self.len.min(RECORD_LEN);
         if let (Some(to), Some(from)) = (record.get_mut(..len), self.record.get(..len)) {
@@ -141,7 +155,10 @@ impl<F: NorFlash> Store<F> {
     /// A store on `flash` in `range`; `None` if the range is not whole erase pages, or fewer than
     /// two.
     pub fn new(flash: F, range: Range<u32>) -> Option<Store<F>> {
-        let pages = range.end.checked_sub(range.start)? / u32::try_from(F::ERASE_SIZE).ok()?;
+        let pages = range
+            .end
+            .checked_sub(range.start)?
+            .checked_div(u32::try_from(F::ERASE_SIZE).ok()?)?;
         if pages < 2 {
             return None;
         }
@@ -157,19 +174,23 @@ impl<F: NorFlash> Store<F> {
         self.queue.destroy().0
     }
 
-    /// The newest item: [`Item::NONE`] if there is none, `Err` if the flash failed or the item
-    /// is not one of ours.
-    async fn newest(&mut self) -> Result<Item, StoreError> {
+    /// The newest item of this store's ([`Item::NONE`] if there is none), and whether it is the
+    /// newest item in the range (an item of another format may have come after it); `Err` if
+    /// the flash could not be read.
+    async fn newest(&mut self) -> Result<(Item, bool), StoreError> {
         let mut iter = self.queue.iter().await.map_err(|_| StoreError::Flash)?;
-        let mut newest = Ok(Item::NONE);
+        let (mut item, mut last) = (Item::NONE, true);
         while let Some(entry) = iter
             .next(&mut self.buffer.0)
             .await
             .map_err(|_| StoreError::Flash)?
         {
-            newest = Item::decode(&entry).ok_or(StoreError::Flash);
+            match Item::decode(&entry) {
+                Some(ours) => (item, last) = (ours, true),
+                None => last = false,
+            }
         }
-        newest
+        Ok((item, last))
     }
 
     /// Append `item`: the newest from now on. (Encoded in the scratch buffer: the futures of
@@ -188,11 +209,19 @@ impl<F: NorFlash> Store<F> {
     /// Read the settings at start-up. Unreadable settings (a damaged record, another format,
     /// a flash error) give the defaults and are counted, in flash too.
     pub async fn load(&mut self) -> Loaded {
-        let (mut item, readable) = match self.newest().await {
-            Ok(item) => (item, true),
-            Err(_) => (Item::NONE, false),
+        let Ok((mut item, last)) = self.newest().await else {
+            // Not written over: the counts it holds are unknown, and a later start may read it.
+            return Loaded {
+                settings: None,
+                boot: Boot {
+                    source: ConfigSource::Damaged,
+                    load_errors: 1,
+                    save_count: 0,
+                    reset: Boot::DEFAULT.reset,
+                },
+            };
         };
-        let source = match (readable, item.len) {
+        let source = match (last, item.len) {
             // Nothing stored yet, or a factory reset since.
             (true, 0) => ConfigSource::Defaults,
             (true, RECORD_LEN) if Settings::decode(&item.record).is_ok() => ConfigSource::Flash,
@@ -200,8 +229,13 @@ impl<F: NorFlash> Store<F> {
         };
         if source == ConfigSource::Damaged {
             item.load_errors = item.load_errors.saturating_add(1);
-            // Best effort: a flash that cannot be read may not take a write either. The record
-            // stays as it was (the next start counts it again), the count goes up.
+            if !last {
+                // Something else came after the last item of ours: not its settings, which
+                // that replaced. The defaults from now on (this start is the one counted).
+                item.len = 0;
+            }
+            // A record of ours that does not decode stays as it was: every start counts it.
+            // Best effort: a flash that will not take the write is counted next start again.
             let _ = self.push(&item).await;
         }
         // Decoded again rather than kept across the write above: the future, on the stack
@@ -225,7 +259,8 @@ impl<F: NorFlash> Store<F> {
     /// included. If the power fails meanwhile, the next start finds the old settings or the
     /// new ones, never a mix.
     pub async fn save(&mut self, record: &[u8; RECORD_LEN]) -> Result<u32, StoreError> {
-        let newest = self.newest().await.unwrap_or(Item::NONE);
+        // Refused if the flash cannot be read: the saves so far would be lost.
+        let (newest, _) = self.newest().await?;
         // A new item rather than `newest` changed: assigning the record into the future's own
         // copy is a copy the compiler cannot prove disjoint (a `memmove`, 1.6 KB of flash).
         let item = Item {
@@ -238,9 +273,19 @@ impl<F: NorFlash> Store<F> {
         Ok(item.saves)
     }
 
-    /// Forget the settings: the next start uses the defaults. The counts stay.
+    /// Forget the settings: the next start uses the defaults. The counts stay, unless the flash
+    /// cannot be read: then the whole range is erased (the way out of a range nothing can read).
     pub async fn factory_reset(&mut self) -> Result<(), StoreError> {
-        let mut item = self.newest().await.unwrap_or(Item::NONE);
+        let mut item = match self.newest().await {
+            Ok((item, _)) => item,
+            Err(_) => {
+                self.queue
+                    .erase_all()
+                    .await
+                    .map_err(|_| StoreError::Flash)?;
+                Item::NONE
+            }
+        };
         item.len = 0;
         self.push(&item).await
     }

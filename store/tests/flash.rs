@@ -7,7 +7,9 @@ use futures::executor::block_on;
 use protocol::plc::settings::{Settings, RECORD_LEN};
 use protocol::plc::{ConfigSource, GatewayConfig};
 use protocol::AxisSet;
+use sequential_storage::cache::Cache;
 use sequential_storage::mock_flash::{MockFlashBase, WriteCountCheck};
+use sequential_storage::queue::{QueueConfig, QueueStorage};
 use settings_store::Store;
 
 /// STM32L475: 2 KiB pages, 64-bit words, written once per erase; two pages for the settings.
@@ -89,13 +91,56 @@ fn an_unreadable_record_gives_the_defaults_and_is_counted() {
 #[test]
 fn a_factory_reset_forgets_the_settings_and_keeps_the_counts() {
     let mut s = store(l4());
+    let mut damaged = settings(500, 2).encode();
+    damaged[0] = 99;
+    block_on(s.save(&damaged)).unwrap();
+    let mut s = store(s.into_flash());
+    assert_eq!(block_on(s.load()).boot.load_errors, 1);
     block_on(s.save(&settings(500, 2).encode())).unwrap();
     block_on(s.factory_reset()).unwrap();
     let mut s = store(s.into_flash());
     let loaded = block_on(s.load());
     assert_eq!(loaded.settings, None);
     assert_eq!(loaded.boot.source, ConfigSource::Defaults);
-    assert_eq!(loaded.boot.save_count, 1);
+    assert_eq!((loaded.boot.save_count, loaded.boot.load_errors), (2, 1));
+}
+
+/// An item of another format after the settings (another firmware's, or this store's before a
+/// change of layout): that start runs the defaults and counts it, the counts of the last item
+/// of ours stay, and nothing of the foreign item is taken for settings.
+#[test]
+fn an_item_of_another_format_gives_the_defaults_once_and_keeps_the_counts() {
+    let mut s = store(l4());
+    block_on(s.save(&settings(500, 2).encode())).unwrap();
+    let foreign: &[&[u8]] = &[&[1, 2, 3], &[settings_store::FORMAT], &[0xFF; 40]];
+    for bytes in foreign {
+        let flash = s.into_flash();
+        let mut queue = QueueStorage::new(
+            flash,
+            QueueConfig::new(L4::FULL_FLASH_RANGE),
+            Cache::new_uncached(),
+        );
+        block_on(queue.push(bytes, false)).unwrap();
+        let mut s2 = store(queue.destroy().0);
+        let loaded = block_on(s2.load());
+        assert_eq!(loaded.settings, None, "{bytes:?}");
+        assert_eq!(loaded.boot.source, ConfigSource::Damaged, "{bytes:?}");
+        assert_eq!(loaded.boot.save_count, 1, "{bytes:?}");
+        let mut s3 = store(s2.into_flash());
+        let again = block_on(s3.load());
+        assert_eq!(
+            again.boot.source,
+            ConfigSource::Defaults,
+            "counted once: {bytes:?}"
+        );
+        s = s3;
+    }
+    let mut s = store(s.into_flash());
+    assert_eq!(block_on(s.load()).boot.load_errors, 3);
+    // A save after them is loaded back, its count following the last of ours.
+    assert_eq!(block_on(s.save(&settings(700, 3).encode())), Ok(2));
+    let mut s = store(s.into_flash());
+    assert_eq!(block_on(s.load()).settings, Some(settings(700, 3)));
 }
 
 /// Power lost after every possible number of bytes written during a save: the next start finds
