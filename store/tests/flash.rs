@@ -105,6 +105,9 @@ fn a_factory_reset_forgets_the_settings_and_keeps_the_counts() {
     assert_eq!((loaded.boot.save_count, loaded.boot.load_errors), (2, 1));
 }
 
+#[repr(align(32))]
+struct Aligned([u8; 64]);
+
 /// An item of another format after the settings (another firmware's, or this store's before a
 /// change of layout): that start runs the defaults and counts it, the counts of the last item
 /// of ours stay, and nothing of the foreign item is taken for settings.
@@ -120,7 +123,10 @@ fn an_item_of_another_format_gives_the_defaults_once_and_keeps_the_counts() {
             QueueConfig::new(L4::FULL_FLASH_RANGE),
             Cache::new_uncached(),
         );
-        block_on(queue.push(bytes, false)).unwrap();
+        // The flash takes words from word-aligned memory (the mock checks it).
+        let mut aligned = Aligned([0; 64]);
+        aligned.0[..bytes.len()].copy_from_slice(bytes);
+        block_on(queue.push(&aligned.0[..bytes.len()], false)).unwrap();
         let mut s2 = store(queue.destroy().0);
         let loaded = block_on(s2.load());
         assert_eq!(loaded.settings, None, "{bytes:?}");
