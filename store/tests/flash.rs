@@ -157,16 +157,32 @@ fn an_item_of_another_format_gives_the_defaults_once_and_keeps_the_counts() {
 fn power_loss_during_a_save_leaves_the_old_or_the_new_settings() {
     let mut erasing = 0;
     for saves_before in [7, 16, 17, 18, 19, 20] {
-        erasing += usize::from(cut_every_byte_of_a_save(saves_before));
+        erasing += usize::from(cut_every_byte_of_a_save(l4(), saves_before));
     }
     assert!(erasing > 0, "no save cut short had to erase a page");
 }
 
-/// The power-loss check after `saves_before` saves; whether the save cut short erases a page.
-fn cut_every_byte_of_a_save(saves_before: u16) -> bool {
+/// The same in the F103's geometry: 1 KiB pages, written in 16-bit half-words.
+#[test]
+fn power_loss_during_a_save_on_the_f103s_flash() {
+    let mut erasing = 0;
+    for saves_before in [3, 6, 7, 8, 9] {
+        let empty = F1::new(WriteCountCheck::OnceOnly, None, true);
+        erasing += usize::from(cut_every_byte_of_a_save(empty, saves_before));
+    }
+    assert!(erasing > 0, "no save cut short had to erase a page");
+}
+
+/// The power-loss check on `empty` after `saves_before` saves; whether the save cut short
+/// erases a page.
+fn cut_every_byte_of_a_save<const P: usize, const W: usize, const N: usize>(
+    empty: MockFlashBase<P, W, N>,
+    saves_before: u16,
+) -> bool {
+    let page = (W * N) as u32;
     let old = settings(500, 2);
     let new = settings(900, 5);
-    let mut base = store(l4());
+    let mut base = store(empty);
     for i in 0..saves_before {
         block_on(base.save(&settings(100 + i, 1).encode())).unwrap();
     }
@@ -175,17 +191,17 @@ fn cut_every_byte_of_a_save(saves_before: u16) -> bool {
     let erases = {
         let counting = Counting {
             flash: base.clone(),
-            erases: vec![0; 2],
-            page: 2048,
+            erases: vec![0; P],
+            page,
         };
-        let mut s = Store::new(counting, L4::FULL_FLASH_RANGE).unwrap();
+        let mut s = Store::new(counting, MockFlashBase::<P, W, N>::FULL_FLASH_RANGE).unwrap();
         block_on(s.save(&new.encode())).unwrap();
         s.into_flash().erases.iter().sum::<u32>()
     };
     let mut outcomes = [0usize; 2];
     // The mock flash counts an erase as the page's bytes: a save that erases first is cut
-    // during the erase for the first 2 KiB.
-    let span = if erases > 0 { 2048 } else { 0 } + 4 * RECORD_LEN as u32;
+    // during the erase for the first page's worth.
+    let span = if erases > 0 { page } else { 0 } + 4 * RECORD_LEN as u32;
     for cut in 0..span {
         let mut flash = base.clone();
         flash.bytes_until_shutoff = Some(cut);
