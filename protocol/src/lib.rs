@@ -60,6 +60,7 @@ pub mod axes;
 mod bits;
 pub mod command;
 pub mod deframer;
+mod div;
 pub mod engine;
 pub mod error;
 mod field;

@@ -2,7 +2,15 @@
 //! (smoltcp's `poll(timestamp)` model), so the same code runs on the MCU, on a PC and in
 //! virtual-time tests. The bus engine, the Modbus receiver and the PIO all take these.
 
+use core::num::NonZeroU32;
 use core::ops::{Add, Sub};
+
+use crate::div::{div, divisor};
+
+/// Microseconds in a millisecond and in a second, as divisors for [`div`] (which keeps the
+/// 64-bit division routine out of the firmware).
+const US_PER_MS: NonZeroU32 = divisor(1000);
+const US_PER_S: NonZeroU32 = divisor(1_000_000);
 
 /// A point in time, in microseconds since an arbitrary origin chosen by the caller.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -33,6 +41,11 @@ impl Duration {
         self.0
     }
 
+    /// Whole milliseconds.
+    pub fn as_millis(self) -> u64 {
+        div(self.0, US_PER_MS)
+    }
+
     /// The sum, saturating.
     pub const fn plus(self, other: Duration) -> Duration {
         Duration(self.0.saturating_add(other.0))
@@ -42,6 +55,11 @@ impl Duration {
 impl Instant {
     /// The origin.
     pub const ZERO: Instant = Instant(0);
+
+    /// Whole seconds since the origin.
+    pub fn as_secs(self) -> u64 {
+        div(self.0, US_PER_S)
+    }
 
     /// The time elapsed since `earlier` (zero if `earlier` is later).
     pub const fn since(self, earlier: Instant) -> Duration {

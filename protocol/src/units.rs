@@ -25,7 +25,9 @@
 //! exactly. Incremental moves use "the equations for the opposite homing direction" for negative
 //! distances (brief edition §4-3 3).
 
-use core::num::{NonZeroU16, NonZeroU64};
+use core::num::{NonZeroU16, NonZeroU32};
+
+use crate::div::{div_rem, divisor};
 
 use crate::types::{Acceleration, HomeDirection, Pulses, Velocity};
 
@@ -39,15 +41,9 @@ const VELOCITY_FACTOR: i64 = 300;
 /// The acceleration factor 5883.99, in hundredths: 60 x 9.80665 x 1000 / 1000 / 0.1 x 100.
 const ACCELERATION_FACTOR_X100: i64 = 588_399;
 /// [`VELOCITY_FACTOR`] as a divisor.
-const VELOCITY_DIVISOR: NonZeroU64 = match NonZeroU64::new(VELOCITY_FACTOR as u64) {
-    Some(d) => d,
-    None => NonZeroU64::MIN,
-};
+const VELOCITY_DIVISOR: NonZeroU32 = divisor(VELOCITY_FACTOR as u32);
 /// [`ACCELERATION_FACTOR_X100`] as a divisor.
-const ACCELERATION_DIVISOR: NonZeroU64 = match NonZeroU64::new(ACCELERATION_FACTOR_X100 as u64) {
-    Some(d) => d,
-    None => NonZeroU64::MIN,
-};
+const ACCELERATION_DIVISOR: NonZeroU32 = divisor(ACCELERATION_FACTOR_X100 as u32);
 /// Positions the controller accepts: C0000000H-3FFFFFFFH (complete edition §7-2-2 PCMD).
 const POSITION_LIMIT: i64 = 0x3FFF_FFFF;
 
@@ -107,8 +103,8 @@ impl Lead {
     }
 
     /// The lead as a divisor.
-    fn divisor(self) -> NonZeroU64 {
-        NonZeroU64::from(self.0)
+    fn divisor(self) -> NonZeroU32 {
+        NonZeroU32::from(self.0)
     }
 
     /// The lead of a REG1 lead-type code (bits 0-3; 0 = 2.5 mm ... 9 = 20 mm).
@@ -207,11 +203,11 @@ pub struct Scale {
     pub complement: Complement,
 }
 
-/// Integer division of `n` by `d`, truncated toward zero. `d` cannot be zero (the division is
-/// `u64 / NonZeroU64`, which has no zero check) and the quotient of a magnitude cannot
-/// overflow, so this has no panic path.
-fn div_trunc(n: i64, d: NonZeroU64) -> i64 {
-    let q = i64::try_from(n.unsigned_abs() / d).unwrap_or(i64::MAX);
+/// Integer division of `n` by `d`, truncated toward zero. `d` cannot be zero and the quotient
+/// of a magnitude cannot overflow, so this has no panic path. The divisions of this module
+/// go through [`div_rem`]: 32-bit divisors, no 64-bit division routine on the MCU.
+fn div_trunc(n: i64, d: NonZeroU32) -> i64 {
+    let q = i64::try_from(div_rem(n.unsigned_abs(), d).0).unwrap_or(i64::MAX);
     if n < 0 {
         -q
     } else {
@@ -221,11 +217,10 @@ fn div_trunc(n: i64, d: NonZeroU64) -> i64 {
 
 /// Integer division of `n` by `d`, rounded to nearest, halves away from zero. Never overflows:
 /// it works on magnitudes and never forms `2 * n` (a public caller may pass any `i64`).
-fn div_round(n: i64, d: NonZeroU64) -> i64 {
-    let m = n.unsigned_abs();
-    let (q, r) = (m / d, m % d);
+fn div_round(n: i64, d: NonZeroU32) -> i64 {
+    let (q, r) = div_rem(n.unsigned_abs(), d);
     // r < d, so d - r cannot underflow; rounding up when r >= d - r avoids forming 2 * r.
-    let q = q.saturating_add(u64::from(r >= d.get().saturating_sub(r)));
+    let q = q.saturating_add(u64::from(r >= d.get() - r));
     let q = i64::try_from(q).unwrap_or(i64::MAX);
     if n < 0 {
         -q
@@ -255,7 +250,7 @@ impl Scale {
 
     /// Magnitude conversion back: the length of `pulses`, rounded to 0.01 mm.
     pub fn length(&self, pulses: i64) -> Length {
-        let ppr = NonZeroU64::from(self.pulses_per_rev);
+        let ppr = NonZeroU32::from(self.pulses_per_rev);
         let value = div_round(
             pulses.saturating_mul(i64::from(self.lead.hundredths())),
             ppr,
@@ -351,7 +346,7 @@ impl Scale {
     /// The acceleration units of an acceleration in G, truncated.
     pub fn acceleration(&self, accel: Accel) -> Result<Acceleration, UnitError> {
         let units = div_trunc(
-            i64::from(accel.0) * ACCELERATION_FACTOR_X100 / 100,
+            div_trunc(i64::from(accel.0) * ACCELERATION_FACTOR_X100, divisor(100)),
             self.lead.divisor(),
         );
         if units == 0 {

@@ -18,6 +18,9 @@
 //! counts as moving until a status says otherwise (`unseen`): its last status, from before the
 //! command, says it stands.
 
+use core::num::NonZeroU32;
+
+use crate::div::div;
 use crate::time::{Duration, Instant};
 use crate::{Command, Pulses};
 
@@ -167,11 +170,10 @@ fn arrival(
         return None;
     }
     // remaining / moved > 0; the product stays far from overflow (|remaining| < 2^33,
-    // elapsed < 2^31 µs in practice; saturating for the rest).
-    let us = remaining
-        .unsigned_abs()
-        .saturating_mul(elapsed_us)
-        .checked_div(moved.unsigned_abs())?;
+    // elapsed < 2^31 µs in practice; saturating for the rest). `moved` is the difference of
+    // two i32, so its magnitude fits in 32 bits (crate::div: no 64-bit division routine).
+    let moved = NonZeroU32::new(u32::try_from(moved.unsigned_abs()).ok()?)?;
+    let us = div(remaining.unsigned_abs().saturating_mul(elapsed_us), moved);
     Some(now + Duration(us))
 }
 

@@ -44,6 +44,7 @@
 use super::approach::Approach;
 use super::{timing, Engine, Link, Next, Origin, FIRST_PROBE};
 use crate::axes::{least, AxisMap, AxisSet};
+use crate::div::{div, divisor};
 use crate::memory::PNOW;
 use crate::time::{earliest, Duration, Instant};
 use crate::{Axis, Command, Request};
@@ -380,9 +381,9 @@ impl Engine {
     fn oldest_position_due(&self, pass: &Pass) -> Option<(Axis, bool)> {
         // A mover's position is read as often as its part of the share of reads allows, once a
         // cycle at least (as a round robin of reads would).
-        let share = u64::from(self.config.position_reads_per_cycle.max(1));
+        let share = divisor(u32::from(self.config.position_reads_per_cycle));
         let movers = pass.moving.len() as u64;
-        let period = Duration(pass.cycle.0.saturating_mul(movers) / share).min(pass.cycle);
+        let period = Duration(div(pass.cycle.0.saturating_mul(movers), share)).min(pass.cycle);
         let stale = pass.moving.iter().filter(|&a| {
             self.axes[a]
                 .position_at

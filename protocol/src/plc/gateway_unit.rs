@@ -58,7 +58,7 @@ impl Gateway {
         link: &SlaveCounters,
     ) -> Result<u16, Exception> {
         let (major, minor, patch) = self.config.identity.version();
-        let uptime = u32::try_from(self.now.0 / 1_000_000).unwrap_or(u32::MAX);
+        let uptime = u32::try_from(self.now.as_secs()).unwrap_or(u32::MAX);
         let sync = &self.sync;
         match address {
             G_VERSION => Ok(u16::from(major) << 8 | u16::from(minor)),
@@ -67,9 +67,7 @@ impl Gateway {
             0x0003 => Ok(split(uptime)[1]),
             G_FAILSAFE => Ok(self.failsafe.latched()),
             G_FAILSAFE_COUNT => Ok(self.failsafe.count()),
-            G_WATCHDOG => {
-                Ok(u16::try_from(self.config.watchdog.as_micros() / 1000).unwrap_or(u16::MAX))
-            }
+            G_WATCHDOG => Ok(u16::try_from(self.config.watchdog.as_millis()).unwrap_or(u16::MAX)),
             G_BUS_BAUD => Ok(u16::try_from(self.persist.baud.bits_per_second() / 100).unwrap_or(0)),
             G_BUS_RTIM => Ok(u16::from(self.persist.rtim.get())),
             G_PLC_BAUD => Ok(u16::try_from(self.persist.plc.baud / 100).unwrap_or(0)),

@@ -138,7 +138,7 @@ impl Settings {
             Parity::Odd => 1,
             Parity::Even => 2,
         });
-        let ms = u16::try_from(self.watchdog.as_micros() / 1000).unwrap_or(u16::MAX);
+        let ms = u16::try_from(self.watchdog.as_millis()).unwrap_or(u16::MAX);
         w.bytes(&ms.to_le_bytes());
         w.u8(match self.watchdog_action {
             WatchdogAction::StopAll => 0,
