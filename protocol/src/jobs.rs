@@ -135,14 +135,46 @@ fn write(axis: Axis, field: PointField, value: u32) -> Step {
     )
 }
 
+/// Frames of [`write_field`]: Q1, T4, W4, V5.
+pub const WRITE_FIELD_LEN: usize = 4;
+
 /// Change one field of an existing point: Q1, T4, W4, V5 (brief edition §5-3 1).
-pub fn write_field(axis: Axis, point: PositionNo, field: PointField, value: u32) -> [Step; 4] {
-    [
-        load(axis, point),
-        address(axis, field),
-        write(axis, field, value),
-        store(axis, point),
-    ]
+pub fn write_field(
+    axis: Axis,
+    point: PositionNo,
+    field: PointField,
+    value: u32,
+) -> [Step; WRITE_FIELD_LEN] {
+    steps(|i| write_field_step(axis, point, field, value, i))
+}
+
+/// Frame `index` of [`write_field`], without building the others (the engine asks for one
+/// frame at a time), or `None` past the end.
+pub fn write_field_step(
+    axis: Axis,
+    point: PositionNo,
+    field: PointField,
+    value: u32,
+    index: usize,
+) -> Option<Step> {
+    match index {
+        0 => Some(load(axis, point)),
+        1 => Some(address(axis, field)),
+        2 => Some(write(axis, field, value)),
+        3 => Some(store(axis, point)),
+        _ => None,
+    }
+}
+
+/// The frames of a sequence as an array, from the function that gives them one by one (the
+/// one place each sequence is written down).
+fn steps<const N: usize>(step: impl Fn(usize) -> Option<Step>) -> [Step; N] {
+    // Every index below N has a frame; the fallback only satisfies the types.
+    let fallback = Step {
+        request: Request::new(Axis::MIN, Command::Status),
+        expect: Expect::Reply,
+    };
+    core::array::from_fn(|i| step(i).unwrap_or(fallback))
 }
 
 /// A whole point as the brief edition writes one (§5-3 2).
@@ -189,57 +221,54 @@ pub const READ_POINT_LEN: usize = 1 + PointField::ALL.len();
 
 /// Write a whole new point: Q1, six T4 + W4 pairs, V5 (the 14 frames of brief edition §5-3 2).
 pub fn write_point(axis: Axis, point: PositionNo, data: &PointData) -> [Step; WRITE_POINT_LEN] {
-    let [f0, f1, f2, f3, f4, f5] = data.fields();
-    let pair =
-        |(field, value): (PointField, u32)| [address(axis, field), write(axis, field, value)];
-    let [a0, w0] = pair(f0);
-    let [a1, w1] = pair(f1);
-    let [a2, w2] = pair(f2);
-    let [a3, w3] = pair(f3);
-    let [a4, w4] = pair(f4);
-    let [a5, w5] = pair(f5);
-    [
-        load(axis, point),
-        a0,
-        w0,
-        a1,
-        w1,
-        a2,
-        w2,
-        a3,
-        w3,
-        a4,
-        w4,
-        a5,
-        w5,
-        store(axis, point),
-    ]
+    steps(|i| write_point_step(axis, point, data, i))
 }
+
+/// Frame `index` of [`write_point`], without building the others, or `None` past the end.
+pub fn write_point_step(
+    axis: Axis,
+    point: PositionNo,
+    data: &PointData,
+    index: usize,
+) -> Option<Step> {
+    match index {
+        0 => Some(load(axis, point)),
+        WRITE_POINT_STORE => Some(store(axis, point)),
+        i => {
+            // Frames 1..=12: the T4 + W4 pair of each field in turn.
+            let pair = i.checked_sub(1)?;
+            let &(field, value) = data.fields().get(pair / 2)?;
+            Some(if pair % 2 == 0 {
+                address(axis, field)
+            } else {
+                write(axis, field, value)
+            })
+        }
+    }
+}
+
+/// Where V5 is in [`write_point`]: its last frame.
+const WRITE_POINT_STORE: usize = WRITE_POINT_LEN - 1;
 
 /// Read a point back: Q1, then R4 of every documented field ([`PointField::ALL`]).
 pub fn read_point(axis: Axis, point: PositionNo) -> [Step; READ_POINT_LEN] {
-    let read = |field: PointField| {
-        step(
-            axis,
-            Command::ReadMemory {
-                address: field.address(),
-            },
-            Expect::Data,
-        )
-    };
-    let [f0, f1, f2, f3, f4, f5, f6, f7, f8] = PointField::ALL;
-    [
-        load(axis, point),
-        read(f0),
-        read(f1),
-        read(f2),
-        read(f3),
-        read(f4),
-        read(f5),
-        read(f6),
-        read(f7),
-        read(f8),
-    ]
+    steps(|i| read_point_step(axis, point, i))
+}
+
+/// Frame `index` of [`read_point`], without building the others, or `None` past the end.
+pub fn read_point_step(axis: Axis, point: PositionNo, index: usize) -> Option<Step> {
+    match index.checked_sub(1) {
+        None => Some(load(axis, point)),
+        Some(i) => PointField::ALL.get(i).map(|field| {
+            step(
+                axis,
+                Command::ReadMemory {
+                    address: field.address(),
+                },
+                Expect::Data,
+            )
+        }),
+    }
 }
 
 /// The values of a read-back, in [`PointField::ALL`] order.
@@ -263,5 +292,52 @@ impl PointReadback {
         data.fields()
             .iter()
             .all(|&(field, value)| self.get(field) == value)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The engine asks for frames one at a time until `None`: each sequence must give exactly
+    /// its length of frames, and its first and last are Q1 and V5 (or the last R4).
+    #[test]
+    fn each_sequence_gives_its_frames_then_ends() {
+        let axis = Axis::MAX;
+        let point = PositionNo::MAX;
+        let data = PointData {
+            position: Pulses(1234),
+            velocity: Velocity::MAX,
+            acceleration: Acceleration::MIN,
+            flags: PointData::FLAGS_MOTION_AND_BAND,
+            band: 10,
+            max_acceleration: 30,
+        };
+        let field = PointField::Velocity;
+        let count =
+            |step: &dyn Fn(usize) -> Option<Step>| (0..).take_while(|&i| step(i).is_some()).count();
+        assert_eq!(
+            count(&|i| write_field_step(axis, point, field, 7, i)),
+            WRITE_FIELD_LEN
+        );
+        assert_eq!(
+            count(&|i| write_point_step(axis, point, &data, i)),
+            WRITE_POINT_LEN
+        );
+        assert_eq!(count(&|i| read_point_step(axis, point, i)), READ_POINT_LEN);
+        for i in WRITE_POINT_LEN..WRITE_POINT_LEN + 4 {
+            assert_eq!(write_point_step(axis, point, &data, i), None);
+        }
+        let frames = write_point(axis, point, &data);
+        assert_eq!(frames.first(), Some(&load(axis, point)));
+        assert_eq!(frames.last(), Some(&store(axis, point)));
+        // Every field's T4 comes right before its W4, in the order of `fields`.
+        for (n, (f, value)) in data.fields().into_iter().enumerate() {
+            assert_eq!(frames.get(1 + 2 * n), Some(&address(axis, f)));
+            assert_eq!(frames.get(2 + 2 * n), Some(&write(axis, f, value)));
+        }
+        assert!(read_point(axis, point)
+            .iter()
+            .all(|s| s.request.axis == axis));
     }
 }

@@ -285,38 +285,29 @@ pub(crate) fn program(job: &Job, index: usize) -> Option<Op> {
             point,
             field,
             value,
-        } => jobs::write_field(axis, point, field, value)
-            .get(index)
-            .copied()
-            .map(Op::Send),
+        } => jobs::write_field_step(axis, point, field, value, index).map(Op::Send),
         JobKind::WritePoint {
             point,
             data,
             verify,
-        } => {
-            let write = jobs::write_point(axis, point, &data);
-            match index.checked_sub(write.len()) {
-                None => write.get(index).copied().map(Op::Send),
-                Some(_) if !verify => None,
-                Some(i) => jobs::read_point(axis, point).get(i).copied().map(Op::Send),
-            }
+        } => match index.checked_sub(WRITE_POINT_LEN) {
+            None => jobs::write_point_step(axis, point, &data, index),
+            Some(_) if !verify => None,
+            Some(i) => jobs::read_point_step(axis, point, i),
         }
+        .map(Op::Send),
         JobKind::StartBuffered(axes) => one(&[
             send(axis, Command::ExecuteBuffered),
             Op::Await(Condition::Unbuffered(axes.with(axis))),
         ]),
-        JobKind::ReadPoint(point) => jobs::read_point(axis, point)
-            .get(index)
-            .copied()
-            .map(Op::Send),
+        JobKind::ReadPoint(point) => jobs::read_point_step(axis, point, index).map(Op::Send),
         JobKind::StorePoint { point, data } => {
-            let read = jobs::read_point(axis, point);
-            let write = jobs::write_point(axis, point, &data);
-            match index.checked_sub(read.len()) {
-                None => read.get(index).copied(),
-                Some(i) => match i.checked_sub(write.len()) {
-                    None => write.get(i).copied(),
-                    Some(j) => read.get(j).copied(),
+            // Read, compare (the engine decides there), write, read back.
+            match index.checked_sub(READ_POINT_LEN) {
+                None => jobs::read_point_step(axis, point, index),
+                Some(i) => match i.checked_sub(WRITE_POINT_LEN) {
+                    None => jobs::write_point_step(axis, point, &data, i),
+                    Some(j) => jobs::read_point_step(axis, point, j),
                 },
             }
             .map(Op::Send)
