@@ -152,12 +152,11 @@ pub async fn run(
                     let saved = settings.save(&record);
                     node.stored(saved);
                 }
-                Action::Store(Store::FactoryReset) => {
-                    settings.factory_reset();
-                    board.plc.flush().await;
-                    cortex_m::peripheral::SCB::sys_reset();
-                }
-                Action::Store(Store::Restart) => {
+                Action::Store(store @ (Store::FactoryReset | Store::Restart)) => {
+                    if matches!(store, Store::FactoryReset) {
+                        settings.factory_reset();
+                    }
+                    // The reply to the write that asked for it has gone out first.
                     board.plc.flush().await;
                     cortex_m::peripheral::SCB::sys_reset();
                 }
