@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Flash and RAM of the hardware firmware of both boards against their budgets, with the stack
 # high-water mark measured in the emulator (scripts/emu-test.sh paints the stack and measures each
-# test; the L475 emulator build runs the same tasks as both hardware builds).
+# test; the L475 emulator build runs the same tasks as both hardware builds) or, if deeper, the
+# hardware build's start-up path by its call graph (scripts/stack_depth.py: the settings load
+# from flash, which QEMU cannot run).
 #
 #   scripts/size-report.sh           # builds both boards, reuses the emulator's stack log when it
 #                                    # is newer than the emulator ELF (else runs the emulator suite)
@@ -31,8 +33,10 @@ if ! [[ -s $hwm && -f $emu_elf && $hwm -nt $emu_elf ]]; then
     scripts/emu-test.sh -q >/dev/null
 fi
 python=$(scripts/py-env.sh)
+# llvm-objdump from rustup's llvm-tools (rust-toolchain.toml), for the start-up stack.
+objdump="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/llvm-objdump"
 
-"$python" scripts/size_report.py "${SIZE_TOP:-12}" "$hwm" "$check" \
+"$python" scripts/size_report.py "${SIZE_TOP:-12}" "$hwm" "$check" "$objdump" \
     "L475 B-L475E-IOT01A (STM32L475VG)" target/thumbv7em-none-eabihf/release/rc-gateway \
         0x08000000 0x08100000 0x20000000 0x20018000 48 16 \
     "F103 STM32F103C8 (blue pill)" target/size-f103/thumbv7m-none-eabi/release/rc-gateway \

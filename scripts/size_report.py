@@ -1,9 +1,10 @@
 """scripts/size-report.sh's arithmetic: flash and static RAM of each board's ELF from its section
-headers, the stack high-water mark from the emulator's log, each against its budget, and where
+headers, the stack (the emulator's high-water mark, or the start-up path of the hardware build by
+its call graph if that is deeper: scripts/stack_depth.py), each against its budget, and where
 the bytes go (by crate, and the largest symbols).
 
-Arguments: TOP HWM_LOG CHECK, then per board: NAME ELF FLASH_START FLASH_END RAM_START RAM_END
-FLASH_BUDGET_KIB RAM_BUDGET_KIB.
+Arguments: TOP HWM_LOG CHECK OBJDUMP, then per board: NAME ELF FLASH_START FLASH_END RAM_START
+RAM_END FLASH_BUDGET_KIB RAM_BUDGET_KIB.
 """
 
 import collections
@@ -12,6 +13,8 @@ import sys
 
 from elftools.elf.constants import SH_FLAGS
 from elftools.elf.elffile import ELFFile
+
+import stack_depth
 
 
 def demangle(name):
@@ -52,7 +55,8 @@ def stack_high_water_mark(path):
     return stack, where
 
 
-def report(name, elf_path, flash_region, ram_region, flash_budget, ram_budget, stack, stack_where, top):
+def report(name, elf_path, flash_region, ram_region, flash_budget, ram_budget, stack, stack_where, top,
+           objdump):
     inside = lambda address, region: region[0] <= address < region[1]  # noqa: E731
     with open(elf_path, "rb") as f:
         elf = ELFFile(f)
@@ -81,11 +85,21 @@ def report(name, elf_path, flash_region, ram_region, flash_budget, ram_budget, s
           f"   ({', '.join(f'{k} {v}' for k, v in flash.items())})")
     print(f"  static RAM   {kib(static_ram)}   ({', '.join(f'{k} {v}' for k, v in ram.items())})")
     print(f"  stack HWM    {kib(stack)}   ({stack} B, {stack_where}; emulator build of the L475)")
-    print(f"  RAM + stack  {kib(static_ram + stack)}  budget {kib(ram_budget)}  "
-          f"{verdict(static_ram + stack, ram_budget)}")
+    # The hardware build's start-up (the settings load from flash, which QEMU cannot run) by its
+    # call graph, with the deepest interrupt on top.
+    boot, path, path_bytes, handler, handler_bytes, entry = stack_depth.worst_case(objdump, elf_path)
+    # Named by the firmware's own function deepest on the path (below it: libraries).
+    ours = [demangle(f) for f in path if f.startswith("_ZN10rc_gateway")]
+    print(f"  start-up     {kib(boot)}   ({boot} B by the call graph: {path_bytes} B from main, "
+          f"through {ours[-1] if ours else '-'}; + {handler_bytes} B in {handler} "
+          f"+ {entry} B interrupt entry)")
+    deepest = max(stack, boot)
+    print(f"  RAM + stack  {kib(static_ram + deepest)}  budget {kib(ram_budget)}  "
+          f"{verdict(static_ram + deepest, ram_budget)}   (the deeper of the two stacks; "
+          f"{ram_budget - static_ram - deepest} B to spare)")
     if flash_total > flash_budget:
         over.append("flash")
-    if static_ram + stack > ram_budget:
+    if static_ram + deepest > ram_budget:
         over.append("RAM")
     by_crate = collections.Counter()
     for size, symbol, where in symbols:
@@ -100,17 +114,17 @@ def report(name, elf_path, flash_region, ram_region, flash_budget, ram_budget, s
 
 
 def main(argv):
-    top, hwm_path, check = int(argv[0]), argv[1], argv[2] == "1"
+    top, hwm_path, check, objdump = int(argv[0]), argv[1], argv[2] == "1", argv[3]
     try:
         stack, stack_where = stack_high_water_mark(hwm_path)
     except (OSError, ValueError):
         sys.exit(f"no stack measurement in {hwm_path}: did scripts/emu-test.sh run?")
-    boards = argv[3:]
+    boards = argv[4:]
     failures = []
     for i in range(0, len(boards), 8):
         name, elf, fs, fe, rs, re_, fb, rb = boards[i:i + 8]
         over = report(name, elf, (int(fs, 16), int(fe, 16)), (int(rs, 16), int(re_, 16)),
-                      int(fb) * 1024, int(rb) * 1024, stack, stack_where, top)
+                      int(fb) * 1024, int(rb) * 1024, stack, stack_where, top, objdump)
         failures += [f"{name.split()[0]} {what}" for what in over]
         print()
     if failures:
