@@ -13,10 +13,10 @@
 //!   and an [`Exception`] code.
 //!
 //! Memory: the reply goes to a caller-provided [`ReplyBuffer`] (256 bytes, the longest ADU).
-//! The model reads into scratch arrays inside the [`Slave`], sized to the Modbus maxima: 250
-//! bytes of packed bits (FC01/02 read at most 2000) and 125 `u16`s (FC03/04 read at most 125
-//! registers, FC10 writes at most 123), 500 bytes in all; FC0F hands the model the request's own
-//! packed bits ([`Bits`]). A long write is handed over whole, never in chunks, so the model can
+//! The model reads into a scratch array inside the [`Slave`], sized to the Modbus maxima: 250
+//! bytes of packed bits (FC01/02 read at most 2000) or 125 `u16`s (FC03/04 read at most 125
+//! registers, FC10 writes at most 123), 250 bytes shared by the two; FC0F hands the model the
+//! request's own packed bits ([`Bits`]). A long write is handed over whole, never in chunks, so the model can
 //! validate everything before applying anything. Keeping the scratch in the `Slave` (typically a
 //! `static` or a task's state) rather than on the stack keeps [`Slave::handle`]'s stack frame
 //! small.
@@ -173,13 +173,22 @@ impl ReplyBuffer {
 /// The Modbus RTU slave; see the [module documentation](self).
 #[derive(Clone, Debug)]
 pub struct Slave {
-    bits: [u8; MAX_READ_BITS.div_ceil(8) as usize],
-    registers: [u16; MAX_READ_REGISTERS as usize],
+    scratch: Scratch,
     counters: SlaveCounters,
     /// The serial-line counts at the last restart or clear: FC08 counts from here.
     cleared: LineCounts,
     /// FC08 sub-function 04 is in force.
     listen_only: bool,
+}
+
+/// What a request reads or writes: packed bits or registers, never both (one request at a time),
+/// so they share their bytes: 250 bytes of the node, which lives on the MCU's stack.
+#[derive(Clone, Debug)]
+enum Scratch {
+    /// FC01/FC02: at most 2000 bits.
+    Bits([u8; MAX_READ_BITS.div_ceil(8) as usize]),
+    /// FC03/FC04 read at most 125 registers, FC10 writes at most 123.
+    Registers([u16; MAX_READ_REGISTERS as usize]),
 }
 
 impl Default for Slave {
@@ -189,11 +198,13 @@ impl Default for Slave {
 }
 
 impl Slave {
-    /// A slave with zeroed counters.
+    /// A slave with zeroed counters. Not inlined, so that it is built in place (see
+    /// [`Node::new`](crate::node::Node::new)): inlined, its scratch was a temporary on the
+    /// MCU's stack at start-up (264 B, `scripts/stack_depth.py`).
+    #[inline(never)]
     pub const fn new() -> Slave {
         Slave {
-            bits: [0; MAX_READ_BITS.div_ceil(8) as usize],
-            registers: [0; MAX_READ_REGISTERS as usize],
+            scratch: Scratch::Registers([0; MAX_READ_REGISTERS as usize]),
             counters: SlaveCounters::ZERO,
             cleared: LineCounts::ZERO,
             listen_only: false,
@@ -405,15 +416,26 @@ impl Slave {
 
     /// The first `quantity` scratch bits, cleared.
     fn bits_mut(&mut self, quantity: u16) -> Result<BitsMut<'_>, Exception> {
-        BitsMut::new(&mut self.bits, usize::from(quantity)).ok_or(Exception::ServerDeviceFailure)
+        if !matches!(self.scratch, Scratch::Bits(_)) {
+            self.scratch = Scratch::Bits([0; MAX_READ_BITS.div_ceil(8) as usize]);
+        }
+        match &mut self.scratch {
+            Scratch::Bits(bits) => BitsMut::new(bits, usize::from(quantity)),
+            Scratch::Registers(_) => None,
+        }
+        .ok_or(Exception::ServerDeviceFailure)
     }
 
     /// The first `quantity` scratch registers, cleared.
     fn registers_mut(&mut self, quantity: u16) -> Result<&mut [u16], Exception> {
-        let registers = self
-            .registers
-            .get_mut(..usize::from(quantity))
-            .ok_or(Exception::ServerDeviceFailure)?;
+        if !matches!(self.scratch, Scratch::Registers(_)) {
+            self.scratch = Scratch::Registers([0; MAX_READ_REGISTERS as usize]);
+        }
+        let registers = match &mut self.scratch {
+            Scratch::Registers(registers) => registers.get_mut(..usize::from(quantity)),
+            Scratch::Bits(_) => None,
+        }
+        .ok_or(Exception::ServerDeviceFailure)?;
         registers.fill(0);
         Ok(registers)
     }
@@ -479,13 +501,19 @@ impl Slave {
         w.byte(request.function())?;
         match *request {
             Request::ReadCoils { quantity, .. } | Request::ReadDiscreteInputs { quantity, .. } => {
-                let bytes = self.bits.get(..usize::from(quantity).div_ceil(8))?;
+                let Scratch::Bits(bits) = &self.scratch else {
+                    return None;
+                };
+                let bytes = bits.get(..usize::from(quantity).div_ceil(8))?;
                 w.byte(u8::try_from(bytes.len()).ok()?)?;
                 w.bytes(bytes)?;
             }
             Request::ReadHoldingRegisters { quantity, .. }
             | Request::ReadInputRegisters { quantity, .. } => {
-                let registers = self.registers.get(..usize::from(quantity))?;
+                let Scratch::Registers(registers) = &self.scratch else {
+                    return None;
+                };
+                let registers = registers.get(..usize::from(quantity))?;
                 w.byte(u8::try_from(2 * registers.len()).ok()?)?;
                 for &register in registers {
                     w.u16(register)?;
