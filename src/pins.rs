@@ -37,6 +37,13 @@ impl PinId {
         }
     }
 
+    /// The pin's number in its port, 0-15 on every STM32. Masked, so that the register
+    /// accessors' range checks are known to pass: the fail-safe (panic, HardFault) has no
+    /// panic path of its own (`scripts/stack_depth.py` showed one under the HardFault handler).
+    fn number(self) -> usize {
+        usize::from(self.pin & 0xF)
+    }
+
     fn block(self) -> Option<pac::gpio::Gpio> {
         Some(match self.port {
             0 => pac::GPIOA,
@@ -56,7 +63,7 @@ impl PinId {
 
     fn set_level(self, high: bool) {
         if let Some(gpio) = self.block() {
-            let n = usize::from(self.pin);
+            let n = self.number();
             gpio.bsrr().write(|w| {
                 if high {
                     w.set_bs(n, true)
@@ -71,7 +78,7 @@ impl PinId {
     fn set_mode(self, mode: Mode) {
         use pac::gpio::vals::Moder;
         if let Some(gpio) = self.block() {
-            let n = usize::from(self.pin);
+            let n = self.number();
             let moder = match mode {
                 Mode::Output => Moder::OUTPUT,
                 Mode::Alternate => Moder::ALTERNATE,
@@ -84,7 +91,7 @@ impl PinId {
     fn set_mode(self, mode: Mode) {
         use pac::gpio::vals::{CnfOut, Mode as Speed};
         if let Some(gpio) = self.block() {
-            let n = usize::from(self.pin);
+            let n = self.number();
             let cnf = match mode {
                 Mode::Output => CnfOut::PUSH_PULL,
                 Mode::Alternate => CnfOut::ALT_PUSH_PULL,

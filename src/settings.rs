@@ -61,12 +61,7 @@ impl Settings {
                 warn!("settings: factory reset (HOME and RES held at power-up)");
                 self.factory_reset();
             }
-            if let Some(loaded) = self.stored() {
-                if let Some(settings) = loaded.settings {
-                    settings.apply_to(config);
-                }
-                config.boot = loaded.boot;
-            }
+            self.apply_stored(config);
         }
         #[cfg(feature = "emulator")]
         let _ = factory;
@@ -77,14 +72,22 @@ impl Settings {
         );
     }
 
-    /// What the store holds. Not inlined, like each store operation here: each one's future
-    /// (the store's buffers and its nested calls) is then on the stack only while it runs, not
-    /// all of them at once under [`Settings::load`].
+    /// What the store holds, into `config`. Not inlined, like each store operation here: each
+    /// one's future (the store's buffers and its nested calls) is then on the stack only while
+    /// it runs, not all of them at once under [`Settings::load`]; and the settings loaded are
+    /// applied here, not returned (the deepest stack at start-up is this one:
+    /// `scripts/stack_depth.py`).
     #[cfg(feature = "hw")]
     #[inline(never)]
-    fn stored(&mut self) -> Option<settings_store::Loaded> {
-        let store = self.store.as_mut()?;
-        Some(block_on(store.load()))
+    fn apply_stored(&mut self, config: &mut GatewayConfig) {
+        let Some(store) = self.store.as_mut() else {
+            return;
+        };
+        let loaded = block_on(store.load());
+        if let Some(settings) = loaded.settings {
+            settings.apply_to(config);
+        }
+        config.boot = loaded.boot;
     }
 
     /// SAVE: store `record`; the saves so far, or `Err` if there is no store or it failed.
