@@ -87,7 +87,7 @@ def report(name, elf_path, flash_region, ram_region, flash_budget, ram_budget, s
     print(f"  stack HWM    {kib(stack)}   ({stack} B, {stack_where}; emulator build of the L475)")
     # The hardware build's start-up (the settings load from flash, which QEMU cannot run) by its
     # call graph, with the deepest interrupt on top.
-    boot, path, path_bytes, handler, handler_bytes, entry = stack_depth.worst_case(objdump, elf_path)
+    boot, path, path_bytes, handler, handler_bytes, entry, _ = stack_depth.worst_case(objdump, elf_path)
     # Named by the firmware's own function deepest on the path (below it: libraries).
     ours = [demangle(f) for f in path if f.startswith("_ZN10rc_gateway")]
     print(f"  start-up     {kib(boot)}   ({boot} B by the call graph: {path_bytes} B from main, "
