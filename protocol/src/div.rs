@@ -4,9 +4,9 @@
 //! compiler-builtins' `__aeabi_uldivmod`, whose code is about 1 KB of the F103's flash
 //! (`scripts/size-report.sh`), for the gateway's few 64-bit divisions: the unit conversions
 //! ([`units`](crate::units)), whose products of a position and a lead pass 32 bits only for
-//! positions beyond about 40 m, and the uptime and watchdog registers, counted in µs. So they
-//! come here: one UDIV when the dividend fits in 32 bits, a bit-at-a-time long division (at
-//! most 64 short steps) when it does not.
+//! positions beyond about 40 m; the engine's arrival estimate and position-read period; and the
+//! uptime and watchdog registers, counted in µs. So they come here: one UDIV when the dividend
+//! fits in 32 bits, a bit-at-a-time long division (at most 64 short steps) when it does not.
 
 use core::num::NonZeroU32;
 
@@ -30,7 +30,8 @@ pub(crate) fn div_rem(n: u64, d: NonZeroU32) -> (u64, u32) {
     (quotient, u32::try_from(remainder).unwrap_or(0))
 }
 
-/// A constant divisor (a zero would be a programming error: it becomes 1, never a panic).
+/// A divisor from a number: a zero becomes 1 (never a panic), as a setting of 0 "per cycle"
+/// means once.
 pub(crate) const fn divisor(d: u32) -> NonZeroU32 {
     match NonZeroU32::new(d) {
         Some(d) => d,

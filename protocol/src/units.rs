@@ -220,7 +220,7 @@ fn div_trunc(n: i64, d: NonZeroU32) -> i64 {
 fn div_round(n: i64, d: NonZeroU32) -> i64 {
     let (q, r) = div_rem(n.unsigned_abs(), d);
     // r < d, so d - r cannot underflow; rounding up when r >= d - r avoids forming 2 * r.
-    let q = q.saturating_add(u64::from(r >= d.get() - r));
+    let q = q.saturating_add(u64::from(r >= d.get().saturating_sub(r)));
     let q = i64::try_from(q).unwrap_or(i64::MAX);
     if n < 0 {
         -q

@@ -16,10 +16,10 @@
 //! The model reads into a scratch array inside the [`Slave`], sized to the Modbus maxima: 250
 //! bytes of packed bits (FC01/02 read at most 2000) or 125 `u16`s (FC03/04 read at most 125
 //! registers, FC10 writes at most 123), 250 bytes shared by the two; FC0F hands the model the
-//! request's own packed bits ([`Bits`]). A long write is handed over whole, never in chunks, so the model can
-//! validate everything before applying anything. Keeping the scratch in the `Slave` (typically a
-//! `static` or a task's state) rather than on the stack keeps [`Slave::handle`]'s stack frame
-//! small.
+//! request's own packed bits ([`Bits`]). A long write is handed over whole, never in chunks, so
+//! the model can validate everything before applying anything. Keeping the scratch in the
+//! `Slave` (typically a `static` or a task's state) rather than on the stack keeps
+//! [`Slave::handle`]'s stack frame small.
 
 use super::adu::{Adu, FrameError, Writer, MAX_ADU_LEN};
 use super::bits::{Bits, BitsMut};
@@ -198,9 +198,10 @@ impl Default for Slave {
 }
 
 impl Slave {
-    /// A slave with zeroed counters. Not inlined, so that it is built in place (see
-    /// [`Node::new`](crate::node::Node::new)): inlined, its scratch was a temporary on the
-    /// MCU's stack at start-up (264 B, `scripts/stack_depth.py`).
+    /// A slave with zeroed counters. Not inlined: it makes its scratch in a temporary of its
+    /// own frame, which is then gone; inlined, the temporary sat in the frame of
+    /// [`Node::new`](crate::node::Node::new), on the deepest path at start-up (264 B,
+    /// `scripts/stack_depth.py`).
     #[inline(never)]
     pub const fn new() -> Slave {
         Slave {
@@ -354,7 +355,7 @@ impl Slave {
         Handled::Broadcast
     }
 
-    /// Asks the model: reads fill the scratch arrays, writes are taken from them.
+    /// Asks the model: reads fill the scratch, writes are taken from it.
     fn execute(
         &mut self,
         unit: u8,
