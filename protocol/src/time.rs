@@ -28,7 +28,7 @@ impl Duration {
 
     /// `ms` milliseconds.
     pub const fn from_millis(ms: u64) -> Duration {
-        Duration(ms.saturating_mul(1000))
+        Duration(ms.saturating_mul(US_PER_MS.get() as u64))
     }
 
     /// `us` microseconds.

@@ -27,7 +27,7 @@
 
 use core::num::{NonZeroU16, NonZeroU32};
 
-use crate::div::{div_rem, divisor};
+use crate::div::{div, div_rem, divisor};
 
 use crate::types::{Acceleration, HomeDirection, Pulses, Velocity};
 
@@ -205,9 +205,9 @@ pub struct Scale {
 
 /// Integer division of `n` by `d`, truncated toward zero. `d` cannot be zero and the quotient
 /// of a magnitude cannot overflow, so this has no panic path. The divisions of this module
-/// go through [`div_rem`]: 32-bit divisors, no 64-bit division routine on the MCU.
+/// go through [`div`] and [`div_rem`]: 32-bit divisors, no 64-bit division routine on the MCU.
 fn div_trunc(n: i64, d: NonZeroU32) -> i64 {
-    let q = i64::try_from(div_rem(n.unsigned_abs(), d).0).unwrap_or(i64::MAX);
+    let q = i64::try_from(div(n.unsigned_abs(), d)).unwrap_or(i64::MAX);
     if n < 0 {
         -q
     } else {

@@ -186,10 +186,15 @@ pub struct Slave {
 #[derive(Clone, Debug)]
 enum Scratch {
     /// FC01/FC02: at most 2000 bits.
-    Bits([u8; MAX_READ_BITS.div_ceil(8) as usize]),
+    Bits([u8; BIT_BYTES]),
     /// FC03/FC04 read at most 125 registers, FC10 writes at most 123.
-    Registers([u16; MAX_READ_REGISTERS as usize]),
+    Registers([u16; REGISTERS]),
 }
+
+/// Bytes of the longest bit read, packed.
+const BIT_BYTES: usize = MAX_READ_BITS.div_ceil(8) as usize;
+/// Registers of the longest register read.
+const REGISTERS: usize = MAX_READ_REGISTERS as usize;
 
 impl Default for Slave {
     fn default() -> Self {
@@ -205,7 +210,7 @@ impl Slave {
     #[inline(never)]
     pub const fn new() -> Slave {
         Slave {
-            scratch: Scratch::Registers([0; MAX_READ_REGISTERS as usize]),
+            scratch: Scratch::Registers([0; REGISTERS]),
             counters: SlaveCounters::ZERO,
             cleared: LineCounts::ZERO,
             listen_only: false,
@@ -418,7 +423,7 @@ impl Slave {
     /// The first `quantity` scratch bits, cleared.
     fn bits_mut(&mut self, quantity: u16) -> Result<BitsMut<'_>, Exception> {
         if !matches!(self.scratch, Scratch::Bits(_)) {
-            self.scratch = Scratch::Bits([0; MAX_READ_BITS.div_ceil(8) as usize]);
+            self.scratch = Scratch::Bits([0; BIT_BYTES]);
         }
         match &mut self.scratch {
             Scratch::Bits(bits) => BitsMut::new(bits, usize::from(quantity)),
@@ -430,7 +435,7 @@ impl Slave {
     /// The first `quantity` scratch registers, cleared.
     fn registers_mut(&mut self, quantity: u16) -> Result<&mut [u16], Exception> {
         if !matches!(self.scratch, Scratch::Registers(_)) {
-            self.scratch = Scratch::Registers([0; MAX_READ_REGISTERS as usize]);
+            self.scratch = Scratch::Registers([0; REGISTERS]);
         }
         let registers = match &mut self.scratch {
             Scratch::Registers(registers) => registers.get_mut(..usize::from(quantity)),
