@@ -54,6 +54,7 @@ mod systick;
 #[cfg(feature = "hw")]
 use defmt_rtt as _;
 use embassy_executor::Spawner;
+use small_mem as _;
 use static_cell::StaticCell;
 
 /// Firmware version, from `Cargo.toml`.
