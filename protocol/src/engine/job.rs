@@ -208,110 +208,112 @@ fn send(axis: Axis, command: Command) -> Op {
 }
 
 /// The `index`-th operation of `job`'s program, or `None` past its end.
+///
+/// Matched on the job and the index together: only the op asked for is built (an array of a
+/// program's ops, indexed, built all of them each time, in more code).
 pub(crate) fn program(job: &Job, index: usize) -> Option<Op> {
     let axis = job.axis;
-    let one = |ops: &[Op]| ops.get(index).copied();
-    match job.kind {
-        JobKind::Command(command) => one(&[Op::Send(Step {
+    let send = |command| Some(send(axis, command));
+    Some(match (job.kind, index) {
+        (JobKind::Command(command), 0) => Op::Send(Step {
             request: Request::new(axis, command),
             expect: Expect::Reply,
-        })]),
-        JobKind::Servo(on) => one(&[
-            send(axis, Command::Servo(on)),
-            Op::Await(Condition::Servo(on)),
-        ]),
-        JobKind::Home(direction) => one(&[
-            Op::Await(Condition::InPosition),
-            send(axis, Command::Home(direction)),
-            Op::Await(Condition::Homed),
-        ]),
-        JobKind::MoveToPoint(point) => one(&[
-            send(axis, Command::MoveToPoint(point)),
-            Op::Await(Condition::InPosition),
-            read_position(axis),
-        ]),
-        JobKind::MoveAbsolute(position) => one(&[
-            send(axis, Command::MoveAbsolute(position)),
-            Op::Await(Condition::InPosition),
-            read_position(axis),
-        ]),
-        JobKind::MoveRelative(distance) => one(&[
-            send(axis, Command::MoveRelative(distance)),
-            Op::Await(Condition::InPosition),
-            read_position(axis),
-        ]),
-        JobKind::DirectMove {
-            target,
-            relative,
-            velocity,
-            acceleration,
-        } => one(&[
-            send(
-                axis,
-                Command::SetVelocityAcceleration {
-                    velocity,
-                    acceleration,
-                },
-            ),
-            send(
-                axis,
-                if relative {
-                    Command::MoveRelative(target)
-                } else {
-                    Command::MoveAbsolute(target)
-                },
-            ),
-            Op::Await(Condition::InPosition),
-            read_position(axis),
-        ]),
-        JobKind::Jog(end) => one(&[send(axis, Command::MoveAbsolute(end))]),
-        JobKind::AwaitInPosition => one(&[Op::Await(Condition::InPosition), read_position(axis)]),
-        JobKind::Stop => one(&[send(axis, Command::CancelMotion)]),
-        JobKind::AlarmReset => one(&[
-            send(axis, Command::Servo(false)),
-            send(axis, Command::Reset(ResetKind::AlarmReset)),
-        ]),
-        JobKind::SetMotion {
-            velocity,
-            acceleration,
-        } => one(&[send(
-            axis,
-            Command::SetVelocityAcceleration {
+        }),
+        (JobKind::Servo(on), 0) => return send(Command::Servo(on)),
+        (JobKind::Servo(on), 1) => Op::Await(Condition::Servo(on)),
+        (JobKind::Home(_), 0) => Op::Await(Condition::InPosition),
+        (JobKind::Home(direction), 1) => return send(Command::Home(direction)),
+        (JobKind::Home(_), 2) => Op::Await(Condition::Homed),
+        (JobKind::Jog(end), 0) => return send(Command::MoveAbsolute(end)),
+        (JobKind::Stop, 0) => return send(Command::CancelMotion),
+        (JobKind::AlarmReset, 0) => return send(Command::Servo(false)),
+        (JobKind::AlarmReset, 1) => return send(Command::Reset(ResetKind::AlarmReset)),
+        (
+            JobKind::SetMotion {
                 velocity,
                 acceleration,
+            }
+            | JobKind::DirectMove {
+                velocity,
+                acceleration,
+                ..
             },
-        )]),
-        JobKind::WriteField {
-            point,
-            field,
-            value,
-        } => jobs::write_field_step(axis, point, field, value, index).map(Op::Send),
-        JobKind::WritePoint {
-            point,
-            data,
-            verify,
-        } => match index.checked_sub(WRITE_POINT_LEN) {
-            None => jobs::write_point_step(axis, point, &data, index),
-            Some(_) if !verify => None,
-            Some(i) => jobs::read_point_step(axis, point, i),
+            0,
+        ) => {
+            return send(Command::SetVelocityAcceleration {
+                velocity,
+                acceleration,
+            })
         }
-        .map(Op::Send),
-        JobKind::StartBuffered(axes) => one(&[
-            send(axis, Command::ExecuteBuffered),
-            Op::Await(Condition::Unbuffered(axes.with(axis))),
-        ]),
-        JobKind::ReadPoint(point) => jobs::read_point_step(axis, point, index).map(Op::Send),
-        JobKind::StorePoint { point, data } => {
+        (JobKind::StartBuffered(_), 0) => return send(Command::ExecuteBuffered),
+        (JobKind::StartBuffered(axes), 1) => Op::Await(Condition::Unbuffered(axes.with(axis))),
+        (
+            JobKind::WriteField {
+                point,
+                field,
+                value,
+            },
+            _,
+        ) => return jobs::write_field_step(axis, point, field, value, index).map(Op::Send),
+        (
+            JobKind::WritePoint {
+                point,
+                data,
+                verify,
+            },
+            _,
+        ) => {
+            return match index.checked_sub(WRITE_POINT_LEN) {
+                None => jobs::write_point_step(axis, point, &data, index),
+                Some(_) if !verify => None,
+                Some(i) => jobs::read_point_step(axis, point, i),
+            }
+            .map(Op::Send)
+        }
+        (JobKind::ReadPoint(point), _) => {
+            return jobs::read_point_step(axis, point, index).map(Op::Send)
+        }
+        (JobKind::StorePoint { point, data }, _) => {
             // Read, compare (the engine decides there), write, read back.
-            match index.checked_sub(READ_POINT_LEN) {
+            return match index.checked_sub(READ_POINT_LEN) {
                 None => jobs::read_point_step(axis, point, index),
                 Some(i) => match i.checked_sub(WRITE_POINT_LEN) {
                     None => jobs::write_point_step(axis, point, &data, i),
                     Some(j) => jobs::read_point_step(axis, point, j),
                 },
             }
-            .map(Op::Send)
+            .map(Op::Send);
         }
+        (kind, _) => return move_program(axis, kind, index),
+    })
+}
+
+/// The ops of a move: its command (a [`JobKind::DirectMove`]'s `v2` before it is op 0 of
+/// [`program`]), then the wait until it is in position, then the read of where it stopped.
+/// [`JobKind::AwaitInPosition`] is the same without a command.
+fn move_program(axis: Axis, kind: JobKind, index: usize) -> Option<Op> {
+    let (command, commands) = match kind {
+        JobKind::MoveToPoint(point) => (Command::MoveToPoint(point), 1),
+        JobKind::MoveAbsolute(position) => (Command::MoveAbsolute(position), 1),
+        JobKind::MoveRelative(distance) => (Command::MoveRelative(distance), 1),
+        JobKind::DirectMove {
+            target, relative, ..
+        } => (
+            if relative {
+                Command::MoveRelative(target)
+            } else {
+                Command::MoveAbsolute(target)
+            },
+            2,
+        ),
+        JobKind::AwaitInPosition => (Command::Status, 0),
+        _ => return None,
+    };
+    match index.checked_sub(commands) {
+        None => Some(send(axis, command)),
+        Some(0) => Some(Op::Await(Condition::InPosition)),
+        Some(1) => Some(read_position(axis)),
+        _ => None,
     }
 }
 
