@@ -264,8 +264,8 @@ impl Command {
     }
 
     /// The 11 characters after the axis.
-    fn write(&self, w: Writer) -> Writer {
-        let w = w.byte(self.code().to_char());
+    fn write(&self, w: &mut Writer) {
+        w.byte(self.code().to_char());
         match *self {
             Command::ReadMemory { address } | Command::SetWriteAddress { address } => {
                 w.byte(b'4').hex(8, address.0)
@@ -289,7 +289,7 @@ impl Command {
                 .byte(b'2')
                 .hex(4, velocity.get().into())
                 .hex(4, acceleration.get().into()),
-        }
+        };
     }
 
     /// Read the 11 characters after the axis.
@@ -411,7 +411,7 @@ fn function_number(r: &mut Reader<'_>, char: u8, expected: u8) -> Result<(), Err
     }
 }
 
-fn write_transfer(w: Writer, transfer: Transfer) -> Writer {
+fn write_transfer(w: &mut Writer, transfer: Transfer) -> &mut Writer {
     match transfer {
         Transfer::CommonParameters => w.bytes(b"0000"),
         Transfer::Point(p) => w.bytes(b"01").hex(2, p.get().into()),
@@ -448,7 +448,9 @@ impl Buffered {
         if !command.bufferable() {
             return None;
         }
-        let info = command.write(Writer::new()).finish();
+        let mut w = Writer::new();
+        command.write(&mut w);
+        let info = w.finish();
         let mut chars = [b'0'; BUFFERED_LEN];
         chars
             .iter_mut()
@@ -505,8 +507,10 @@ impl Request {
 
     /// The frame to send.
     pub fn emit(&self) -> Frame {
-        let w = Writer::new().byte(self.axis.to_char());
-        Frame::from_data(self.command.write(w).finish())
+        let mut w = Writer::new();
+        w.byte(self.axis.to_char());
+        self.command.write(&mut w);
+        Frame::from_data(w.finish())
     }
 
     /// Read a command frame, as a controller (or the simulator) would.

@@ -89,6 +89,9 @@ impl<'a> Reader<'a> {
 }
 
 /// Writes fields left to right; unwritten characters stay `'0'` (the documents' filler).
+///
+/// Written in place (`&mut self`): a writer passed by value was copied whole (16 bytes) at
+/// every field.
 pub(crate) struct Writer {
     data: [u8; DATA_LEN],
     pos: usize,
@@ -103,7 +106,7 @@ impl Writer {
     }
 
     /// One character. Layouts are fixed and tested to fit; a write past the end is ignored.
-    pub(crate) fn byte(mut self, byte: u8) -> Self {
+    pub(crate) fn byte(&mut self, byte: u8) -> &mut Self {
         if let Some(slot) = self.data.get_mut(self.pos) {
             *slot = byte;
         }
@@ -112,19 +115,23 @@ impl Writer {
     }
 
     /// Several characters.
-    pub(crate) fn bytes(self, bytes: &[u8]) -> Self {
-        bytes.iter().fold(self, |w, &b| w.byte(b))
+    pub(crate) fn bytes(&mut self, bytes: &[u8]) -> &mut Self {
+        for &b in bytes {
+            self.byte(b);
+        }
+        self
     }
 
     /// A big-endian hex number of `digits` characters.
-    pub(crate) fn hex(self, digits: u32, value: u32) -> Self {
-        (0..digits)
-            .rev()
-            .fold(self, |w, i| w.byte(hex::digit(value >> (4 * i))))
+    pub(crate) fn hex(&mut self, digits: u32, value: u32) -> &mut Self {
+        for i in (0..digits).rev() {
+            self.byte(hex::digit(value >> (4 * i)));
+        }
+        self
     }
 
     /// The 12 data characters; the rest of the frame is filler.
-    pub(crate) fn finish(self) -> [u8; DATA_LEN] {
+    pub(crate) fn finish(&self) -> [u8; DATA_LEN] {
         self.data
     }
 }

@@ -139,8 +139,9 @@ impl Reply {
 
     /// The frame a controller sends.
     pub fn emit(&self) -> Frame {
-        let w = Writer::new().byte(RESPONSE_ID).byte(self.axis().to_char());
-        let w = match *self {
+        let mut w = Writer::new();
+        w.byte(RESPONSE_ID).byte(self.axis().to_char());
+        match *self {
             Reply::Status { code, report, .. } => w
                 .byte(code.to_char())
                 .hex(2, report.status.bits().into())
