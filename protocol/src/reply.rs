@@ -204,10 +204,13 @@ impl Reply {
 }
 
 fn read_status(r: &mut Reader<'_>, axis: Axis, code: Code) -> Result<Reply, Error> {
-    let status = Status::from_bits(r.hex_u8()?);
-    let alarm = AlarmCode(r.hex_u8()?);
-    let inputs = Inputs::from_bits(r.hex_u8()?);
-    let outputs = Outputs::from_bits(r.hex_u8()?);
+    // Status, Alarm, IN and OUT as one 8-digit number (one read and one check, not four), then
+    // split into its bytes.
+    let [status, alarm, inputs, outputs] = r.hex(8)?.to_be_bytes();
+    let status = Status::from_bits(status);
+    let alarm = AlarmCode(alarm);
+    let inputs = Inputs::from_bits(inputs);
+    let outputs = Outputs::from_bits(outputs);
     r.zeros(1)?;
     Ok(Reply::Status {
         axis,
