@@ -81,6 +81,8 @@ struct Pass {
     moving: AxisSet,
     /// Movers at their expected arrival (for up to a cycle), polled first.
     arriving: AxisSet,
+    /// Axes that answer (or may) and are not rejoining: the ones status polls go to.
+    polled: AxisSet,
 }
 
 /// The polling state.
@@ -192,8 +194,12 @@ impl Engine {
             hot: AxisSet::EMPTY,
             moving: AxisSet::EMPTY,
             arriving: AxisSet::EMPTY,
+            polled: AxisSet::EMPTY,
         };
         for a in self.config.axes.iter() {
+            if self.axes[a].link != Link::Offline && !self.rejoining(a) {
+                pass.polled = pass.polled.with(a);
+            }
             if self.axes[a].moving() {
                 pass.moving = pass.moving.with(a);
             }
@@ -236,7 +242,7 @@ impl Engine {
             return Some(self.position_read(axis));
         }
         if self.schedule.idle_run < IDLE_RUN {
-            if let Some(axis) = self.idle_due(now, idle_period) {
+            if let Some(axis) = self.idle_due(&pass, idle_period) {
                 self.schedule.idle_run += 1;
                 return Some(self.status_poll(now, axis));
             }
@@ -257,13 +263,8 @@ impl Engine {
             return Some(probe);
         }
         let cursor = self.schedule.cursor;
-        let others = self
-            .config
-            .axes
-            .iter()
-            .filter(|&a| self.axes[a].link != Link::Offline && !self.rejoining(a))
-            // Arriving axes had their turn above; this is the other one.
-            .filter(|&a| !pass.arriving.contains(a));
+        // Arriving axes had their turn above; this is the other one.
+        let others = AxisSet(pass.polled.0 & !pass.arriving.0).iter();
         let axis = least(others, |a| {
             let last = self.schedule.last_poll[a];
             let due = if !pass.hot.contains(a) {
@@ -312,10 +313,8 @@ impl Engine {
     /// The mover (or axis with a job) polled longest ago, if that is a `cycle` ago or more:
     /// never supervised less often than by a round robin, whatever else is due.
     fn mover_at_limit(&self, pass: &Pass) -> Option<Axis> {
-        let movers = pass
-            .hot
+        let movers = AxisSet(pass.hot.0 & pass.polled.0)
             .iter()
-            .filter(|&a| self.axes[a].link != Link::Offline && !self.rejoining(a))
             .filter(|&a| self.schedule.last_poll[a] + pass.cycle <= pass.now);
         least(movers, |a| self.waiting_longest(a))
     }
@@ -330,13 +329,11 @@ impl Engine {
     }
 
     /// The idle axis polled longest ago, if that is `limit` ago or more.
-    fn idle_due(&self, now: Instant, limit: Duration) -> Option<Axis> {
-        let due = self
-            .config
-            .axes
+    fn idle_due(&self, pass: &Pass, limit: Duration) -> Option<Axis> {
+        let due = pass
+            .polled
             .iter()
-            .filter(|&a| self.axes[a].link != Link::Offline && !self.rejoining(a))
-            .filter(|&a| self.schedule.last_poll[a] + limit <= now);
+            .filter(|&a| self.schedule.last_poll[a] + limit <= pass.now);
         least(due, |a| self.waiting_longest(a))
     }
 
