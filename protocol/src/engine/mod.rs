@@ -160,7 +160,17 @@ impl Engine {
     /// Not inlined: built in its caller's result (see [`Node::new`](crate::node::Node::new)).
     #[inline(never)]
     pub const fn new(config: Config) -> Engine {
-        let (config, rtim) = Self::normalized(config);
+        // Changed in place (the copy a `Config { retries, ..config }` made was field by field).
+        let mut config = config;
+        if config.retries > 3 {
+            config.retries = 3;
+        }
+        // §6-1 first (every axis at the power-up RTIM after its break), or polling at once.
+        let (rtim, phase) = if config.establish {
+            (RTIM_AFTER_BREAK, Some(Phase::SlowBaud))
+        } else {
+            (config.rtim, None)
+        };
         Engine {
             config,
             axes: AxisMap::new(AxisState::new(rtim)),
@@ -176,37 +186,13 @@ impl Engine {
             line_baud: config.baud,
             free_at: Instant::ZERO,
             break_until: None,
-            phase: Self::first_phase(&config),
+            phase,
             settle_until: Instant::ZERO,
             schedule: Schedule::new(config.position_reads_per_cycle),
             rejoin: Rejoin::new(),
             job_cursor: 0,
             next_id: 0,
             bus: BusCounters::ZERO,
-        }
-    }
-
-    /// `config` with its retries capped at 3, and the RTIM the axes start with.
-    const fn normalized(config: Config) -> (Config, crate::Rtim) {
-        let rtim = if config.establish {
-            RTIM_AFTER_BREAK
-        } else {
-            config.rtim
-        };
-        let retries = if config.retries > 3 {
-            3
-        } else {
-            config.retries
-        };
-        (Config { retries, ..config }, rtim)
-    }
-
-    /// Where the engine starts: §6-1 first, or polling at once.
-    const fn first_phase(config: &Config) -> Option<Phase> {
-        if config.establish {
-            Some(Phase::SlowBaud)
-        } else {
-            None
         }
     }
 
