@@ -325,11 +325,7 @@ impl Engine {
             self.cancel_jobs(job.axis, JobError::Cancelled);
             if let Some((old, _)) = self.stops[job.axis].replace((id, 0)) {
                 // Two stops in a row: the first is superseded by the second.
-                self.emit(Event::JobDone {
-                    id: old,
-                    axis: job.axis,
-                    result: Err(JobError::Cancelled),
-                });
+                self.job_failed(old, job.axis, JobError::Cancelled);
             }
             return Ok(id);
         }

@@ -37,13 +37,7 @@ pub(super) struct Active {
 impl Engine {
     /// Cancel the running and waiting jobs of `axis` (a stop is coming).
     pub(super) fn cancel_jobs(&mut self, axis: Axis, error: JobError) {
-        if let Some(active) = self.active[axis].take() {
-            self.emit(Event::JobDone {
-                id: active.id,
-                axis,
-                result: Err(error),
-            });
-        }
+        self.fail_job(axis, error);
         self.cancel_waiting(axis, error);
         if matches!(self.in_flight, Some(f) if f.origin == Origin::Job && f.request.axis == axis) {
             // The answer still completes the transaction; nothing routes it to a job.
@@ -65,11 +59,7 @@ impl Engine {
         for _ in 0..self.queue.len() {
             if let Some((id, job)) = self.queue.pop_front() {
                 if job.axis == axis {
-                    self.emit(Event::JobDone {
-                        id,
-                        axis,
-                        result: Err(error),
-                    });
+                    self.job_failed(id, axis, error);
                 } else {
                     let _ = self.queue.push_back((id, job));
                 }
@@ -94,11 +84,7 @@ impl Engine {
     pub(super) fn requeue_stop(&mut self, axis: Axis, id: JobId, attempt: u8) {
         match &mut self.stops[axis] {
             slot @ None => *slot = Some((id, attempt)),
-            Some(_) => self.emit(Event::JobDone {
-                id,
-                axis,
-                result: Err(JobError::Cancelled),
-            }),
+            Some(_) => self.job_failed(id, axis, JobError::Cancelled),
         }
     }
 
@@ -127,11 +113,7 @@ impl Engine {
                 continue;
             }
             if self.axes[job.axis].link == super::Link::Offline {
-                self.emit(Event::JobDone {
-                    id,
-                    axis: job.axis,
-                    result: Err(JobError::Offline),
-                });
+                self.job_failed(id, job.axis, JobError::Offline);
                 continue;
             }
             let wait_deadline = match program(&job, 0) {
@@ -317,6 +299,17 @@ impl Engine {
                 result,
             });
         }
+    }
+
+    /// Report that job `id` of `axis` failed. Not inlined: several places report a failure,
+    /// and each would build the whole event.
+    #[inline(never)]
+    pub(super) fn job_failed(&mut self, id: JobId, axis: Axis, error: JobError) {
+        self.emit(Event::JobDone {
+            id,
+            axis,
+            result: Err(error),
+        });
     }
 
     pub(super) fn fail_job(&mut self, axis: Axis, error: JobError) {

@@ -3,7 +3,7 @@
 
 use super::{
     job::{program, Op},
-    Engine, Event, Failure, InFlight, JobError, Link, LinkError, Origin, Output,
+    Engine, Failure, InFlight, JobError, Link, LinkError, Origin, Output,
 };
 use crate::time::{Duration, Instant};
 use crate::{Command, Error, Frame, Reply, Request};
@@ -146,11 +146,7 @@ impl Engine {
                 }
             }
             Origin::Stop(id) => {
-                self.emit(Event::JobDone {
-                    id,
-                    axis,
-                    result: Err(JobError::Timeout),
-                });
+                self.job_failed(id, axis, JobError::Timeout);
                 self.set_link(now, axis, Link::Offline);
             }
             Origin::Establish => {
