@@ -191,6 +191,9 @@ impl Deframer {
     }
 
     /// Forget any partial candidate and pending echo (e.g. after a break or a baud change).
+    ///
+    /// Not inlined: the engine resets at five places, none of them per byte or per frame.
+    #[inline(never)]
     pub fn reset(&mut self) {
         self.drop_partial();
         self.echo = None;
