@@ -111,7 +111,8 @@ impl Deframer {
             if abandoned > 0 {
                 self.reject(abandoned);
             }
-            self.buf = [0; FRAME_LEN];
+            // Only the first `len` bytes count: what the last candidate left after them is
+            // overwritten before it is read.
             self.buf[0] = STX;
             self.len = 1;
             return match u8::try_from(abandoned) {
