@@ -203,14 +203,21 @@ impl PointData {
 
     /// The fields in the order the brief edition writes them, with their values.
     pub fn fields(&self) -> [(PointField, u32); 6] {
-        [
-            (PointField::Position, self.position.to_wire()),
-            (PointField::Velocity, self.velocity.get().into()),
-            (PointField::Acceleration, self.acceleration.get().into()),
-            (PointField::Flags, self.flags),
-            (PointField::Band, self.band),
-            (PointField::MaxAcceleration, self.max_acceleration),
-        ]
+        core::array::from_fn(|i| self.field(i).unwrap_or((PointField::Position, 0)))
+    }
+
+    /// Field `index` of [`fields`](Self::fields), without building the others (a write job
+    /// asks for one frame at a time), or `None` past the last.
+    fn field(&self, index: usize) -> Option<(PointField, u32)> {
+        Some(match index {
+            0 => (PointField::Position, self.position.to_wire()),
+            1 => (PointField::Velocity, self.velocity.get().into()),
+            2 => (PointField::Acceleration, self.acceleration.get().into()),
+            3 => (PointField::Flags, self.flags),
+            4 => (PointField::Band, self.band),
+            5 => (PointField::MaxAcceleration, self.max_acceleration),
+            _ => return None,
+        })
     }
 }
 
@@ -237,7 +244,7 @@ pub fn write_point_step(
         i => {
             // Frames 1..=12: the T4 + W4 pair of each field in turn.
             let pair = i.checked_sub(1)?;
-            let &(field, value) = data.fields().get(pair / 2)?;
+            let (field, value) = data.field(pair / 2)?;
             Some(if pair % 2 == 0 {
                 address(axis, field)
             } else {
@@ -289,9 +296,9 @@ impl PointReadback {
     /// Whether writing `data` would change nothing (so V5, which wears the memory, can be
     /// skipped).
     pub fn matches(&self, data: &PointData) -> bool {
-        data.fields()
-            .iter()
-            .all(|&(field, value)| self.get(field) == value)
+        (0..)
+            .map_while(|i| data.field(i))
+            .all(|(field, value)| self.get(field) == value)
     }
 }
 
