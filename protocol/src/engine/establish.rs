@@ -74,7 +74,7 @@ impl Engine {
     /// Run the communication establishment procedure (again). A resend left over from a
     /// procedure in progress is dropped: it belongs to the old one.
     pub fn establish(&mut self) {
-        if matches!(self.retry, Some(f) if f.origin == Origin::Establish) {
+        if matches!(self.retry, Some((_, Origin::Establish, _))) {
             self.retry = None;
         }
         self.phase = Some(Phase::SlowBaud);
@@ -97,8 +97,8 @@ impl Engine {
             self.emit(super::Event::Established);
             return None;
         }
-        if let Some(retry) = self.retry.take() {
-            return Some(self.start(now, retry.request, retry.origin, retry.attempt));
+        if let Some((request, origin, attempt)) = self.retry.take() {
+            return Some(self.start(now, request, origin, attempt));
         }
         match next(phase, self.config.baud, self.config.rtim) {
             Some(Next::Line(action)) => {

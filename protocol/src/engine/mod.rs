@@ -134,7 +134,8 @@ pub struct Engine {
     queue: Deque<(JobId, Job), QUEUE_LEN>,
     events: Deque<Event, EVENT_LEN>,
     in_flight: Option<InFlight>,
-    retry: Option<InFlight>,
+    /// A transaction to send again (only what starts it: its time limits are new).
+    retry: Option<Next>,
     /// A transaction parked while the line changes rate for it.
     pending: Option<Next>,
     deframer: Deframer,
@@ -538,7 +539,7 @@ impl Engine {
         }
         // 2. A resend.
         if let Some(retry) = self.retry.take() {
-            return Some((retry.request, retry.origin, retry.attempt));
+            return Some(retry);
         }
         // 3. A mover at its expected arrival (a few in a row at most), then job frames.
         if let Some(poll) = self.arrival_poll(now) {

@@ -45,7 +45,7 @@ impl Engine {
                 f.origin = Origin::Cancelled;
             }
         }
-        if matches!(self.retry, Some(f) if f.origin == Origin::Job && f.request.axis == axis) {
+        if matches!(self.retry, Some((r, Origin::Job, _)) if r.axis == axis) {
             self.retry = None;
         }
         if matches!(self.pending, Some((r, Origin::Job, _)) if r.axis == axis) {

@@ -188,7 +188,7 @@ impl Engine {
             Origin::Establish if is_w4 => self.establish_rewind(),
             // Stops keep their own resend: the shared slot may hold another one.
             Origin::Stop(id) => self.requeue_stop(axis, id, attempt),
-            _ => self.retry = Some(InFlight { attempt, ..flight }),
+            _ => self.retry = Some((flight.request, flight.origin, attempt)),
         }
     }
 }
