@@ -452,10 +452,8 @@ impl Buffered {
         command.write(&mut w);
         let info = w.finish();
         let mut chars = [b'0'; BUFFERED_LEN];
-        chars
-            .iter_mut()
-            .zip(info.iter())
-            .for_each(|(slot, &c)| *slot = c);
+        // The first 10 of its 11 characters (the last is the `0` that `h` drops).
+        chars.copy_from_slice(info.get(..BUFFERED_LEN)?);
         Some(Buffered {
             chars,
             moves: command.moves(),
