@@ -313,10 +313,8 @@ impl Engine {
     /// The mover (or axis with a job) polled longest ago, if that is a `cycle` ago or more:
     /// never supervised less often than by a round robin, whatever else is due.
     fn mover_at_limit(&self, pass: &Pass) -> Option<Axis> {
-        let movers = AxisSet(pass.hot.0 & pass.polled.0)
-            .iter()
-            .filter(|&a| self.schedule.last_poll[a] + pass.cycle <= pass.now);
-        least(movers, |a| self.waiting_longest(a))
+        let movers = AxisSet(pass.hot.0 & pass.polled.0);
+        self.polled_longest_ago(movers, pass.now, pass.cycle)
     }
 
     /// The key that puts the axis polled longest ago first, ties in turn from the cursor.
@@ -330,10 +328,15 @@ impl Engine {
 
     /// The idle axis polled longest ago, if that is `limit` ago or more.
     fn idle_due(&self, pass: &Pass, limit: Duration) -> Option<Axis> {
-        let due = pass
-            .polled
+        self.polled_longest_ago(pass.polled, pass.now, limit)
+    }
+
+    /// The axis of `axes` polled longest ago, if that is `limit` before `now` or more (one
+    /// search for [`idle_due`](Self::idle_due) and [`mover_at_limit`](Self::mover_at_limit)).
+    fn polled_longest_ago(&self, axes: AxisSet, now: Instant, limit: Duration) -> Option<Axis> {
+        let due = axes
             .iter()
-            .filter(|&a| self.schedule.last_poll[a] + limit <= pass.now);
+            .filter(|&a| self.schedule.last_poll[a] + limit <= now);
         least(due, |a| self.waiting_longest(a))
     }
 
