@@ -304,6 +304,9 @@ impl Engine {
         None
     }
 
+    /// The axis' status poll, counted as its last. Not inlined: four rules end in it (one
+    /// call per transaction at most).
+    #[inline(never)]
     fn status_poll(&mut self, now: Instant, axis: Axis) -> Next {
         self.schedule.last_poll[axis] = now;
         self.schedule.cursor = (axis.get() + 1) % 16;
@@ -368,7 +371,8 @@ impl Engine {
         }
     }
 
-    /// The axis' position read (R4 PNOW), no longer due.
+    /// The axis' position read (R4 PNOW), no longer due. Not inlined: two rules end in it.
+    #[inline(never)]
     fn position_read(&mut self, axis: Axis) -> Next {
         self.schedule.position_due = self.schedule.position_due.without(axis);
         let read = Command::ReadMemory { address: PNOW };
