@@ -532,11 +532,9 @@ impl Engine {
         self.start(now, request, origin, attempt)
     }
 
+    /// What goes when no stop waits: [`poll`](Self::poll), the only caller, has taken the
+    /// stops (rule 1, before everything) just before.
     fn next_transaction(&mut self, now: Instant) -> Option<Next> {
-        // 1. Stops, before anything else (poll() has taken them already; this is for safety).
-        if let Some(stop) = self.next_stop() {
-            return Some(stop);
-        }
         // 2. A resend.
         if let Some(retry) = self.retry.take() {
             return Some(retry);
