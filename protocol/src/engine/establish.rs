@@ -191,7 +191,7 @@ impl Engine {
             // §6-1 step 2: the new delay is in force from this reply on.
             self.axes[axis].rtim = rtim;
         }
-        if configure(step.saturating_add(1), self.config.baud, self.config.rtim).is_some() {
+        if step.saturating_add(1) < CONFIGURE_STEPS {
             self.phase = Some(Phase::Configure {
                 axis,
                 step: step + 1,
