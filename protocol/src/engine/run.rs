@@ -272,7 +272,6 @@ impl Engine {
             Some(Op::Await(_)) => active.wait_deadline = Some(now + motion_timeout),
             Some(Op::Send(_)) => {}
             None => {
-                let active = *active;
                 let result = match (written(&active.job), active.job.kind) {
                     (Some(data), _) if !active.readback.matches(&data) => {
                         Err(JobError::VerifyFailed)
