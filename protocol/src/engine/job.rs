@@ -337,8 +337,8 @@ pub(crate) fn readback_slot(job: &Job, index: usize) -> Option<usize> {
 }
 
 /// The data a verified `WritePoint` or a `StorePoint` writes, to compare with its read-back.
-pub(crate) fn written(job: &Job) -> Option<PointData> {
-    match job.kind {
+pub(crate) fn written(job: &Job) -> Option<&PointData> {
+    match &job.kind {
         JobKind::WritePoint {
             data, verify: true, ..
         }

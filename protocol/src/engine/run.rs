@@ -273,7 +273,7 @@ impl Engine {
             Some(Op::Send(_)) => {}
             None => {
                 let result = match (written(&active.job), active.job.kind) {
-                    (Some(data), _) if !active.readback.matches(&data) => {
+                    (Some(data), _) if !active.readback.matches(data) => {
                         Err(JobError::VerifyFailed)
                     }
                     (Some(_), _) | (None, JobKind::ReadPoint(_)) => {
