@@ -85,9 +85,12 @@ impl<'a> Adu<'a> {
     }
 }
 
-/// Writes a frame into a byte slice, never past its end.
+/// Writes a frame into a byte slice, never past its end. A field that does not fit spoils the
+/// frame (nothing more is written) and [`finish`](Writer::finish) says `None`: one check at the
+/// end rather than one after every field, which took flash at each of the many fields written.
 pub(crate) struct Writer<'a> {
     buf: &'a mut [u8],
+    /// Bytes written; past `buf`'s end once the frame is spoilt.
     len: usize,
 }
 
@@ -97,30 +100,54 @@ impl<'a> Writer<'a> {
         Writer { buf, len: 0 }
     }
 
-    /// Appends one byte; `None` if the buffer is full.
-    pub(crate) fn byte(&mut self, byte: u8) -> Option<()> {
-        *self.buf.get_mut(self.len)? = byte;
-        self.len += 1;
-        Some(())
+    /// Appends one byte.
+    pub(crate) fn byte(&mut self, byte: u8) {
+        self.bytes(&[byte]);
     }
 
     /// Appends a big-endian 16-bit value (Application Protocol §4.2).
-    pub(crate) fn u16(&mut self, value: u16) -> Option<()> {
-        self.bytes(&value.to_be_bytes())
+    pub(crate) fn u16(&mut self, value: u16) {
+        self.bytes(&value.to_be_bytes());
     }
 
-    /// Appends bytes; `None` (and nothing written) if they do not fit.
-    pub(crate) fn bytes(&mut self, bytes: &[u8]) -> Option<()> {
-        let end = self.len.checked_add(bytes.len())?;
-        self.buf.get_mut(self.len..end)?.copy_from_slice(bytes);
-        self.len = end;
-        Some(())
+    /// Appends a length or count as one byte; one above 255 spoils the frame.
+    pub(crate) fn len8(&mut self, len: usize) {
+        match u8::try_from(len) {
+            Ok(byte) => self.byte(byte),
+            Err(_) => self.spoil(),
+        }
     }
 
-    /// Appends the CRC of everything written and returns the frame length.
+    /// Appends a length or count as a big-endian 16-bit value; one above 65535 spoils the frame.
+    pub(crate) fn len16(&mut self, len: usize) {
+        match u16::try_from(len) {
+            Ok(value) => self.u16(value),
+            Err(_) => self.spoil(),
+        }
+    }
+
+    /// Appends bytes, or spoils the frame if they do not fit.
+    pub(crate) fn bytes(&mut self, bytes: &[u8]) {
+        let end = self.len.saturating_add(bytes.len());
+        match self.buf.get_mut(self.len..end) {
+            Some(slot) => {
+                slot.copy_from_slice(bytes);
+                self.len = end;
+            }
+            None => self.spoil(),
+        }
+    }
+
+    /// Nothing more is written, and [`finish`](Writer::finish) says `None`.
+    fn spoil(&mut self) {
+        self.len = usize::MAX;
+    }
+
+    /// Appends the CRC of everything written and returns the frame length; `None` if the frame
+    /// is spoilt or the CRC does not fit.
     pub(crate) fn finish(mut self) -> Option<usize> {
         let crc = crc::checksum(self.buf.get(..self.len)?);
-        self.bytes(&crc::to_wire(crc))?;
-        Some(self.len)
+        self.bytes(&crc::to_wire(crc));
+        (self.len != usize::MAX).then_some(self.len)
     }
 }

@@ -146,7 +146,7 @@ pub(super) fn write_device_id(
     identity: &Identity,
     code: ReadDevId,
     object: u8,
-) -> Result<Option<()>, Exception> {
+) -> Result<(), Exception> {
     let (first, last) = match code {
         ReadDevId::Individual => {
             identity
@@ -157,21 +157,19 @@ pub(super) fn write_device_id(
         _ if object <= code.last() => (object, code.last()),
         _ => (0, code.last()),
     };
-    Ok((|| {
-        w.byte(MEI_READ_DEVICE_ID)?;
-        w.byte(code.code())?;
-        w.byte(CONFORMITY)?;
-        w.byte(0x00)?; // More Follows: everything fits.
-        w.byte(0x00)?; // Next Object Id: none.
-        w.byte(last - first + 1)?;
-        for id in first..=last {
-            let value = identity.object(id).unwrap_or("").as_bytes();
-            w.byte(id)?;
-            w.byte(u8::try_from(value.len()).ok()?)?;
-            w.bytes(value)?;
-        }
-        Some(())
-    })())
+    w.byte(MEI_READ_DEVICE_ID);
+    w.byte(code.code());
+    w.byte(CONFORMITY);
+    w.byte(0x00); // More Follows: everything fits.
+    w.byte(0x00); // Next Object Id: none.
+    w.byte(last - first + 1);
+    for id in first..=last {
+        let value = identity.object(id).unwrap_or("").as_bytes();
+        w.byte(id);
+        w.len8(value.len());
+        w.bytes(value);
+    }
+    Ok(())
 }
 
 #[cfg(test)]

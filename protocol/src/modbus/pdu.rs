@@ -353,53 +353,53 @@ impl<'a> Request<'a> {
     /// master side, for tests and simulators).
     pub fn emit(&self, unit: u8, out: &mut [u8]) -> Option<usize> {
         let mut w = Writer::new(out);
-        w.byte(unit)?;
-        w.byte(self.function())?;
+        w.byte(unit);
+        w.byte(self.function());
         match *self {
             Request::ReadCoils { address, quantity }
             | Request::ReadDiscreteInputs { address, quantity }
             | Request::ReadHoldingRegisters { address, quantity }
             | Request::ReadInputRegisters { address, quantity } => {
-                w.u16(address)?;
-                w.u16(quantity)?;
+                w.u16(address);
+                w.u16(quantity);
             }
             Request::WriteSingleCoil { address, value } => {
-                w.u16(address)?;
-                w.u16(if value { COIL_ON } else { 0 })?;
+                w.u16(address);
+                w.u16(if value { COIL_ON } else { 0 });
             }
             Request::WriteSingleRegister { address, value } => {
-                w.u16(address)?;
-                w.u16(value)?;
+                w.u16(address);
+                w.u16(value);
             }
             Request::WriteMultipleCoils {
                 address,
                 quantity,
                 values,
             } => {
-                w.u16(address)?;
-                w.u16(quantity)?;
-                w.byte(u8::try_from(values.len()).ok()?)?;
-                w.bytes(values)?;
+                w.u16(address);
+                w.u16(quantity);
+                w.len8(values.len());
+                w.bytes(values);
             }
             Request::WriteMultipleRegisters { address, values } => {
-                w.u16(address)?;
-                w.u16(u16::try_from(values.len() / 2).ok()?)?;
-                w.byte(u8::try_from(values.len()).ok()?)?;
-                w.bytes(values)?;
+                w.u16(address);
+                w.len16(values.len() / 2);
+                w.len8(values.len());
+                w.bytes(values);
             }
             Request::ReturnQueryData { data } => {
-                w.u16(RETURN_QUERY_DATA)?;
-                w.bytes(data)?;
+                w.u16(RETURN_QUERY_DATA);
+                w.bytes(data);
             }
             Request::Diagnostic { sub, data } => {
-                w.u16(sub.code())?;
-                w.u16(data)?;
+                w.u16(sub.code());
+                w.u16(data);
             }
             Request::ReportServerId => {}
             Request::ReadDeviceId { code, object } => {
-                w.byte(MEI_READ_DEVICE_ID)?;
-                w.byte(code.code())?;
-                w.byte(object)?;
+                w.byte(MEI_READ_DEVICE_ID);
+                w.byte(code.code());
+                w.byte(object);
             }
         }
         w.finish()

@@ -447,7 +447,8 @@ impl Slave {
     }
 
     /// The normal reply to a carried-out request (Application Protocol §6); its length, or
-    /// the exception to answer instead (04 if it does not fit, which cannot happen).
+    /// the exception to answer instead (04 if it does not fit, which cannot happen). Every
+    /// reply starts with the unit and the function code, written once for all.
     fn encode(
         &self,
         unit: u8,
@@ -456,7 +457,53 @@ impl Slave {
         out: &mut [u8],
     ) -> Result<usize, Exception> {
         let mut w = Writer::new(out);
-        let body = match *request {
+        w.byte(unit);
+        w.byte(request.function());
+        match *request {
+            Request::ReadCoils { quantity, .. } | Request::ReadDiscreteInputs { quantity, .. } => {
+                let bytes = match &self.scratch {
+                    Scratch::Bits(bits) => bits.get(..usize::from(quantity).div_ceil(8)),
+                    Scratch::Registers(_) => None,
+                }
+                .ok_or(Exception::ServerDeviceFailure)?;
+                w.len8(bytes.len());
+                w.bytes(bytes);
+            }
+            Request::ReadHoldingRegisters { quantity, .. }
+            | Request::ReadInputRegisters { quantity, .. } => {
+                let registers = match &self.scratch {
+                    Scratch::Registers(registers) => registers.get(..usize::from(quantity)),
+                    Scratch::Bits(_) => None,
+                }
+                .ok_or(Exception::ServerDeviceFailure)?;
+                w.len8(2 * registers.len());
+                for &register in registers {
+                    w.u16(register);
+                }
+            }
+            // FC05 and FC06 echo the request (§6.5, §6.6).
+            Request::WriteSingleCoil { address, value } => {
+                w.u16(address);
+                w.u16(if value { 0xFF00 } else { 0 });
+            }
+            Request::WriteSingleRegister { address, value } => {
+                w.u16(address);
+                w.u16(value);
+            }
+            Request::WriteMultipleCoils {
+                address, quantity, ..
+            } => {
+                w.u16(address);
+                w.u16(quantity);
+            }
+            Request::WriteMultipleRegisters { address, values } => {
+                w.u16(address);
+                w.len16(values.len() / 2);
+            }
+            Request::ReturnQueryData { data } => {
+                w.u16(0);
+                w.bytes(data);
+            }
             Request::Diagnostic { sub, data } => {
                 let value = match sub {
                     Diagnostic::DiagnosticRegister => model.diagnostic_register(unit),
@@ -464,103 +511,35 @@ impl Slave {
                         .value(&self.cleared, sub)
                         .unwrap_or(data),
                 };
-                w.byte(unit)
-                    .and_then(|()| w.byte(request.function()))
-                    .and_then(|()| w.u16(sub.code()))
-                    .and_then(|()| w.u16(value))
+                w.u16(sub.code());
+                w.u16(value);
             }
             Request::ReportServerId => {
                 // Server ID (the unit), run indicator, then "<product code> <revision>".
                 let identity = model.identity(unit).ok_or(Exception::IllegalFunction)?;
                 let (code, revision) = (identity.product_code, identity.revision);
-                let count = u8::try_from(code.len() + revision.len() + 3).ok();
                 let run = if model.running(unit) { RUN_ON } else { RUN_OFF };
-                w.byte(unit)
-                    .and_then(|()| w.byte(request.function()))
-                    .and_then(|()| w.byte(count?))
-                    .and_then(|()| w.byte(unit))
-                    .and_then(|()| w.byte(run))
-                    .and_then(|()| w.bytes(code.as_bytes()))
-                    .and_then(|()| w.byte(b' '))
-                    .and_then(|()| w.bytes(revision.as_bytes()))
+                w.len8(code.len() + revision.len() + 3);
+                w.byte(unit);
+                w.byte(run);
+                w.bytes(code.as_bytes());
+                w.byte(b' ');
+                w.bytes(revision.as_bytes());
             }
             Request::ReadDeviceId { code, object } => {
                 let identity = model.identity(unit).ok_or(Exception::IllegalFunction)?;
-                match w.byte(unit).and_then(|()| w.byte(request.function())) {
-                    Some(()) => ident::write_device_id(&mut w, &identity, code, object)?,
-                    None => None,
-                }
-            }
-            _ => {
-                return self
-                    .encode_data(unit, request, w)
-                    .ok_or(Exception::ServerDeviceFailure)
-            }
-        };
-        body.and_then(|()| w.finish())
-            .ok_or(Exception::ServerDeviceFailure)
-    }
-
-    /// The normal reply to a request on the data tables (or an echo).
-    fn encode_data(&self, unit: u8, request: &Request<'_>, mut w: Writer<'_>) -> Option<usize> {
-        w.byte(unit)?;
-        w.byte(request.function())?;
-        match *request {
-            Request::ReadCoils { quantity, .. } | Request::ReadDiscreteInputs { quantity, .. } => {
-                let Scratch::Bits(bits) = &self.scratch else {
-                    return None;
-                };
-                let bytes = bits.get(..usize::from(quantity).div_ceil(8))?;
-                w.byte(u8::try_from(bytes.len()).ok()?)?;
-                w.bytes(bytes)?;
-            }
-            Request::ReadHoldingRegisters { quantity, .. }
-            | Request::ReadInputRegisters { quantity, .. } => {
-                let Scratch::Registers(registers) = &self.scratch else {
-                    return None;
-                };
-                let registers = registers.get(..usize::from(quantity))?;
-                w.byte(u8::try_from(2 * registers.len()).ok()?)?;
-                for &register in registers {
-                    w.u16(register)?;
-                }
-            }
-            // FC05 and FC06 echo the request (§6.5, §6.6).
-            Request::WriteSingleCoil { address, value } => {
-                w.u16(address)?;
-                w.u16(if value { 0xFF00 } else { 0 })?;
-            }
-            Request::WriteSingleRegister { address, value } => {
-                w.u16(address)?;
-                w.u16(value)?;
-            }
-            Request::WriteMultipleCoils {
-                address, quantity, ..
-            } => {
-                w.u16(address)?;
-                w.u16(quantity)?;
-            }
-            Request::WriteMultipleRegisters { address, values } => {
-                w.u16(address)?;
-                w.u16(u16::try_from(values.len() / 2).ok()?)?;
-            }
-            Request::ReturnQueryData { data } => {
-                w.u16(0)?;
-                w.bytes(data)?;
-            }
-            Request::Diagnostic { .. } | Request::ReportServerId | Request::ReadDeviceId { .. } => {
-                return None
+                ident::write_device_id(&mut w, &identity, code, object)?;
             }
         }
-        w.finish()
+        w.finish().ok_or(Exception::ServerDeviceFailure)
     }
 }
 
 /// An exception reply (Application Protocol §7): unit, function | 0x80, code, CRC: 5 bytes.
 fn encode_exception(unit: u8, function: u8, exception: Exception, out: &mut [u8]) -> Option<usize> {
     let mut w = Writer::new(out);
-    w.byte(unit)?;
-    w.byte(function | 0x80)?;
-    w.byte(exception.code())?;
+    w.byte(unit);
+    w.byte(function | 0x80);
+    w.byte(exception.code());
     w.finish()
 }
