@@ -32,9 +32,20 @@ pub const DEFAULT_WATCHDOG_MS: u16 = 1000;
 pub enum WatchdogAction {
     /// Stop every axis (the default).
     #[default]
-    StopAll,
+    StopAll = 0,
     /// Only latch the event in FAILSAFE (for machines where another system stops the axes).
-    LatchOnly,
+    LatchOnly = 1,
+}
+
+impl WatchdogAction {
+    /// The action of a WDACTION value or stored code (its discriminant), if it is one.
+    pub(crate) fn from_code(code: u16) -> Option<WatchdogAction> {
+        match code {
+            0 => Some(WatchdogAction::StopAll),
+            1 => Some(WatchdogAction::LatchOnly),
+            _ => None,
+        }
+    }
 }
 
 /// One axis as the PLC side needs it: units and travel.
@@ -69,6 +80,56 @@ impl Default for AxisConfig {
     }
 }
 
+// What the gateway unit's registers and the stored record (`settings`) both accept: one rule
+// for each, so that what the PLC can write is what a start reads back.
+
+/// A home end's code (AXISCFG, the stored record): 7 motor end, 8 the other.
+pub(crate) fn home_of(code: u16) -> Option<HomeDirection> {
+    match code {
+        7 => Some(HomeDirection::MotorEnd),
+        8 => Some(HomeDirection::NonMotorEnd),
+        _ => None,
+    }
+}
+
+/// A complement's code (AXISCFG, the stored record): 1 one's, 2 two's.
+pub(crate) const fn complement_code(complement: Complement) -> u8 {
+    match complement {
+        Complement::Ones => 1,
+        Complement::Twos => 2,
+    }
+}
+
+/// The complement of a code of [`complement_code`], if it is one.
+pub(crate) fn complement_of(code: u16) -> Option<Complement> {
+    match code {
+        1 => Some(Complement::Ones),
+        2 => Some(Complement::Twos),
+        _ => None,
+    }
+}
+
+/// Whether a gateway unit id is one (Serial Line §2.2's slave addresses).
+pub(crate) fn unit_ok(unit: u16) -> bool {
+    (1..=247).contains(&unit)
+}
+
+/// The axis of `axes` whose unit is `unit` (axis n is unit n + 1), if any: the gateway's
+/// own unit must not be one.
+pub(crate) fn axis_of(unit: u8, axes: AxisSet) -> Option<Axis> {
+    unit.checked_sub(1)
+        .and_then(Axis::new)
+        .filter(|&a| axes.contains(a))
+}
+
+/// Whether a PLC watchdog time is one: 0 (off) or 50-60000 ms.
+pub(crate) fn watchdog_ok(ms: u16) -> bool {
+    ms == 0 || (50..=60_000).contains(&ms)
+}
+
+/// The most resends after a time-out.
+pub(crate) const MAX_RETRIES: u16 = 3;
+
 /// Parity of the PLC line (8 data bits; one stop bit with parity, as Modbus RTU frames
 /// characters of 11 bits, Serial Line §2.5.1; the line's timing uses 11 bits either way).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -76,11 +137,24 @@ impl Default for AxisConfig {
 pub enum Parity {
     /// No parity.
     #[default]
-    None,
+    None = 0,
     /// Even parity (the Modbus default).
-    Even,
+    Even = 2,
     /// Odd parity.
-    Odd,
+    Odd = 1,
+}
+
+impl Parity {
+    /// The parity of a PLCPARITY value or stored code (its discriminant: 0 none, 1 odd,
+    /// 2 even), if it is one.
+    pub(crate) fn from_code(code: u16) -> Option<Parity> {
+        match code {
+            0 => Some(Parity::None),
+            1 => Some(Parity::Odd),
+            2 => Some(Parity::Even),
+            _ => None,
+        }
+    }
 }
 
 /// The PLC line's settings.
@@ -152,8 +226,6 @@ impl GatewayConfig {
 
     /// The axis addressed by a Modbus unit id, if the PLC may address it.
     pub fn axis_of_unit(&self, unit: u8) -> Option<Axis> {
-        unit.checked_sub(1)
-            .and_then(Axis::new)
-            .filter(|&a| self.bus.axes.contains(a))
+        axis_of(unit, self.bus.axes)
     }
 }

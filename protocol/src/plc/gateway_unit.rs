@@ -6,7 +6,10 @@
 
 use super::axis_unit::{link_code, nth};
 use super::channel::Channel;
-use super::config::{Parity, WatchdogAction};
+use super::config::{
+    axis_of, complement_code, complement_of, home_of, unit_ok, watchdog_ok, Parity, WatchdogAction,
+    MAX_RETRIES,
+};
 use super::gateway::Gateway;
 use super::map::{self, *};
 use super::persist::Store;
@@ -52,51 +55,52 @@ fn counter_register(counters: &[u32], offset: u16) -> u16 {
 }
 
 impl Gateway {
+    /// One register of the gateway unit. What takes work to compute (the version, the uptime)
+    /// is computed only for its own registers, not for every register read.
     pub(super) fn gateway_read(
         &self,
         address: u16,
         link: &SlaveCounters,
     ) -> Result<u16, Exception> {
-        let (major, minor, patch) = self.config.identity.version();
-        let uptime = u32::try_from(self.now.as_secs()).unwrap_or(u32::MAX);
-        let sync = &self.sync;
-        match address {
-            G_VERSION => Ok(u16::from(major) << 8 | u16::from(minor)),
-            0x0001 => Ok(patch),
-            G_UPTIME => Ok(split(uptime)[0]),
-            0x0003 => Ok(split(uptime)[1]),
-            G_FAILSAFE => Ok(self.failsafe.latched()),
-            G_FAILSAFE_COUNT => Ok(self.failsafe.count()),
-            G_WATCHDOG => Ok(u16::try_from(self.config.watchdog.as_millis()).unwrap_or(u16::MAX)),
-            G_BUS_BAUD => Ok(u16::try_from(self.persist.baud.bits_per_second() / 100).unwrap_or(0)),
-            G_BUS_RTIM => Ok(u16::from(self.persist.rtim.get())),
-            G_PLC_BAUD => Ok(u16::try_from(self.persist.plc.baud / 100).unwrap_or(0)),
-            G_PLC_PARITY => Ok(match self.persist.plc.parity {
-                Parity::None => 0,
-                Parity::Odd => 1,
-                Parity::Even => 2,
-            }),
-            G_UNIT_ID => Ok(u16::from(self.persist.unit)),
-            G_SAVE | G_FACTORY | G_RESTART => Ok(0),
-            G_SAVE_STATUS => Ok(self.persist.status as u16),
-            G_SAVE_COUNT => Ok(split(self.persist.saves)[0]),
-            0x0016 => Ok(split(self.persist.saves)[1]),
-            G_CONFIG_SOURCE => Ok(self.config.boot.source as u16),
-            G_CONFIG_ERRORS => Ok(self.config.boot.load_errors),
-            G_RESET_CAUSE => Ok(self.config.boot.reset as u16),
-            G_RETRIES => Ok(u16::from(self.engine.config().retries)),
-            G_APPLY | G_SYNC_START => Ok(0),
-            G_WD_ACTION => Ok(match self.config.watchdog_action {
-                WatchdogAction::StopAll => 0,
-                WatchdogAction::LatchOnly => 1,
-            }),
-            G_PIO_AXIS => Ok(self.config.pio_axis.map_or(0xFFFF, |a| u16::from(a.get()))),
-            G_SYNC_MASK => Ok(sync.mask().0),
-            G_SYNC_STATUS => Ok(sync.status() as u16),
-            a if self.channel.read(a).is_some() => {
-                self.channel.read(a).ok_or(Exception::IllegalDataAddress)
+        Ok(match address {
+            G_VERSION | 0x0001 => {
+                let (major, minor, patch) = self.config.identity.version();
+                if address == G_VERSION {
+                    u16::from(major) << 8 | u16::from(minor)
+                } else {
+                    patch
+                }
             }
+            G_UPTIME | 0x0003 => {
+                let uptime = u32::try_from(self.now.as_secs()).unwrap_or(u32::MAX);
+                counter_register(&[uptime], address - G_UPTIME)
+            }
+            G_FAILSAFE => self.failsafe.latched(),
+            G_FAILSAFE_COUNT => self.failsafe.count(),
+            G_WATCHDOG => u16::try_from(self.config.watchdog.as_millis()).unwrap_or(u16::MAX),
+            G_BUS_BAUD => u16::try_from(self.persist.baud.bits_per_second() / 100).unwrap_or(0),
+            G_BUS_RTIM => u16::from(self.persist.rtim.get()),
+            G_PLC_BAUD => u16::try_from(self.persist.plc.baud / 100).unwrap_or(0),
+            G_PLC_PARITY => self.persist.plc.parity as u16,
+            G_UNIT_ID => u16::from(self.persist.unit),
+            G_SAVE | G_FACTORY | G_RESTART => 0,
+            G_SAVE_STATUS => self.persist.status as u16,
+            G_SAVE_COUNT | 0x0016 => {
+                counter_register(&[self.persist.saves], address - G_SAVE_COUNT)
+            }
+            G_CONFIG_SOURCE => self.config.boot.source as u16,
+            G_CONFIG_ERRORS => self.config.boot.load_errors,
+            G_RESET_CAUSE => self.config.boot.reset as u16,
+            G_RETRIES => u16::from(self.engine.config().retries),
+            G_APPLY | G_SYNC_START => 0,
+            G_WD_ACTION => self.config.watchdog_action as u16,
+            G_PIO_AXIS => self.config.pio_axis.map_or(0xFFFF, |a| u16::from(a.get())),
+            G_SYNC_MASK => self.sync.mask().0,
+            G_SYNC_STATUS => self.sync.status() as u16,
             a => {
+                if let Some(value) = self.channel.read(a) {
+                    return Ok(value);
+                }
                 if let Some((axis, field)) = per_axis(a, G_AXIS_CONFIG, G_AXIS_CONFIG_LEN) {
                     return Ok(self.axis_config_read(axis, field));
                 }
@@ -128,9 +132,9 @@ impl Gateway {
                     let values = [c.unsolicited, c.events_lost, c.queue_full, c.establishments];
                     return Ok(counter_register(&values, offset));
                 }
-                Err(Exception::IllegalDataAddress)
+                return Err(Exception::IllegalDataAddress);
             }
-        }
+        })
     }
 
     fn diagnostics(&self, axis: Axis, offset: u16) -> u16 {
@@ -166,10 +170,7 @@ impl Gateway {
             axis_cfg::PULSES => c.scale.pulses_per_rev.get(),
             axis_cfg::STROKE_HI => stroke[0],
             axis_cfg::STROKE_LO => stroke[1],
-            axis_cfg::COMPLEMENT => match c.scale.complement {
-                Complement::Ones => 1,
-                Complement::Twos => 2,
-            },
+            axis_cfg::COMPLEMENT => u16::from(complement_code(c.scale.complement)),
             _ => 0,
         }
     }
@@ -196,25 +197,21 @@ impl Gateway {
         }
         let valid = match address {
             G_FAILSAFE => value == 0,
-            G_WATCHDOG => value == 0 || (50..=60_000).contains(&value),
+            G_WATCHDOG => watchdog_ok(value),
             G_BUS_BAUD => Baud::from_bits_per_second(u32::from(value) * 100).is_some(),
             G_BUS_RTIM => u8::try_from(value).ok().and_then(Rtim::new).is_some(),
             G_PLC_BAUD => PLC_BAUDS.contains(&(u32::from(value) * 100)),
-            G_PLC_PARITY => value <= 2,
+            G_PLC_PARITY => Parity::from_code(value).is_some(),
             // Not the unit of an axis that is (or will be) on the bus.
             G_UNIT_ID => {
                 let axes = AxisSet(self.config.bus.axes.0 | self.persist.axes.0);
-                (1..=247).contains(&value)
-                    && u8::try_from(value - 1)
-                        .ok()
-                        .and_then(Axis::new)
-                        .is_none_or(|a| !axes.contains(a))
+                unit_ok(value) && u8::try_from(value).is_ok_and(|u| axis_of(u, axes).is_none())
             }
             G_SAVE | G_RESTART => value <= 1,
             G_FACTORY => value == 0 || value == FACTORY_KEY,
-            G_RETRIES => value <= 3,
+            G_RETRIES => value <= MAX_RETRIES,
             G_APPLY => value == 0 || (value == 1 && self.bus_idle()),
-            G_WD_ACTION => value <= 1,
+            G_WD_ACTION => WatchdogAction::from_code(value).is_some(),
             G_PIO_AXIS => value == 0xFFFF || value <= 15,
             G_SYNC_MASK => value & !self.config.bus.axes.0 == 0,
             G_SYNC_START => value <= 1,
@@ -226,11 +223,11 @@ impl Gateway {
                         value == 0 || (value == 1 && axis.get() + 1 != self.persist.unit)
                     }
                     axis_cfg::LEAD | axis_cfg::PULSES => value > 0,
-                    axis_cfg::HOME => value == 7 || value == 8,
+                    axis_cfg::HOME => home_of(value).is_some(),
                     // The stroke's high word: strokes above i32::MAX (0.01 mm) make no sense.
                     axis_cfg::STROKE_HI => value < 0x8000,
                     axis_cfg::STROKE_LO => true,
-                    axis_cfg::COMPLEMENT => value == 1 || value == 2,
+                    axis_cfg::COMPLEMENT => complement_of(value).is_some(),
                     _ => false,
                 },
                 None => false,

@@ -140,30 +140,32 @@ impl DataModel for Registers<'_> {
         out: &mut [u16],
     ) -> Result<(), Exception> {
         let gateway = &mut *self.gateway;
-        let Some(axis) = gateway.config.axis_of_unit(unit) else {
-            for (i, slot) in out.iter_mut().enumerate() {
+        let axis = gateway.config.axis_of_unit(unit);
+        if let Some(axis) = axis {
+            // Every address must exist in this table before anything is fetched from the bus.
+            let mut touches_table = false;
+            for i in 0..out.len() {
                 let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
-                *slot = gateway.gateway_read(a, &self.link)?;
+                let in_table = table::locate(a).is_some();
+                touches_table |= in_table;
+                if (in_table && table != RegisterTable::Holding)
+                    || (!in_table && !readable(a, table))
+                {
+                    return Err(Exception::IllegalDataAddress);
+                }
             }
-            return Ok(());
-        };
-        // Every address must exist in this table before anything is fetched from the bus.
-        let mut touches_table = false;
-        for i in 0..out.len() {
-            let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
-            let in_table = table::locate(a).is_some();
-            touches_table |= in_table;
-            if (in_table && table != RegisterTable::Holding) || (!in_table && !readable(a, table)) {
-                return Err(Exception::IllegalDataAddress);
+            if touches_table && !gateway.table_rows_ready(axis, address, out.len()) {
+                // Not read from the controller yet: it is being fetched; ask again shortly.
+                return Err(Exception::ServerDeviceFailure);
             }
         }
-        if touches_table && !gateway.table_rows_ready(axis, address, out.len()) {
-            // Not read from the controller yet: it is being fetched; ask again shortly.
-            return Err(Exception::ServerDeviceFailure);
-        }
+        // One loop for both kinds of unit.
         for (i, slot) in out.iter_mut().enumerate() {
             let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
-            *slot = gateway.axis_read(axis, table, a)?;
+            *slot = match axis {
+                Some(axis) => gateway.axis_read(axis, table, a)?,
+                None => gateway.gateway_read(a, &self.link)?,
+            };
         }
         Ok(())
     }

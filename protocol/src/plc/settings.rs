@@ -28,13 +28,16 @@
 //! range are right: a record that is not exactly what [`Settings::encode`] writes is refused
 //! as a whole, never applied in part.
 
-use super::config::{AxisConfig, GatewayConfig, Parity, PlcLine, WatchdogAction};
+use super::config::{
+    axis_of, complement_code, complement_of, home_of, unit_ok, watchdog_ok, AxisConfig,
+    GatewayConfig, Parity, PlcLine, WatchdogAction, MAX_RETRIES,
+};
 use crate::axes::AxisSet;
 use crate::line::Baud;
 use crate::modbus::crc;
 use crate::time::Duration;
-use crate::units::{Complement, Lead, Length};
-use crate::{Axis, HomeDirection, Rtim};
+use crate::units::{Lead, Length};
+use crate::{Axis, Rtim};
 
 /// The format version this code writes and reads.
 pub const FORMAT: u8 = 1;
@@ -133,17 +136,10 @@ impl Settings {
         w.u8(FORMAT);
         w.u8(self.unit);
         w.bytes(&self.plc.baud.to_le_bytes());
-        w.u8(match self.plc.parity {
-            Parity::None => 0,
-            Parity::Odd => 1,
-            Parity::Even => 2,
-        });
+        w.u8(self.plc.parity as u8);
         let ms = u16::try_from(self.watchdog.as_millis()).unwrap_or(u16::MAX);
         w.bytes(&ms.to_le_bytes());
-        w.u8(match self.watchdog_action {
-            WatchdogAction::StopAll => 0,
-            WatchdogAction::LatchOnly => 1,
-        });
+        w.u8(self.watchdog_action as u8);
         w.u8(self.baud.brsl());
         w.u8(self.rtim.get());
         w.u8(self.retries);
@@ -153,10 +149,7 @@ impl Settings {
             w.bytes(&c.scale.lead.hundredths().to_le_bytes());
             w.bytes(&c.scale.pulses_per_rev.get().to_le_bytes());
             w.u8(c.scale.home.code());
-            w.u8(match c.scale.complement {
-                Complement::Ones => 1,
-                Complement::Twos => 2,
-            });
+            w.u8(complement_code(c.scale.complement));
             w.bytes(&c.stroke.0.to_le_bytes());
         }
         let sum = crc::checksum(out.get(..RECORD_LEN - 2).unwrap_or(&[]));
@@ -180,29 +173,26 @@ impl Settings {
         }
         let r = Reader(body);
         let bad = |at: usize| SettingsError::Field(u8::try_from(at).unwrap_or(u8::MAX));
-        let unit = r.u8(1).filter(|u| (1..=247).contains(u)).ok_or(bad(1))?;
+        let unit = r.u8(1).filter(|&u| unit_ok(u.into())).ok_or(bad(1))?;
         let baud = r.u32(2).filter(|b| PLC_BAUDS.contains(b)).ok_or(bad(2))?;
-        let parity = match r.u8(6) {
-            Some(0) => Parity::None,
-            Some(1) => Parity::Odd,
-            Some(2) => Parity::Even,
-            _ => return Err(bad(6)),
-        };
-        let ms = r
-            .u16(7)
-            .filter(|&ms| ms == 0 || (50..=60_000).contains(&ms))
-            .ok_or(bad(7))?;
-        let watchdog_action = match r.u8(9) {
-            Some(0) => WatchdogAction::StopAll,
-            Some(1) => WatchdogAction::LatchOnly,
-            _ => return Err(bad(9)),
-        };
+        let parity = r
+            .u8(6)
+            .and_then(|c| Parity::from_code(c.into()))
+            .ok_or(bad(6))?;
+        let ms = r.u16(7).filter(|&ms| watchdog_ok(ms)).ok_or(bad(7))?;
+        let watchdog_action = r
+            .u8(9)
+            .and_then(|c| WatchdogAction::from_code(c.into()))
+            .ok_or(bad(9))?;
         let bus_baud = r
             .u8(10)
             .and_then(|code| Baud::from_brsl(code.into()))
             .ok_or(bad(10))?;
         let rtim = r.u8(11).and_then(Rtim::new).ok_or(bad(11))?;
-        let retries = r.u8(12).filter(|&n| n <= 3).ok_or(bad(12))?;
+        let retries = r
+            .u8(12)
+            .filter(|&n| u16::from(n) <= MAX_RETRIES)
+            .ok_or(bad(12))?;
         let pio_axis = match r.u8(13) {
             Some(0xFF) => None,
             Some(a) => Some(Axis::new(a).ok_or(bad(13))?),
@@ -217,16 +207,14 @@ impl Settings {
                 .u16(at + 2)
                 .and_then(core::num::NonZeroU16::new)
                 .ok_or(bad(at + 2))?;
-            let home = match r.u8(at + 4) {
-                Some(7) => HomeDirection::MotorEnd,
-                Some(8) => HomeDirection::NonMotorEnd,
-                _ => return Err(bad(at + 4)),
-            };
-            let complement = match r.u8(at + 5) {
-                Some(1) => Complement::Ones,
-                Some(2) => Complement::Twos,
-                _ => return Err(bad(at + 5)),
-            };
+            let home = r
+                .u8(at + 4)
+                .and_then(|c| home_of(c.into()))
+                .ok_or(bad(at + 4))?;
+            let complement = r
+                .u8(at + 5)
+                .and_then(|c| complement_of(c.into()))
+                .ok_or(bad(at + 5))?;
             let stroke = r.i32(at + 6).filter(|&s| s > 0).ok_or(bad(at + 6))?;
             slot.scale.lead = lead;
             slot.scale.pulses_per_rev = pulses;
@@ -247,7 +235,7 @@ impl Settings {
             axis_config,
         };
         // The gateway unit must not be one of the axes' units (axis n is unit n + 1).
-        if settings.unit <= 16 && axes.contains(Axis::new(settings.unit - 1).ok_or(bad(1))?) {
+        if axis_of(unit, axes).is_some() {
             return Err(bad(1));
         }
         Ok(settings)
