@@ -192,61 +192,57 @@ impl Channel {
         let [code, axis, point, offset, hi, lo] = request;
         let wanted = join(hi, lo);
         let unexpected = Reason::Unexpected.code(0);
-        match (self.state, result) {
-            (State::Reading(..), Ok(JobOutput::Point(readback))) => {
-                let Some(field) = field(offset) else {
-                    self.fail(code, unexpected);
-                    return None;
-                };
-                let stored = readback.get(field);
-                if code == READ_FIELD || stored == wanted {
-                    let count = if code == WRITE_FIELD { UNCHANGED } else { 0 };
-                    let [h, l] = split(stored);
-                    self.answer([code, 0, h, l, count]);
-                    return None;
-                }
-                let (Some(axis), Some(point)) = (
-                    u8::try_from(axis).ok().and_then(Axis::new),
-                    u8::try_from(point).ok().and_then(PositionNo::new),
-                ) else {
-                    self.fail(code, unexpected);
-                    return None;
-                };
-                let job = Job {
-                    axis,
-                    kind: JobKind::WriteField {
-                        point,
-                        field,
-                        value: wanted,
-                    },
-                };
-                match engine.submit(job) {
-                    Ok(w) => {
-                        self.state = State::Writing(w, request);
-                        return Some((axis, point));
+        // The response, or the CMER code it fails with: posted in one place.
+        let response: Result<[u16; RESP_LEN], u16> = 'response: {
+            match (self.state, result) {
+                (State::Reading(..), Ok(JobOutput::Point(readback))) => {
+                    let Some(field) = field(offset) else {
+                        break 'response Err(unexpected);
+                    };
+                    let stored = readback.get(field);
+                    if code == READ_FIELD || stored == wanted {
+                        let count = if code == WRITE_FIELD { UNCHANGED } else { 0 };
+                        let [h, l] = split(stored);
+                        break 'response Ok([code, 0, h, l, count]);
                     }
-                    Err(_) => self.fail(code, Reason::QueueFull.code(0)),
+                    let (Some(axis), Some(point)) = (
+                        u8::try_from(axis).ok().and_then(Axis::new),
+                        u8::try_from(point).ok().and_then(PositionNo::new),
+                    ) else {
+                        break 'response Err(unexpected);
+                    };
+                    let job = Job {
+                        axis,
+                        kind: JobKind::WriteField {
+                            point,
+                            field,
+                            value: wanted,
+                        },
+                    };
+                    match engine.submit(job) {
+                        Ok(w) => {
+                            self.state = State::Writing(w, request);
+                            return Some((axis, point));
+                        }
+                        Err(_) => Err(Reason::QueueFull.code(0)),
+                    }
                 }
+                (State::Writing(..), Ok(output)) => {
+                    let count = match output {
+                        JobOutput::Value(v) => u16::try_from(*v).unwrap_or(u16::MAX - 1),
+                        _ => 0,
+                    };
+                    Ok([code, 0, hi, lo, count])
+                }
+                (_, Err(e)) => Err(Reason::of(*e)),
+                _ => Err(unexpected),
             }
-            (State::Writing(..), Ok(output)) => {
-                let count = match output {
-                    JobOutput::Value(v) => u16::try_from(*v).unwrap_or(u16::MAX - 1),
-                    _ => 0,
-                };
-                self.answer([code, 0, hi, lo, count]);
-            }
-            (_, Err(e)) => self.fail(code, Reason::of(*e)),
-            _ => self.fail(code, unexpected),
-        }
-        None
-    }
-
-    fn answer(&mut self, response: [u16; RESP_LEN]) {
-        self.response = response;
+        };
+        self.response = match response {
+            Ok(response) => response,
+            Err(error) => [code | FAILED, error, 0, 0, 0],
+        };
         self.state = State::Answered;
-    }
-
-    fn fail(&mut self, code: u16, error: u16) {
-        self.answer([code | FAILED, error, 0, 0, 0]);
+        None
     }
 }
