@@ -155,52 +155,55 @@ impl SyncStart {
         blocked: AxisSet,
         engine: &mut Engine,
     ) -> Option<SyncEnd> {
-        if self.start == Some(id) {
-            self.start = None;
-            return Some(match result {
-                Ok(_) => {
-                    self.status = SyncStatus::Done;
-                    self.buffered = AxisSet::EMPTY;
-                    SyncEnd::Started(self.running)
+        // Why the start is given up, if it is: given up in one place.
+        let reason = 'fail: {
+            if self.start == Some(id) {
+                self.start = None;
+                match result {
+                    Ok(_) => {
+                        self.status = SyncStatus::Done;
+                        self.buffered = AxisSet::EMPTY;
+                        return Some(SyncEnd::Started(self.running));
+                    }
+                    // The `t` may not have reached every axis: cancel what may still be
+                    // buffered.
+                    Err(error) => break 'fail Reason::of(*error),
                 }
-                // The `t` may not have reached every axis: cancel what may still be buffered.
-                Err(error) => self.fail_with(Reason::of(*error), engine),
-            });
-        }
-        if self.jobs[axis] != Some(id) {
-            return None;
-        }
-        self.jobs[axis] = None;
-        self.pending = self.pending.without(axis);
-        match result {
-            Ok(_) => {
-                self.buffered = self.buffered.with(axis);
-                if self.status != SyncStatus::Running {
-                    // The start was given up while this `h` ran: cancel it at once.
-                    self.cancel_buffered(engine);
+            }
+            if self.jobs[axis] != Some(id) {
+                return None;
+            }
+            self.jobs[axis] = None;
+            self.pending = self.pending.without(axis);
+            if let Err(error) = result {
+                break 'fail Reason::of(*error);
+            }
+            self.buffered = self.buffered.with(axis);
+            if self.status != SyncStatus::Running {
+                // The start was given up while this `h` ran: cancel it at once.
+                self.cancel_buffered(engine);
+                return None;
+            }
+            if !self.pending.is_empty() {
+                return None;
+            }
+            if self.running.0 & blocked.0 != 0 {
+                // STP, EMG or the stop input came on while the commands were buffered.
+                break 'fail Reason::Paused.code(0);
+            }
+            let lead = self.running.iter().next()?;
+            match engine.submit(Job {
+                axis: lead,
+                kind: JobKind::StartBuffered(self.running),
+            }) {
+                Ok(id) => {
+                    self.start = Some(id);
                     return None;
                 }
+                Err(_) => Reason::QueueFull.code(0),
             }
-            Err(error) => return Some(self.fail_with(Reason::of(*error), engine)),
-        }
-        if !self.pending.is_empty() || self.status != SyncStatus::Running {
-            return None;
-        }
-        if self.running.0 & blocked.0 != 0 {
-            // STP, EMG or the stop input came on while the commands were buffered.
-            return Some(self.fail_with(Reason::Paused.code(0), engine));
-        }
-        let lead = self.running.iter().next()?;
-        match engine.submit(Job {
-            axis: lead,
-            kind: JobKind::StartBuffered(self.running),
-        }) {
-            Ok(id) => {
-                self.start = Some(id);
-                None
-            }
-            Err(_) => Some(self.fail_with(Reason::QueueFull.code(0), engine)),
-        }
+        };
+        Some(self.fail_with(reason, engine))
     }
 
     /// Give up the start in progress (a stop, the fail-safe): the axes of its mask, if one was
