@@ -191,8 +191,7 @@ impl Gateway {
     /// Check one gateway register write without applying it: 02 for an address that does not
     /// exist, 03 for a read-only register or a value out of range.
     fn gateway_check(&self, address: u16, value: u16) -> Result<(), Exception> {
-        let entry = map::find(Unit::Gateway, address).ok_or(Exception::IllegalDataAddress)?;
-        if !entry.writable {
+        if !map::gateway_writable(address).ok_or(Exception::IllegalDataAddress)? {
             return Err(Exception::IllegalDataValue);
         }
         let valid = match address {

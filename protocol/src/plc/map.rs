@@ -226,52 +226,60 @@ const fn e(
     }
 }
 
-/// What the gateway needs of an entry at run time: where it is and whether it can be written.
-/// Kept apart from [`Entry`] so that the documentation texts stay out of the firmware.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Access {
-    /// Unit.
-    pub unit: Unit,
-    /// First address.
-    pub address: u16,
-    /// Number of registers or coils.
-    pub count: u16,
-    /// Whether it can be written.
-    pub writable: bool,
-}
-
-/// [`MAP`] without its texts, computed at compile time (an index out of range here would be a
-/// build error, never a run-time panic).
+/// How many entries of [`MAP`] are the gateway unit's, and how many of those are writable.
 #[allow(clippy::indexing_slicing)]
-const ACCESS: [Access; MAP.len()] = {
-    let mut out = [Access {
-        unit: Unit::Axis,
-        address: 0,
-        count: 0,
-        writable: false,
-    }; MAP.len()];
+const GATEWAY_ENTRIES: (usize, usize) = {
+    let (mut n, mut writable) = (0, 0);
     let mut i = 0;
     while i < MAP.len() {
-        let e = &MAP[i];
-        out[i] = Access {
-            unit: e.unit,
-            address: e.address,
-            count: e.count,
-            writable: e.writable,
-        };
+        if matches!(MAP[i].unit, Unit::Gateway) {
+            n += 1;
+            if MAP[i].writable {
+                writable += 1;
+            }
+        }
         i += 1;
+    }
+    (n, writable)
+};
+
+/// The gateway unit's entries of [`MAP`] as (first address, count), the writable ones first,
+/// computed at compile time (an index out of range here would be a build error, never a
+/// run-time panic). All the gateway needs of the map at run time: the texts stay out of the
+/// firmware, and so do the axis units' entries, whose addresses their own code checks.
+#[allow(clippy::indexing_slicing)]
+const ACCESS: [(u16, u16); GATEWAY_ENTRIES.0] = {
+    let mut out = [(0, 0); GATEWAY_ENTRIES.0];
+    let mut n = 0;
+    let mut writable = true;
+    loop {
+        let mut i = 0;
+        while i < MAP.len() {
+            let e = &MAP[i];
+            if matches!(e.unit, Unit::Gateway) && e.writable == writable {
+                out[n] = (e.address, e.count);
+                n += 1;
+            }
+            i += 1;
+        }
+        if !writable {
+            break;
+        }
+        writable = false;
     }
     out
 };
 
-/// Where `address` of `unit` is in the map, if anywhere.
-pub fn find(unit: Unit, address: u16) -> Option<Access> {
-    ACCESS.iter().copied().find(|e| {
-        e.unit == unit
-            && address
-                .checked_sub(e.address)
-                .is_some_and(|offset| offset < e.count)
-    })
+/// Whether `address` of the gateway unit can be written, if it is in the map at all.
+pub fn gateway_writable(address: u16) -> Option<bool> {
+    ACCESS
+        .iter()
+        .position(|&(first, count)| {
+            address
+                .checked_sub(first)
+                .is_some_and(|offset| offset < count)
+        })
+        .map(|i| i < GATEWAY_ENTRIES.1)
 }
 
 /// Every address the gateway answers. Anything else is exception 02.
@@ -343,3 +351,26 @@ pub const MAP: &[Entry] = &[
     e(Unit::Gateway, Status, G_BUS, 8, "BUS", "count", "", false, "Unsolicited frames, events lost, queue full, establishments (u32 each)", Gateway),
     e(Unit::Gateway, Status, G_PLC, 14, "PLCLINK", "count", "", false, "Modbus frames, CRC errors, exceptions, replies, other units, broadcasts, malformed (u32 each)", Gateway),
 ];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The compact run-time table says of every address what the map itself says.
+    #[test]
+    fn gateway_writable_is_the_maps_word() {
+        for address in 0..=u16::MAX {
+            let entry = MAP.iter().find(|e| {
+                e.unit == Unit::Gateway
+                    && address
+                        .checked_sub(e.address)
+                        .is_some_and(|offset| offset < e.count)
+            });
+            assert_eq!(
+                gateway_writable(address),
+                entry.map(|e| e.writable),
+                "{address:#06x}"
+            );
+        }
+    }
+}
