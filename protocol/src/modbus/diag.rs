@@ -35,33 +35,34 @@ use super::slave::SlaveCounters;
 /// An FC08 sub-function other than Return Query Data.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u16)]
 pub enum Diagnostic {
     /// 0x01: clear the counters and leave Listen Only mode (answered first, unless in it).
-    RestartCommunications,
+    RestartCommunications = 0x01,
     /// 0x02: the diagnostic register.
-    DiagnosticRegister,
+    DiagnosticRegister = 0x02,
     /// 0x04: stop answering until [`Diagnostic::RestartCommunications`].
-    ForceListenOnly,
+    ForceListenOnly = 0x04,
     /// 0x0A: clear the counters.
-    ClearCounters,
+    ClearCounters = 0x0A,
     /// 0x0B.
-    BusMessageCount,
+    BusMessageCount = 0x0B,
     /// 0x0C.
-    BusCommunicationErrorCount,
+    BusCommunicationErrorCount = 0x0C,
     /// 0x0D.
-    BusExceptionErrorCount,
+    BusExceptionErrorCount = 0x0D,
     /// 0x0E.
-    ServerMessageCount,
+    ServerMessageCount = 0x0E,
     /// 0x0F.
-    ServerNoResponseCount,
+    ServerNoResponseCount = 0x0F,
     /// 0x10.
-    ServerNakCount,
+    ServerNakCount = 0x10,
     /// 0x11.
-    ServerBusyCount,
+    ServerBusyCount = 0x11,
     /// 0x12.
-    BusCharacterOverrunCount,
+    BusCharacterOverrunCount = 0x12,
     /// 0x14.
-    ClearOverrunCounter,
+    ClearOverrunCounter = 0x14,
 }
 
 impl Diagnostic {
@@ -82,28 +83,29 @@ impl Diagnostic {
         Diagnostic::ClearOverrunCounter,
     ];
 
-    /// The sub-function code.
+    /// The sub-function code (the discriminant: no table to look it up in).
     pub const fn code(self) -> u16 {
-        match self {
-            Diagnostic::RestartCommunications => 0x01,
-            Diagnostic::DiagnosticRegister => 0x02,
-            Diagnostic::ForceListenOnly => 0x04,
-            Diagnostic::ClearCounters => 0x0A,
-            Diagnostic::BusMessageCount => 0x0B,
-            Diagnostic::BusCommunicationErrorCount => 0x0C,
-            Diagnostic::BusExceptionErrorCount => 0x0D,
-            Diagnostic::ServerMessageCount => 0x0E,
-            Diagnostic::ServerNoResponseCount => 0x0F,
-            Diagnostic::ServerNakCount => 0x10,
-            Diagnostic::ServerBusyCount => 0x11,
-            Diagnostic::BusCharacterOverrunCount => 0x12,
-            Diagnostic::ClearOverrunCounter => 0x14,
-        }
+        self as u16
     }
 
     /// The sub-function with this code, if supported.
     pub fn from_code(code: u16) -> Option<Diagnostic> {
-        Diagnostic::ALL.into_iter().find(|d| d.code() == code)
+        Some(match code {
+            0x01 => Diagnostic::RestartCommunications,
+            0x02 => Diagnostic::DiagnosticRegister,
+            0x04 => Diagnostic::ForceListenOnly,
+            0x0A => Diagnostic::ClearCounters,
+            0x0B => Diagnostic::BusMessageCount,
+            0x0C => Diagnostic::BusCommunicationErrorCount,
+            0x0D => Diagnostic::BusExceptionErrorCount,
+            0x0E => Diagnostic::ServerMessageCount,
+            0x0F => Diagnostic::ServerNoResponseCount,
+            0x10 => Diagnostic::ServerNakCount,
+            0x11 => Diagnostic::ServerBusyCount,
+            0x12 => Diagnostic::BusCharacterOverrunCount,
+            0x14 => Diagnostic::ClearOverrunCounter,
+            _ => return None,
+        })
     }
 
     /// Whether `data` is an allowed data field for it.
@@ -164,5 +166,20 @@ impl LineCounts {
             Diagnostic::BusCharacterOverrunCount => count(self.overruns, since.overruns),
             _ => return None,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `from_code` knows the sub-functions of [`Diagnostic::ALL`], and no other code.
+    #[test]
+    fn from_code_is_the_inverse_of_code() {
+        for code in 0..=u16::MAX {
+            let expected = Diagnostic::ALL.into_iter().find(|d| d.code() == code);
+            assert_eq!(Diagnostic::from_code(code), expected, "{code:#06x}");
+        }
+        assert_eq!(Diagnostic::ClearOverrunCounter.code(), 0x14);
     }
 }
