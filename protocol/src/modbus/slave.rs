@@ -368,21 +368,23 @@ impl Slave {
         model: &mut impl DataModel,
     ) -> Result<(), Exception> {
         match *request {
-            Request::ReadCoils { address, quantity } => {
+            Request::ReadCoils { address, quantity }
+            | Request::ReadDiscreteInputs { address, quantity } => {
+                let table = match request {
+                    Request::ReadCoils { .. } => BitTable::Coils,
+                    _ => BitTable::DiscreteInputs,
+                };
                 let mut out = self.bits_mut(quantity)?;
-                model.read_bits(unit, BitTable::Coils, address, &mut out)
+                model.read_bits(unit, table, address, &mut out)
             }
-            Request::ReadDiscreteInputs { address, quantity } => {
-                let mut out = self.bits_mut(quantity)?;
-                model.read_bits(unit, BitTable::DiscreteInputs, address, &mut out)
-            }
-            Request::ReadHoldingRegisters { address, quantity } => {
+            Request::ReadHoldingRegisters { address, quantity }
+            | Request::ReadInputRegisters { address, quantity } => {
+                let table = match request {
+                    Request::ReadHoldingRegisters { .. } => RegisterTable::Holding,
+                    _ => RegisterTable::Input,
+                };
                 let out = self.registers_mut(quantity)?;
-                model.read_registers(unit, RegisterTable::Holding, address, out)
-            }
-            Request::ReadInputRegisters { address, quantity } => {
-                let out = self.registers_mut(quantity)?;
-                model.read_registers(unit, RegisterTable::Input, address, out)
+                model.read_registers(unit, table, address, out)
             }
             Request::WriteSingleCoil { address, value } => {
                 let byte = [u8::from(value)];
