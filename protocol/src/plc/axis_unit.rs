@@ -128,12 +128,10 @@ pub(super) fn readable(address: u16, table: RegisterTable) -> bool {
 }
 
 impl Gateway {
-    pub(super) fn axis_read(
-        &mut self,
-        axis: Axis,
-        table: RegisterTable,
-        address: u16,
-    ) -> Result<u16, Exception> {
+    /// One register of an axis unit that [`readable`] (or the position table, for holding
+    /// registers) allows in the table read: the caller has checked every address of the request
+    /// first, so the table is not looked at again here.
+    pub(super) fn axis_read(&mut self, axis: Axis, address: u16) -> Result<u16, Exception> {
         let plc = self.axes[axis];
         let config = self.config.axes[axis];
         let state = self.engine.axis(axis);
@@ -152,28 +150,26 @@ impl Gateway {
             CMER => Ok(plc.reason),
             LINK => Ok(link_code(state.link)),
             CMCT => Ok(plc.taken),
-            DRG1 if table == RegisterTable::Holding => Ok(plc.drg1),
-            POSR if table == RegisterTable::Holding => Ok(plc.posr),
-            a if table == RegisterTable::Holding && (DIRECT..DIRECT + DIRECT_MAX).contains(&a) => {
-                plc.direct
-                    .get(usize::from(a - DIRECT))
+            DRG1 => Ok(plc.drg1),
+            POSR => Ok(plc.posr),
+            a => {
+                if let Some(&value) = a
+                    .checked_sub(DIRECT)
+                    .and_then(|i| plc.direct.get(usize::from(i)))
+                {
+                    return Ok(value);
+                }
+                let (row, offset) = table::locate(a).ok_or(Exception::IllegalDataAddress)?;
+                let point = row_point(row)?;
+                let readback = self
+                    .points
+                    .get(axis, point)
+                    .ok_or(Exception::ServerDeviceFailure)?;
+                table::registers(&readback, &config)
+                    .get(usize::from(offset))
                     .copied()
                     .ok_or(Exception::IllegalDataAddress)
             }
-            a => match (table::locate(a), table) {
-                (Some((row, offset)), RegisterTable::Holding) => {
-                    let point = row_point(row)?;
-                    let readback = self
-                        .points
-                        .get(axis, point)
-                        .ok_or(Exception::ServerDeviceFailure)?;
-                    table::registers(&readback, &config)
-                        .get(usize::from(offset))
-                        .copied()
-                        .ok_or(Exception::IllegalDataAddress)
-                }
-                _ => Err(Exception::IllegalDataAddress),
-            },
         }
     }
 

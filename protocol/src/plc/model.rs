@@ -163,7 +163,7 @@ impl DataModel for Registers<'_> {
         for (i, slot) in out.iter_mut().enumerate() {
             let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
             *slot = match axis {
-                Some(axis) => gateway.axis_read(axis, table, a)?,
+                Some(axis) => gateway.axis_read(axis, a)?,
                 None => gateway.gateway_read(a, &self.link)?,
             };
         }
