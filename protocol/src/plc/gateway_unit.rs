@@ -20,8 +20,8 @@ use crate::engine::LinkError;
 use crate::line::Baud;
 use crate::modbus::{Exception, SlaveCounters};
 use crate::time::Duration;
-use crate::units::{Complement, Lead, Length};
-use crate::{Axis, HomeDirection, PositionNo, Rtim};
+use crate::units::{Lead, Length};
+use crate::{Axis, PositionNo, Rtim};
 
 /// AXISCFG field offsets.
 mod axis_cfg {
@@ -188,152 +188,198 @@ impl Gateway {
                 .all(|a| !self.engine.busy(a) && !self.engine.axis(a).moving())
     }
 
-    /// Check one gateway register write without applying it: 02 for an address that does not
-    /// exist, 03 for a read-only register or a value out of range.
-    fn gateway_check(&self, address: u16, value: u16) -> Result<(), Exception> {
-        if !map::gateway_writable(address).ok_or(Exception::IllegalDataAddress)? {
+    /// One gateway register write, checked, and carried out if `apply` (the command channel
+    /// and SYNCSTART aside, which [`gateway_write`](Self::gateway_write) does itself). A write
+    /// runs this twice: first every register is checked (02 for an address that does not
+    /// exist, 03 for a read-only register or a value out of range) and nothing changes, then
+    /// every register is applied in order. One function for both, so that each register's
+    /// rule and conversion are written (and in the firmware) once. When applying, the verdicts
+    /// are not asked again: the check said yes to each, and an earlier register of the same
+    /// write (APPLY, say) may have changed what a later one's rule looks at.
+    fn gateway_register(&mut self, address: u16, value: u16, apply: bool) -> Result<(), Exception> {
+        if !apply && !map::gateway_writable(address).ok_or(Exception::IllegalDataAddress)? {
             return Err(Exception::IllegalDataValue);
         }
         let valid = match address {
-            G_FAILSAFE => value == 0,
-            G_WATCHDOG => watchdog_ok(value),
-            G_BUS_BAUD => Baud::from_bits_per_second(u32::from(value) * 100).is_some(),
-            G_BUS_RTIM => u8::try_from(value).ok().and_then(Rtim::new).is_some(),
-            G_PLC_BAUD => PLC_BAUDS.contains(&(u32::from(value) * 100)),
-            G_PLC_PARITY => Parity::from_code(value).is_some(),
+            G_FAILSAFE => {
+                if apply {
+                    self.failsafe.clear();
+                }
+                value == 0
+            }
+            G_WATCHDOG => {
+                if apply {
+                    self.config.watchdog = Duration::from_millis(u64::from(value));
+                }
+                watchdog_ok(value)
+            }
+            G_BUS_BAUD => {
+                let baud = Baud::from_bits_per_second(u32::from(value) * 100);
+                if let (true, Some(baud)) = (apply, baud) {
+                    self.persist.baud = baud;
+                }
+                baud.is_some()
+            }
+            G_BUS_RTIM => {
+                let rtim = u8::try_from(value).ok().and_then(Rtim::new);
+                if let (true, Some(rtim)) = (apply, rtim) {
+                    self.persist.rtim = rtim;
+                }
+                rtim.is_some()
+            }
+            G_PLC_BAUD => {
+                let baud = u32::from(value) * 100;
+                if apply {
+                    self.persist.plc.baud = baud;
+                }
+                PLC_BAUDS.contains(&baud)
+            }
+            G_PLC_PARITY => {
+                let parity = Parity::from_code(value);
+                if let (true, Some(parity)) = (apply, parity) {
+                    self.persist.plc.parity = parity;
+                }
+                parity.is_some()
+            }
             // Not the unit of an axis that is (or will be) on the bus.
             G_UNIT_ID => {
                 let axes = AxisSet(self.config.bus.axes.0 | self.persist.axes.0);
-                unit_ok(value) && u8::try_from(value).is_ok_and(|u| axis_of(u, axes).is_none())
+                let unit = u8::try_from(value);
+                if let (true, Ok(unit)) = (apply, unit) {
+                    self.persist.unit = unit;
+                }
+                unit_ok(value) && unit.is_ok_and(|u| axis_of(u, axes).is_none())
             }
-            G_SAVE | G_RESTART => value <= 1,
-            G_FACTORY => value == 0 || value == FACTORY_KEY,
-            G_RETRIES => value <= MAX_RETRIES,
+            G_SAVE | G_RESTART => {
+                if apply && value == 1 {
+                    if address == G_SAVE {
+                        self.persist.save(&self.config);
+                    } else {
+                        self.persist.request = Some(Store::Restart);
+                    }
+                }
+                value <= 1
+            }
+            G_FACTORY => {
+                if apply && value == FACTORY_KEY {
+                    self.persist.request = Some(Store::FactoryReset);
+                }
+                value == 0 || value == FACTORY_KEY
+            }
+            G_RETRIES => {
+                if apply {
+                    self.engine.set_retries(u8::try_from(value).unwrap_or(3));
+                }
+                value <= MAX_RETRIES
+            }
+            G_APPLY if apply => {
+                if value == 1 {
+                    let pending = self.persist.pending(&self.config);
+                    self.plc_line_changed |= pending.plc != self.config.plc;
+                    self.config.plc = pending.plc;
+                    self.config.unit = pending.unit;
+                    self.config.bus.axes = pending.bus.axes;
+                    self.config.bus.baud = pending.bus.baud;
+                    self.config.bus.rtim = pending.bus.rtim;
+                    self.engine
+                        .reconfigure(pending.bus.axes, pending.bus.baud, pending.bus.rtim);
+                }
+                true
+            }
             G_APPLY => value == 0 || (value == 1 && self.bus_idle()),
-            G_WD_ACTION => WatchdogAction::from_code(value).is_some(),
-            G_PIO_AXIS => value == 0xFFFF || value <= 15,
-            G_SYNC_MASK => value & !self.config.bus.axes.0 == 0,
+            G_WD_ACTION => {
+                let action = WatchdogAction::from_code(value);
+                if let (true, Some(action)) = (apply, action) {
+                    self.config.watchdog_action = action;
+                }
+                action.is_some()
+            }
+            G_PIO_AXIS => {
+                if apply {
+                    self.config.pio_axis = u8::try_from(value).ok().and_then(Axis::new);
+                }
+                value == 0xFFFF || value <= 15
+            }
+            G_SYNC_MASK => {
+                let valid = value & !self.config.bus.axes.0 == 0;
+                if apply {
+                    self.sync.set_mask(AxisSet(value));
+                }
+                valid
+            }
             G_SYNC_START => value <= 1,
             a if Channel::is_request(a) => true,
             a => match per_axis(a, G_AXIS_CONFIG, G_AXIS_CONFIG_LEN) {
-                Some((axis, field)) => match field {
-                    // An axis whose unit is the gateway's cannot be enabled.
-                    axis_cfg::ENABLED => {
-                        value == 0 || (value == 1 && axis.get() + 1 != self.persist.unit)
-                    }
-                    axis_cfg::LEAD | axis_cfg::PULSES => value > 0,
-                    axis_cfg::HOME => home_of(value).is_some(),
-                    // The stroke's high word: strokes above i32::MAX (0.01 mm) make no sense.
-                    axis_cfg::STROKE_HI => value < 0x8000,
-                    axis_cfg::STROKE_LO => true,
-                    axis_cfg::COMPLEMENT => complement_of(value).is_some(),
-                    _ => false,
-                },
+                Some((axis, field)) => self.axis_config_register(axis, field, value, apply),
                 None => false,
             },
         };
-        if valid {
+        if valid || apply {
             Ok(())
         } else {
             Err(Exception::IllegalDataValue)
         }
     }
 
-    /// Apply one checked gateway register write (the command channel and SYNCSTART aside).
-    fn gateway_apply(&mut self, address: u16, value: u16) {
-        match address {
-            G_FAILSAFE => self.failsafe.clear(),
-            G_WATCHDOG => self.config.watchdog = Duration::from_millis(u64::from(value)),
-            G_BUS_BAUD => {
-                if let Some(baud) = Baud::from_bits_per_second(u32::from(value) * 100) {
-                    self.persist.baud = baud;
-                }
-            }
-            G_BUS_RTIM => {
-                if let Some(rtim) = u8::try_from(value).ok().and_then(Rtim::new) {
-                    self.persist.rtim = rtim;
-                }
-            }
-            G_PLC_BAUD => self.persist.plc.baud = u32::from(value) * 100,
-            G_PLC_PARITY => {
-                self.persist.plc.parity = match value {
-                    1 => Parity::Odd,
-                    2 => Parity::Even,
-                    _ => Parity::None,
-                }
-            }
-            G_UNIT_ID => self.persist.unit = u8::try_from(value).unwrap_or(self.persist.unit),
-            G_SAVE if value == 1 => self.persist.save(&self.config),
-            G_FACTORY if value == FACTORY_KEY => self.persist.request = Some(Store::FactoryReset),
-            G_RESTART if value == 1 => self.persist.request = Some(Store::Restart),
-            G_RETRIES => self.engine.set_retries(u8::try_from(value).unwrap_or(3)),
-            G_APPLY if value == 1 => {
-                let pending = self.persist.pending(&self.config);
-                self.plc_line_changed |= pending.plc != self.config.plc;
-                self.config.plc = pending.plc;
-                self.config.unit = pending.unit;
-                self.config.bus.axes = pending.bus.axes;
-                self.config.bus.baud = pending.bus.baud;
-                self.config.bus.rtim = pending.bus.rtim;
-                self.engine
-                    .reconfigure(pending.bus.axes, pending.bus.baud, pending.bus.rtim);
-            }
-            G_WD_ACTION => {
-                self.config.watchdog_action = if value == 0 {
-                    WatchdogAction::StopAll
+    /// AXISCFG field `field` of `axis`: whether `value` is valid, and if `apply` it is stored
+    /// (see [`gateway_register`](Self::gateway_register)).
+    fn axis_config_register(&mut self, axis: Axis, field: u16, value: u16, apply: bool) -> bool {
+        if field == axis_cfg::ENABLED {
+            // An axis whose unit is the gateway's cannot be enabled.
+            let valid = value == 0 || (value == 1 && axis.get() + 1 != self.persist.unit);
+            if apply {
+                self.persist.axes = if value == 1 {
+                    self.persist.axes.with(axis)
                 } else {
-                    WatchdogAction::LatchOnly
-                }
-            }
-            G_PIO_AXIS => self.config.pio_axis = u8::try_from(value).ok().and_then(Axis::new),
-            G_SYNC_MASK => self.sync.set_mask(AxisSet(value)),
-            a => {
-                let Some((axis, field)) = per_axis(a, G_AXIS_CONFIG, G_AXIS_CONFIG_LEN) else {
-                    return;
+                    self.persist.axes.without(axis)
                 };
-                if field == axis_cfg::ENABLED {
-                    self.persist.axes = if value == 1 {
-                        self.persist.axes.with(axis)
-                    } else {
-                        self.persist.axes.without(axis)
-                    };
-                    return;
-                }
-                let c = &mut self.config.axes[axis];
-                match field {
-                    axis_cfg::LEAD => {
-                        c.scale.lead = Lead::from_hundredths(value).unwrap_or(c.scale.lead)
-                    }
-                    axis_cfg::HOME => {
-                        c.scale.home = if value == 7 {
-                            HomeDirection::MotorEnd
-                        } else {
-                            HomeDirection::NonMotorEnd
-                        }
-                    }
-                    axis_cfg::PULSES => {
-                        c.scale.pulses_per_rev =
-                            core::num::NonZeroU16::new(value).unwrap_or(c.scale.pulses_per_rev)
-                    }
-                    axis_cfg::STROKE_HI | axis_cfg::STROKE_LO => {
-                        let [hi, lo] = split(u32::try_from(c.stroke.0).unwrap_or(0));
-                        let (hi, lo) = if field == axis_cfg::STROKE_HI {
-                            (value, lo)
-                        } else {
-                            (hi, value)
-                        };
-                        c.stroke = Length(i32::try_from(join(hi, lo)).unwrap_or(i32::MAX));
-                    }
-                    axis_cfg::COMPLEMENT => {
-                        c.scale.complement = if value == 1 {
-                            Complement::Ones
-                        } else {
-                            Complement::Twos
-                        }
-                    }
-                    _ => {}
-                }
             }
+            return valid;
+        }
+        let c = &mut self.config.axes[axis];
+        match field {
+            axis_cfg::LEAD => {
+                let lead = Lead::from_hundredths(value);
+                if let (true, Some(lead)) = (apply, lead) {
+                    c.scale.lead = lead;
+                }
+                lead.is_some()
+            }
+            axis_cfg::PULSES => {
+                let pulses = core::num::NonZeroU16::new(value);
+                if let (true, Some(pulses)) = (apply, pulses) {
+                    c.scale.pulses_per_rev = pulses;
+                }
+                pulses.is_some()
+            }
+            axis_cfg::HOME => {
+                let home = home_of(value);
+                if let (true, Some(home)) = (apply, home) {
+                    c.scale.home = home;
+                }
+                home.is_some()
+            }
+            axis_cfg::STROKE_HI | axis_cfg::STROKE_LO => {
+                if apply {
+                    let [hi, lo] = split(u32::try_from(c.stroke.0).unwrap_or(0));
+                    let (hi, lo) = if field == axis_cfg::STROKE_HI {
+                        (value, lo)
+                    } else {
+                        (hi, value)
+                    };
+                    c.stroke = Length(i32::try_from(join(hi, lo)).unwrap_or(i32::MAX));
+                }
+                // The stroke's high word: strokes above i32::MAX (0.01 mm) make no sense.
+                field == axis_cfg::STROKE_LO || value < 0x8000
+            }
+            axis_cfg::COMPLEMENT => {
+                let complement = complement_of(value);
+                if let (true, Some(complement)) = (apply, complement) {
+                    c.scale.complement = complement;
+                }
+                complement.is_some()
+            }
+            _ => false,
         }
     }
 
@@ -343,7 +389,7 @@ impl Gateway {
     pub(super) fn gateway_write(&mut self, address: u16, values: &[u16]) -> Result<(), Exception> {
         for (i, &value) in values.iter().enumerate() {
             let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
-            self.gateway_check(a, value)?;
+            self.gateway_register(a, value, false)?;
         }
         let at = |register: u16| {
             register
@@ -365,8 +411,9 @@ impl Gateway {
             self.channel.store(request, start, &mut self.engine)?;
         }
         for (i, &value) in values.iter().enumerate() {
-            if let Some(a) = nth(address, i).filter(|&a| a != G_SYNC_START) {
-                self.gateway_apply(a, value);
+            if let Some(a) = nth(address, i) {
+                // Checked above: applying cannot fail.
+                let _ = self.gateway_register(a, value, true);
             }
         }
         if start_sync {
