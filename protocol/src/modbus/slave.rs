@@ -307,7 +307,7 @@ impl Slave {
         }
         let result = request.and_then(|request| {
             self.execute(unit, &request, model)?;
-            self.encode(unit, &request, model, &mut reply.bytes)
+            self.encode(unit, adu.function(), &request, model, &mut reply.bytes)
         });
         let len = match result {
             Ok(len) => len,
@@ -450,17 +450,19 @@ impl Slave {
 
     /// The normal reply to a carried-out request (Application Protocol §6); its length, or
     /// the exception to answer instead (04 if it does not fit, which cannot happen). Every
-    /// reply starts with the unit and the function code, written once for all.
+    /// reply starts with the unit and the function code (the frame's: the request's own),
+    /// written once for all.
     fn encode(
         &self,
         unit: u8,
+        function: u8,
         request: &Request<'_>,
         model: &impl DataModel,
         out: &mut [u8],
     ) -> Result<usize, Exception> {
         let mut w = Writer::new(out);
         w.byte(unit);
-        w.byte(request.function());
+        w.byte(function);
         match *request {
             Request::ReadCoils { quantity, .. } | Request::ReadDiscreteInputs { quantity, .. } => {
                 let bytes = match &self.scratch {
