@@ -177,18 +177,22 @@ impl PointCache {
             Ok(JobOutput::Point(readback) | JobOutput::Unchanged(readback)) => Some(*readback),
             _ => None,
         };
-        if let Some(read) = self.reads[axis].filter(|r| r.id == id) {
+        let read = self.reads[axis].filter(|r| r.id == id);
+        if read.is_some() {
             self.reads[axis] = None;
-            if let (false, Some(row)) = (read.stale, row) {
-                self.put(axis, read.point, row);
-            }
         }
-        if let Some((_, point)) = self.writes[axis].filter(|(w, _)| *w == id) {
+        let write = self.writes[axis].filter(|(w, _)| *w == id);
+        if write.is_some() {
             self.writes[axis] = None;
-            // The verified read-back, or nothing if the write failed.
-            if let Some(row) = row {
-                self.put(axis, point, row);
-            }
+        }
+        // The row a read fetched (unless a write made it stale), or a write's verified
+        // read-back (nothing if the write failed): one job is never both.
+        let point = match (read, write) {
+            (Some(read), _) => (!read.stale).then_some(read.point),
+            (None, write) => write.map(|(_, point)| point),
+        };
+        if let (Some(point), Some(row)) = (point, row) {
+            self.put(axis, point, row);
         }
     }
 }
