@@ -118,11 +118,11 @@ impl Channel {
         if code == 0 {
             return Ok(None);
         }
-        if request == self.request && self.state != State::Idle {
+        if request == self.request && !matches!(self.state, State::Idle) {
             // The same request written again while it runs or is answered: nothing new.
             return Ok(None);
         }
-        if self.state != State::Idle || self.response[0] != 0 {
+        if !matches!(self.state, State::Idle) || self.response[0] != 0 {
             return Err(Exception::ServerDeviceFailure);
         }
         let axis = u8::try_from(axis)
@@ -150,7 +150,7 @@ impl Channel {
     ) -> Result<(), Exception> {
         let Some((axis, point)) = start else {
             self.request = request;
-            if request[0] == 0 && self.state == State::Answered {
+            if request[0] == 0 && matches!(self.state, State::Answered) {
                 // Step 4 -> 5: the PLC cleared its request, the gateway clears the response.
                 self.response = [0; RESP_LEN];
                 self.state = State::Idle;
