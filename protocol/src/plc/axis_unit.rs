@@ -10,7 +10,7 @@ use super::map::*;
 use super::registers::{join, status_block};
 use super::table;
 use crate::engine::{JobId, JobKind, Link};
-use crate::modbus::{Exception, RegisterTable};
+use crate::modbus::{Bits, Exception, RegisterTable};
 use crate::time::Instant;
 use crate::units::{Accel, Length, Speed};
 use crate::{Axis, HomeDirection, PositionNo};
@@ -369,44 +369,46 @@ impl Gateway {
         self.points.store(axis, point, data, &mut self.engine)
     }
 
-    /// FC05/FC0F to an axis unit.
+    /// FC05/FC0F to an axis unit: the stops first, then the rest in address order (two passes
+    /// over the coils through one loop body, so that each coil's code is there once).
     pub(super) fn axis_coils(
         &mut self,
         axis: Axis,
         address: u16,
-        values: impl Iterator<Item = bool> + Clone,
+        values: Bits<'_>,
     ) -> Result<(), Exception> {
-        coils_exist(address, values.clone().count())?;
-        let writes = values
-            .enumerate()
-            .filter_map(|(i, on)| nth(address, i).map(|a| (a, on)));
-        // Stops first, then the rest in address order.
-        for (a, on) in writes.clone() {
-            let drg1 = self.axes[axis].drg1;
-            match a {
-                COIL_STOP if on => self.command(axis, JobKind::Stop)?,
-                COIL_STP => self.write_drg1(axis, with_bit(drg1, DRG1_STP, on))?,
-                _ => {}
-            }
-        }
-        for (a, on) in writes {
-            let plc = self.axes[axis];
-            match a {
-                COIL_SON => self.write_drg1(axis, with_bit(plc.drg1, DRG1_SON, on))?,
-                COIL_ALRS => {
-                    if on && !plc.coil_alrs {
-                        self.command(axis, JobKind::AlarmReset)?;
+        coils_exist(address, values.len())?;
+        for stops in [true, false] {
+            for (i, on) in values.iter().enumerate() {
+                let Some(a) = nth(address, i) else {
+                    continue;
+                };
+                let plc = self.axes[axis];
+                let (bit, level) = match (a, stops) {
+                    (COIL_STOP, true) if on => {
+                        self.command(axis, JobKind::Stop)?;
+                        continue;
                     }
-                    self.axes[axis].coil_alrs = on;
-                }
-                COIL_HOME => {
-                    if on && !plc.coil_home {
-                        let home = self.home_direction(axis);
-                        self.command(axis, JobKind::Home(home))?;
+                    (COIL_STP, true) => (DRG1_STP, on),
+                    (COIL_SON, false) => (DRG1_SON, on),
+                    (COIL_ALRS, false) => {
+                        if on && !plc.coil_alrs {
+                            self.command(axis, JobKind::AlarmReset)?;
+                        }
+                        self.axes[axis].coil_alrs = on;
+                        continue;
                     }
-                    self.axes[axis].coil_home = on;
-                }
-                _ => {}
+                    (COIL_HOME, false) => {
+                        if on && !plc.coil_home {
+                            let home = self.home_direction(axis);
+                            self.command(axis, JobKind::Home(home))?;
+                        }
+                        self.axes[axis].coil_home = on;
+                        continue;
+                    }
+                    _ => continue,
+                };
+                self.write_drg1(axis, with_bit(plc.drg1, bit, level))?;
             }
         }
         Ok(())

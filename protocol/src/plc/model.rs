@@ -182,7 +182,7 @@ impl DataModel for Registers<'_> {
                 .any(|(i, on)| on && matches!(nth(address, i), Some(COIL_STOP | COIL_STP)));
             for axis in gateway.config.bus.axes.iter() {
                 if gateway.engine.online(axis) {
-                    gateway.axis_coils(axis, address, values.iter())?;
+                    gateway.axis_coils(axis, address, values)?;
                 } else if stops {
                     gateway.command(axis, JobKind::Stop)?;
                 }
@@ -193,7 +193,7 @@ impl DataModel for Registers<'_> {
             .config
             .axis_of_unit(unit)
             .ok_or(Exception::IllegalDataAddress)?;
-        gateway.axis_coils(axis, address, values.iter())
+        gateway.axis_coils(axis, address, values)
     }
 
     fn write_registers(&mut self, unit: u8, address: u16, values: &[u16]) -> Result<(), Exception> {
