@@ -304,27 +304,11 @@ impl Gateway {
     /// but a stop is refused with 04 (nothing recorded) while the axis does not answer, so that
     /// it can never run late when the axis appears.
     pub fn command(&mut self, axis: Axis, kind: JobKind) -> Result<(), Exception> {
-        if kind == JobKind::Stop {
-            // A stop is an interrupt, not a command with an outcome of its own: CMST keeps
-            // showing the command it cancels (failed, reason 6).
-            let submitted = self
-                .engine
-                .submit(Job { axis, kind })
-                .map(|_| ())
-                .map_err(|_| Exception::ServerDeviceFailure);
-            self.handle_events();
-            // After the stop (which cancels the axis' queued jobs): give the synchronized start
-            // up and cancel what it buffered.
-            if self.sync.involves(axis) {
-                if let Some(end) = self.sync.fail(&mut self.engine) {
-                    self.sync_ended(end);
-                }
-            }
-            return submitted;
-        }
-        if !self.engine.online(axis) {
+        let stop = kind == JobKind::Stop;
+        if !stop && !self.engine.online(axis) {
             return Err(Exception::ServerDeviceFailure);
         }
+        // (A stop does not move the axis: it is never blocked.)
         let motion = Motion::of(&kind);
         let blocked = motion != Motion::None && self.blocked().contains(axis);
         let result = if blocked {
@@ -334,6 +318,21 @@ impl Gateway {
                 SubmitError::QueueFull | SubmitError::AxisDisabled => Reason::QueueFull,
             })
         };
+        if stop {
+            // A stop is an interrupt, not a command with an outcome of its own: CMST keeps
+            // showing the command it cancels (failed, reason 6).
+            self.handle_events();
+            // After the stop (which cancels the axis' queued jobs): give the synchronized start
+            // up and cancel what it buffered.
+            if self.sync.involves(axis) {
+                if let Some(end) = self.sync.fail(&mut self.engine) {
+                    self.sync_ended(end);
+                }
+            }
+            return result
+                .map(|_| ())
+                .map_err(|_| Exception::ServerDeviceFailure);
+        }
         let plc = &mut self.axes[axis];
         match result {
             Ok(id) => {
