@@ -418,12 +418,13 @@ impl Gateway {
     /// A synchronized start ended: each axis still showing it follows its move to the end, or
     /// fails with the start.
     fn sync_ended(&mut self, end: SyncEnd) {
-        match end {
-            SyncEnd::Started(axes) => {
-                for axis in axes.iter() {
-                    if !self.axes[axis].sync {
-                        continue;
-                    }
+        let (SyncEnd::Started(axes) | SyncEnd::Failed(axes, _)) = end;
+        for axis in axes.iter() {
+            if !self.axes[axis].sync {
+                continue;
+            }
+            let reason = match end {
+                SyncEnd::Started(_) => {
                     let job = Job {
                         axis,
                         kind: JobKind::AwaitInPosition,
@@ -431,18 +432,16 @@ impl Gateway {
                     let plc = &mut self.axes[axis];
                     plc.sync = false;
                     match self.engine.submit(job) {
-                        Ok(id) => plc.job = Some(id),
-                        Err(_) => plc.fail(Reason::QueueFull.code(0)),
+                        Ok(id) => {
+                            plc.job = Some(id);
+                            continue;
+                        }
+                        Err(_) => Reason::QueueFull.code(0),
                     }
                 }
-            }
-            SyncEnd::Failed(axes, reason) => {
-                for axis in axes.iter() {
-                    if self.axes[axis].sync {
-                        self.axes[axis].fail(reason);
-                    }
-                }
-            }
+                SyncEnd::Failed(_, reason) => reason,
+            };
+            self.axes[axis].fail(reason);
         }
     }
 }
