@@ -330,16 +330,17 @@ impl Gateway {
                 Ok(())
             }
             (DRG1..=POSR, _) | (PNOW..=CMCT, _) => Err(Exception::IllegalDataValue),
-            (a, _) if table::locate(a).is_some() => self.table_write(axis, a, values),
-            _ => Err(Exception::IllegalDataAddress),
+            // A row is written whole, from its first register.
+            (a, _) => match table::locate(a) {
+                Some((row, 0)) => self.table_write(axis, row, values),
+                _ => Err(Exception::IllegalDataAddress),
+            },
         }
     }
 
-    /// A whole row written at 0x1000 + 16 n: stored unless the controller already holds it.
-    fn table_write(&mut self, axis: Axis, address: u16, values: &[u16]) -> Result<(), Exception> {
-        let Some((row, 0)) = table::locate(address) else {
-            return Err(Exception::IllegalDataAddress);
-        };
+    /// Row `row`, written whole at 0x1000 + 16 n: stored unless the controller already holds
+    /// it.
+    fn table_write(&mut self, axis: Axis, row: u16, values: &[u16]) -> Result<(), Exception> {
         if !(15..=16).contains(&values.len()) {
             return Err(Exception::IllegalDataAddress);
         }
