@@ -117,55 +117,53 @@ impl Diagnostic {
     }
 }
 
-/// The serial-line counters of Serial Line §6.1 at one moment, from the slave's counts.
+/// The serial-line counters of Serial Line §6.1 at one moment, from the slave's counts: bus
+/// messages, bus errors, exceptions, server messages, no response, overruns (an array, so
+/// that a sub-function's counter is found by its place rather than by a match of its own).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub(super) struct LineCounts {
-    pub(super) bus_messages: u32,
-    pub(super) bus_errors: u32,
-    pub(super) exceptions: u32,
-    pub(super) server_messages: u32,
-    pub(super) no_response: u32,
-    pub(super) overruns: u32,
-}
+pub(super) struct LineCounts(pub(super) [u32; 6]);
+
+// Where each count is in [`LineCounts`].
+const BUS_MESSAGES: usize = 0;
+const BUS_ERRORS: usize = 1;
+const EXCEPTIONS: usize = 2;
+const SERVER_MESSAGES: usize = 3;
+const NO_RESPONSE: usize = 4;
+/// The overrun count, which FC08 sub-function 0x14 clears alone.
+pub(super) const OVERRUNS: usize = 5;
 
 impl LineCounts {
-    pub(super) const ZERO: LineCounts = LineCounts {
-        bus_messages: 0,
-        bus_errors: 0,
-        exceptions: 0,
-        server_messages: 0,
-        no_response: 0,
-        overruns: 0,
-    };
+    pub(super) const ZERO: LineCounts = LineCounts([0; 6]);
 
     pub(super) fn of(c: &SlaveCounters) -> LineCounts {
-        LineCounts {
-            bus_messages: c.frames,
-            bus_errors: c.crc_errors,
-            exceptions: c
-                .illegal_function
+        // In the order of the places above.
+        LineCounts([
+            c.frames,
+            c.crc_errors,
+            c.illegal_function
                 .wrapping_add(c.illegal_data_address)
                 .wrapping_add(c.illegal_data_value)
                 .wrapping_add(c.server_device_failure),
-            server_messages: c.served,
-            no_response: c.unanswered,
-            overruns: c.too_long,
-        }
+            c.served,
+            c.unanswered,
+            c.too_long,
+        ])
     }
 
     /// The counter a sub-function returns, counted since `since`.
     pub(super) fn value(&self, since: &LineCounts, sub: Diagnostic) -> Option<u16> {
-        let count = |now: u32, then: u32| (now.wrapping_sub(then) & 0xFFFF) as u16;
-        Some(match sub {
-            Diagnostic::BusMessageCount => count(self.bus_messages, since.bus_messages),
-            Diagnostic::BusCommunicationErrorCount => count(self.bus_errors, since.bus_errors),
-            Diagnostic::BusExceptionErrorCount => count(self.exceptions, since.exceptions),
-            Diagnostic::ServerMessageCount => count(self.server_messages, since.server_messages),
-            Diagnostic::ServerNoResponseCount => count(self.no_response, since.no_response),
-            Diagnostic::ServerNakCount | Diagnostic::ServerBusyCount => 0,
-            Diagnostic::BusCharacterOverrunCount => count(self.overruns, since.overruns),
+        let at = match sub {
+            Diagnostic::BusMessageCount => BUS_MESSAGES,
+            Diagnostic::BusCommunicationErrorCount => BUS_ERRORS,
+            Diagnostic::BusExceptionErrorCount => EXCEPTIONS,
+            Diagnostic::ServerMessageCount => SERVER_MESSAGES,
+            Diagnostic::ServerNoResponseCount => NO_RESPONSE,
+            Diagnostic::BusCharacterOverrunCount => OVERRUNS,
+            Diagnostic::ServerNakCount | Diagnostic::ServerBusyCount => return Some(0),
             _ => return None,
-        })
+        };
+        let (now, then) = (self.0.get(at)?, since.0.get(at)?);
+        Some((now.wrapping_sub(*then) & 0xFFFF) as u16)
     }
 }
 

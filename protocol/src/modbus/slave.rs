@@ -23,7 +23,7 @@
 
 use super::adu::{Adu, FrameError, Writer, MAX_ADU_LEN};
 use super::bits::{Bits, BitsMut};
-use super::diag::{Diagnostic, LineCounts};
+use super::diag::{Diagnostic, LineCounts, OVERRUNS};
 use super::ident::{self, RUN_OFF, RUN_ON};
 use super::pdu::{self, PduError, Request, MAX_READ_BITS, MAX_READ_REGISTERS};
 use super::rtu::Receiver;
@@ -332,7 +332,11 @@ impl Slave {
             Ok(Request::Diagnostic {
                 sub: Diagnostic::ClearOverrunCounter,
                 ..
-            }) => self.cleared.overruns = self.counters.too_long,
+            }) => {
+                if let Some(overruns) = self.cleared.0.get_mut(OVERRUNS) {
+                    *overruns = self.counters.too_long;
+                }
+            }
             _ => {}
         }
         Handled::Reply(len)
