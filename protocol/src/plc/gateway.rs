@@ -230,12 +230,22 @@ impl Gateway {
     /// Whether something needs the operator's attention: a latched fail-safe, or an axis in
     /// alarm or offline.
     pub fn alarm(&self) -> bool {
-        self.failsafe.latched() != 0
-            || self.config.bus.axes.iter().any(|a| {
-                let state = self.engine.axis(a);
-                state.link == Link::Offline
-                    || state.report.is_some_and(|r| r.outputs.alarm_active())
-            })
+        self.failsafe.latched() != 0 || {
+            let (offline, alarm) = self.trouble(self.config.bus.axes);
+            offline || alarm
+        }
+    }
+
+    /// Whether any of `axes` is offline, and whether any is in alarm (one walk over them for
+    /// both, shared with the diagnostic register).
+    pub(super) fn trouble(&self, axes: AxisSet) -> (bool, bool) {
+        let (mut offline, mut alarm) = (false, false);
+        for a in axes.iter() {
+            let state = self.engine.axis(a);
+            offline |= state.link == Link::Offline;
+            alarm |= state.report.is_some_and(|r| r.outputs.alarm_active());
+        }
+        (offline, alarm)
     }
 
     /// SON is a level, as on a PCON: while the PLC holds it ON, a servo that went off (the alarm

@@ -65,25 +65,12 @@ impl Registers<'_> {
 impl DataModel for Registers<'_> {
     fn diagnostic_register(&self, unit: u8) -> u16 {
         let gateway = &*self.gateway;
-        let engine = gateway.engine();
-        let axes = self.axes_of(unit);
-        let any = |f: &dyn Fn(crate::Axis) -> bool| axes.iter().any(f);
+        let (offline, alarm) = gateway.trouble(self.axes_of(unit));
         let bit = |on: bool, mask: u16| if on { mask } else { 0 };
         gateway.failsafe.latched() & (diagnostic::WATCHDOG | diagnostic::STOP_INPUT)
-            | bit(
-                any(&|a| engine.axis(a).link == crate::engine::Link::Offline),
-                diagnostic::OFFLINE,
-            )
-            | bit(
-                any(&|a| {
-                    engine
-                        .axis(a)
-                        .report
-                        .is_some_and(|r| r.outputs.alarm_active())
-                }),
-                diagnostic::ALARM,
-            )
-            | bit(engine.establishing(), diagnostic::ESTABLISHING)
+            | bit(offline, diagnostic::OFFLINE)
+            | bit(alarm, diagnostic::ALARM)
+            | bit(gateway.engine().establishing(), diagnostic::ESTABLISHING)
             | bit(gateway.failsafe.stop_input(), diagnostic::STOPPED)
     }
 
