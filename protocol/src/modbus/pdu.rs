@@ -234,20 +234,18 @@ impl<'a> Request<'a> {
             return Err(Exception::IllegalDataValue.into());
         }
         let request = match function {
-            READ_COILS | READ_DISCRETE_INPUTS => {
-                let (address, quantity) = read(pdu, MAX_READ_BITS)?;
-                if function == READ_COILS {
-                    Request::ReadCoils { address, quantity }
+            READ_COILS..=READ_INPUT_REGISTERS => {
+                let max = if function <= READ_DISCRETE_INPUTS {
+                    MAX_READ_BITS
                 } else {
-                    Request::ReadDiscreteInputs { address, quantity }
-                }
-            }
-            READ_HOLDING_REGISTERS | READ_INPUT_REGISTERS => {
-                let (address, quantity) = read(pdu, MAX_READ_REGISTERS)?;
-                if function == READ_HOLDING_REGISTERS {
-                    Request::ReadHoldingRegisters { address, quantity }
-                } else {
-                    Request::ReadInputRegisters { address, quantity }
+                    MAX_READ_REGISTERS
+                };
+                let (address, quantity) = read(pdu, max)?;
+                match function {
+                    READ_COILS => Request::ReadCoils { address, quantity },
+                    READ_DISCRETE_INPUTS => Request::ReadDiscreteInputs { address, quantity },
+                    READ_HOLDING_REGISTERS => Request::ReadHoldingRegisters { address, quantity },
+                    _ => Request::ReadInputRegisters { address, quantity },
                 }
             }
             WRITE_SINGLE_COIL => {
