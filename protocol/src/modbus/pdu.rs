@@ -205,16 +205,18 @@ fn read(pdu: &[u8], max: u16) -> Result<(u16, u16), Exception> {
     Ok((address, quantity))
 }
 
-/// Address, quantity and values of a multiple write (FC0F, FC10): byte count == `bytes(qty)`.
-fn write_multiple(
-    pdu: &[u8],
-    max: u16,
-    bytes: fn(u16) -> usize,
-) -> Result<(u16, u16, &[u8]), Exception> {
+/// Address, quantity and values of a multiple write of coils (FC0F) or registers (FC10): byte
+/// count == the bytes of the quantity (packed bits, or two per register).
+fn write_multiple(pdu: &[u8], coils: bool) -> Result<(u16, u16, &[u8]), Exception> {
     let (address, quantity) = (field(pdu, 1), field(pdu, 3));
+    let (max, bytes) = if coils {
+        (MAX_WRITE_BITS, usize::from(quantity).div_ceil(8))
+    } else {
+        (MAX_WRITE_REGISTERS, 2 * usize::from(quantity))
+    };
     check_quantity(quantity, max)?;
     let byte_count = usize::from(*pdu.get(5).ok_or(Exception::IllegalDataValue)?);
-    if byte_count != bytes(quantity) {
+    if byte_count != bytes {
         return Err(Exception::IllegalDataValue);
     }
     expect_len(pdu, 6 + byte_count)?;
@@ -267,19 +269,18 @@ impl<'a> Request<'a> {
                     value: field(pdu, 3),
                 }
             }
-            WRITE_MULTIPLE_COILS => {
-                let (address, quantity, values) =
-                    write_multiple(pdu, MAX_WRITE_BITS, |q| usize::from(q).div_ceil(8))?;
-                Request::WriteMultipleCoils {
-                    address,
-                    quantity,
-                    values,
+            WRITE_MULTIPLE_COILS | WRITE_MULTIPLE_REGISTERS => {
+                let coils = function == WRITE_MULTIPLE_COILS;
+                let (address, quantity, values) = write_multiple(pdu, coils)?;
+                if coils {
+                    Request::WriteMultipleCoils {
+                        address,
+                        quantity,
+                        values,
+                    }
+                } else {
+                    Request::WriteMultipleRegisters { address, values }
                 }
-            }
-            WRITE_MULTIPLE_REGISTERS => {
-                let (address, _, values) =
-                    write_multiple(pdu, MAX_WRITE_REGISTERS, |q| 2 * usize::from(q))?;
-                Request::WriteMultipleRegisters { address, values }
             }
             DIAGNOSTICS => {
                 if pdu.len() < 3 {
