@@ -250,23 +250,18 @@ impl<'a> Request<'a> {
                     _ => Request::ReadInputRegisters { address, quantity },
                 }
             }
-            WRITE_SINGLE_COIL => {
+            WRITE_SINGLE_COIL | WRITE_SINGLE_REGISTER => {
                 expect_len(pdu, 5)?;
-                let value = match field(pdu, 3) {
-                    COIL_ON => true,
-                    0 => false,
-                    _ => return Err(Exception::IllegalDataValue.into()),
-                };
-                Request::WriteSingleCoil {
-                    address: field(pdu, 1),
-                    value,
-                }
-            }
-            WRITE_SINGLE_REGISTER => {
-                expect_len(pdu, 5)?;
-                Request::WriteSingleRegister {
-                    address: field(pdu, 1),
-                    value: field(pdu, 3),
+                let (address, value) = (field(pdu, 1), field(pdu, 3));
+                if function == WRITE_SINGLE_REGISTER {
+                    Request::WriteSingleRegister { address, value }
+                } else {
+                    let value = match value {
+                        COIL_ON => true,
+                        0 => false,
+                        _ => return Err(Exception::IllegalDataValue.into()),
+                    };
+                    Request::WriteSingleCoil { address, value }
                 }
             }
             WRITE_MULTIPLE_COILS | WRITE_MULTIPLE_REGISTERS => {
