@@ -7,8 +7,6 @@
 //! linker finds here in `OUT_DIR` (on its search path). The board file must not be called
 //! `memory.x`: the linker would read the top-level one first.
 //!
-//! `RC_GATEWAY_BOARD_LAYOUT` (a path) replaces the board's layout: scripts/size-report.sh uses it
-//! to measure a build that does not fit its chip (how far over it is), never for a build to flash.
 //! `-Tlink.x` lives in `.cargo/config.toml` (every build needs it); `-Tdefmt.x` is here because
 //! only the `hw` feature links defmt, and the linker fails on a script that no crate provides.
 
@@ -22,8 +20,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     } else {
         "memory/l475vg.x"
     };
-    let layout = env::var_os("RC_GATEWAY_BOARD_LAYOUT").map_or_else(|| board.into(), PathBuf::from);
-    fs::copy(&layout, out.join("board.x"))?;
+    fs::copy(board, out.join("board.x"))?;
     // Also where the linker looks when its working directory is not the package root.
     fs::copy("memory.x", out.join("memory.x"))?;
     println!("cargo:rustc-link-search={}", out.display());
@@ -32,7 +29,6 @@ fn main() -> Result<(), Box<dyn Error>> {
     }
     println!("cargo:rerun-if-changed=memory.x");
     println!("cargo:rerun-if-changed=memory");
-    println!("cargo:rerun-if-env-changed=RC_GATEWAY_BOARD_LAYOUT");
     println!("cargo:rerun-if-changed=build.rs");
     Ok(())
 }

@@ -4,7 +4,8 @@ its call graph if that is deeper: scripts/stack_depth.py), each against its budg
 the bytes go (by crate, and the largest symbols).
 
 Arguments: TOP HWM_LOG CHECK OBJDUMP, then per board: NAME ELF FLASH_START FLASH_END RAM_START
-RAM_END FLASH_BUDGET_KIB RAM_BUDGET_KIB.
+RAM_END FLASH_BUDGET_KIB RAM_BUDGET_KIB ENFORCED. With CHECK 1, a board that is over a budget fails
+the report if it is ENFORCED (1); the others' budgets are targets, reported.
 """
 
 import collections
@@ -121,18 +122,25 @@ def main(argv):
         sys.exit(f"no stack measurement in {hwm_path}: did scripts/emu-test.sh run?")
     boards = argv[4:]
     failures = []
-    for i in range(0, len(boards), 8):
-        name, elf, fs, fe, rs, re_, fb, rb = boards[i:i + 8]
+    targets_missed = []
+    for i in range(0, len(boards), 9):
+        name, elf, fs, fe, rs, re_, fb, rb, enforced = boards[i:i + 9]
         over = report(name, elf, (int(fs, 16), int(fe, 16)), (int(rs, 16), int(re_, 16)),
                       int(fb) * 1024, int(rb) * 1024, stack, stack_where, top, objdump)
-        failures += [f"{name.split()[0]} {what}" for what in over]
+        missed = [f"{name.split()[0]} {what}" for what in over]
+        if enforced == "1":
+            failures += missed
+        else:
+            targets_missed += missed
         print()
+    if targets_missed:
+        print(f"over a target (reported, not enforced): {', '.join(targets_missed)}")
     if failures:
         print(f"over budget: {', '.join(failures)}")
         if check:
             sys.exit(1)
     else:
-        print("every board within budget")
+        print("every enforced budget met")
 
 
 if __name__ == "__main__":
