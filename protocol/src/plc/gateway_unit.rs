@@ -194,7 +194,8 @@ impl Gateway {
     /// exist, 03 for a read-only register or a value out of range) and nothing changes, then
     /// every register is applied in order. One function for both, so that each register's
     /// rule and conversion are written (and in the firmware) once. When applying, the verdicts
-    /// are not asked again: the check said yes to each, and an earlier register of the same
+    /// do not count (the map look-up and APPLY's idle test are skipped; the other rules are
+    /// worked out and ignored): the check said yes to each, and an earlier register of the same
     /// write (APPLY, say) may have changed what a later one's rule looks at.
     fn gateway_register(&mut self, address: u16, value: u16, apply: bool) -> Result<(), Exception> {
         if !apply && !map::gateway_writable(address).ok_or(Exception::IllegalDataAddress)? {
