@@ -71,19 +71,20 @@ fn a_field_out_of_range_is_refused() {
         r[RECORD_LEN - 2..].copy_from_slice(&sum.to_le_bytes());
         Settings::decode(&r)
     };
-    let cases: [(usize, &[u8]); 12] = [
-        (1, &[0]),                   // unit 0
-        (1, &[248]),                 // unit past 247
-        (1, &[2]),                   // unit 2 = axis 1's, which is on the bus
-        (2, &1234u32.to_le_bytes()), // PLC rate
-        (6, &[3]),                   // parity
-        (7, &10u16.to_le_bytes()),   // watchdog below 50 ms
-        (9, &[2]),                   // watchdog action
-        (10, &[0x15]),               // BRSL
-        (11, &[2]),                  // RTIM below 3
-        (12, &[4]),                  // resends
-        (16, &0u16.to_le_bytes()),   // axis 0 lead 0
-        (16 + 4, &[9]),              // axis 0 home end
+    let cases: [(usize, &[u8]); 13] = [
+        (1, &[0]),                        // unit 0
+        (1, &[248]),                      // unit past 247
+        (1, &[2]),                        // unit 2 = axis 1's, which is on the bus
+        (2, &1234u32.to_le_bytes()),      // PLC rate
+        (6, &[3]),                        // parity
+        (7, &10u16.to_le_bytes()),        // watchdog below 50 ms
+        (9, &[2]),                        // watchdog action
+        (10, &[0x15]),                    // BRSL
+        (11, &[2]),                       // RTIM below 3
+        (12, &[4]),                       // resends
+        (16, &0u16.to_le_bytes()),        // axis 0 lead 0
+        (16 + 4, &[9]),                   // axis 0 home end
+        (16 + 6, &(-1i32).to_le_bytes()), // axis 0 stroke below 0
     ];
     for (at, bytes) in cases {
         assert_eq!(
@@ -125,7 +126,7 @@ fn settings() -> impl Strategy<Value = Settings> {
                 } else {
                     protocol::units::Complement::Ones
                 };
-                a.stroke = protocol::units::Length(i32::from(stroke) + 1);
+                a.stroke = protocol::units::Length(i32::from(stroke));
             }
             Settings::of(&c)
         })
@@ -188,6 +189,27 @@ fn save_stores_the_settings_with_the_pending_ones() {
         );
     }
     assert_eq!(rig.stores.len(), 1, "nothing else asked of the flash");
+}
+
+/// Whatever the registers accept, a save stores and the next start loads: a stroke of 0 (only
+/// direct moves to 0 allowed) is one the PLC can set, so a record with it must not be refused
+/// as damaged (which would drop every setting for the defaults).
+#[test]
+fn a_saved_stroke_of_zero_loads() {
+    let mut rig = Rig::ready(1, |_| {});
+    // Axis 1's AXISCFG: stroke high and low words (offsets 4 and 5).
+    rig.write(63, G_AXIS_CONFIG + 8 + 4, &[0, 0]).unwrap();
+    rig.write(63, G_SAVE, &[1]).unwrap();
+    rig.run_for(10 * MS);
+    let record = match rig.stores.as_slice() {
+        [(_, Store::Save(record))] => *record,
+        other => panic!("one save expected: {other:?}"),
+    };
+    let saved = Settings::decode(&record).expect("the saved record loads");
+    assert_eq!(
+        saved.axis_config[axis(1)].stroke,
+        protocol::units::Length(0)
+    );
 }
 
 #[test]

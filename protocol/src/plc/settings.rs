@@ -215,7 +215,9 @@ impl Settings {
                 .u8(at + 5)
                 .and_then(|c| complement_of(c.into()))
                 .ok_or(bad(at + 5))?;
-            let stroke = r.i32(at + 6).filter(|&s| s > 0).ok_or(bad(at + 6))?;
+            // 0 included: AXISCFG takes any stroke of 0 to i32::MAX, and what the PLC can set
+            // must load again after a SAVE.
+            let stroke = r.i32(at + 6).filter(|&s| s >= 0).ok_or(bad(at + 6))?;
             slot.scale.lead = lead;
             slot.scale.pulses_per_rev = pulses;
             slot.scale.home = home;
