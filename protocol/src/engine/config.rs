@@ -5,6 +5,9 @@ use crate::line::Baud;
 use crate::time::Duration;
 use crate::Rtim;
 
+/// The most resends after a time-out, Nrt (complete edition §5 (2): 0-3).
+pub const MAX_RETRIES: u8 = 3;
+
 /// How the engine runs the bus.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -15,7 +18,8 @@ pub struct Config {
     pub baud: Baud,
     /// The RTIM to establish (the controllers' minimum response delay).
     pub rtim: Rtim,
-    /// Resends after a time-out, Nrt (complete edition §5 (2): 0-3; larger values count as 3).
+    /// Resends after a time-out, Nrt (complete edition §5 (2): 0-[`MAX_RETRIES`]; larger values
+    /// count as [`MAX_RETRIES`]).
     pub retries: u8,
     /// Run the communication establishment procedure (§6-1) first. Without it, the engine
     /// assumes every axis already runs at `baud` with `rtim`.

@@ -57,7 +57,7 @@ pub mod timing;
 mod transaction;
 
 pub use axis::{AxisState, Counters, Link, LinkError};
-pub use config::Config;
+pub use config::{Config, MAX_RETRIES};
 pub use job::{Job, JobError, JobId, JobKind, JobOutput};
 pub use output::{BusCounters, Event, Output, SubmitError};
 
@@ -163,8 +163,8 @@ impl Engine {
     pub const fn new(config: Config) -> Engine {
         // Changed in place (the copy a `Config { retries, ..config }` made was field by field).
         let mut config = config;
-        if config.retries > 3 {
-            config.retries = 3;
+        if config.retries > MAX_RETRIES {
+            config.retries = MAX_RETRIES;
         }
         // §6-1 first (every axis at the power-up RTIM after its break), or polling at once.
         let (rtim, phase) = if config.establish {
@@ -298,7 +298,7 @@ impl Engine {
 
     /// Resends after a time-out, from now on (0-3).
     pub fn set_retries(&mut self, retries: u8) {
-        self.config.retries = retries.min(3);
+        self.config.retries = retries.min(MAX_RETRIES);
     }
 
     /// The oldest unread event.

@@ -46,7 +46,7 @@ pub const MAX_WRITE_BITS: u16 = 1968;
 pub const MAX_WRITE_REGISTERS: u16 = 123;
 
 /// FC05's value for ON; 0x0000 is OFF (§6.5).
-const COIL_ON: u16 = 0xFF00;
+pub(super) const COIL_ON: u16 = 0xFF00;
 /// FC08 sub-function 0000, Return Query Data (§6.8.1).
 const RETURN_QUERY_DATA: u16 = 0x0000;
 

@@ -492,7 +492,7 @@ impl Slave {
             // FC05 and FC06 echo the request (§6.5, §6.6).
             Request::WriteSingleCoil { address, value } => {
                 w.u16(address);
-                w.u16(if value { 0xFF00 } else { 0 });
+                w.u16(if value { pdu::COIL_ON } else { 0 });
             }
             Request::WriteSingleRegister { address, value } => {
                 w.u16(address);

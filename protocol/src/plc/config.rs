@@ -83,13 +83,11 @@ impl Default for AxisConfig {
 // What the gateway unit's registers and the stored record (`settings`) both accept: one rule
 // for each, so that what the PLC can write is what a start reads back.
 
-/// A home end's code (AXISCFG, the stored record): 7 motor end, 8 the other.
+/// A home end's code (AXISCFG, the stored record): the `o` command's, 7 motor end, 8 the other.
 pub(crate) fn home_of(code: u16) -> Option<HomeDirection> {
-    match code {
-        7 => Some(HomeDirection::MotorEnd),
-        8 => Some(HomeDirection::NonMotorEnd),
-        _ => None,
-    }
+    u8::try_from(code)
+        .ok()
+        .and_then(|code| HomeDirection::from_code(code).ok())
 }
 
 /// A complement's code (AXISCFG, the stored record): 1 one's, 2 two's.
@@ -126,9 +124,6 @@ pub(crate) fn axis_of(unit: u8, axes: AxisSet) -> Option<Axis> {
 pub(crate) fn watchdog_ok(ms: u16) -> bool {
     ms == 0 || (50..=60_000).contains(&ms)
 }
-
-/// The most resends after a time-out.
-pub(crate) const MAX_RETRIES: u16 = 3;
 
 /// Parity of the PLC line (8 data bits; one stop bit with parity, as Modbus RTU frames
 /// characters of 11 bits, Serial Line §2.5.1; the line's timing uses 11 bits either way).

@@ -8,7 +8,6 @@ use super::axis_unit::{link_code, nth};
 use super::channel::Channel;
 use super::config::{
     axis_of, complement_code, complement_of, home_of, unit_ok, watchdog_ok, Parity, WatchdogAction,
-    MAX_RETRIES,
 };
 use super::gateway::Gateway;
 use super::map::{self, *};
@@ -16,7 +15,7 @@ use super::persist::Store;
 use super::registers::{join, split};
 use super::settings::PLC_BAUDS;
 use crate::axes::AxisSet;
-use crate::engine::LinkError;
+use crate::engine::{LinkError, MAX_RETRIES};
 use crate::line::Baud;
 use crate::modbus::{Exception, SlaveCounters};
 use crate::time::Duration;
@@ -269,9 +268,10 @@ impl Gateway {
             }
             G_RETRIES => {
                 if apply {
-                    self.engine.set_retries(u8::try_from(value).unwrap_or(3));
+                    self.engine
+                        .set_retries(u8::try_from(value).unwrap_or(MAX_RETRIES));
                 }
-                value <= MAX_RETRIES
+                value <= u16::from(MAX_RETRIES)
             }
             G_APPLY if apply => {
                 if value == 1 {

@@ -30,9 +30,10 @@
 
 use super::config::{
     axis_of, complement_code, complement_of, home_of, unit_ok, watchdog_ok, AxisConfig,
-    GatewayConfig, Parity, PlcLine, WatchdogAction, MAX_RETRIES,
+    GatewayConfig, Parity, PlcLine, WatchdogAction,
 };
 use crate::axes::AxisSet;
+use crate::engine::MAX_RETRIES;
 use crate::line::Baud;
 use crate::modbus::crc;
 use crate::time::Duration;
@@ -189,10 +190,7 @@ impl Settings {
             .and_then(|code| Baud::from_brsl(code.into()))
             .ok_or(bad(10))?;
         let rtim = r.u8(11).and_then(Rtim::new).ok_or(bad(11))?;
-        let retries = r
-            .u8(12)
-            .filter(|&n| u16::from(n) <= MAX_RETRIES)
-            .ok_or(bad(12))?;
+        let retries = r.u8(12).filter(|&n| n <= MAX_RETRIES).ok_or(bad(12))?;
         let pio_axis = match r.u8(13) {
             Some(0xFF) => None,
             Some(a) => Some(Axis::new(a).ok_or(bad(13))?),
