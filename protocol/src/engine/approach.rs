@@ -44,11 +44,26 @@ pub(super) struct Approach {
     /// A move command was accepted and no status seen since: the axis moves although its last
     /// status says it stands.
     unseen: bool,
+    /// Position reads left to find where a stopped axis came to rest ([`SETTLE_READS`]).
+    settle_reads: u8,
 }
 
 /// The position reads a move's estimate may ask for beyond the per-cycle share (one from its
 /// start, one at its speed, one spare for a read that came before the axis started).
 const ESTIMATE_READS: u8 = 3;
+
+/// The position reads that may follow a stop until two in a row agree, each at least
+/// [`SETTLE_GAP`] after the one before. A controller reports positioning complete (PFIN) when the
+/// axis enters its position band (complete edition §4-3-1, INP), while it still travels the
+/// rest of the band: the read that ends a move can be up to a band short of where the axis
+/// stops, and an idle axis' position is not read otherwise. Bounded, so that a servo hunting
+/// a pulse either side costs nothing for long.
+pub(super) const SETTLE_READS: u8 = 8;
+
+/// The least time between two reads of a settling axis, so that two reads agree only when the
+/// axis has rested in between: the last half pulse of a deceleration takes 5 ms at ACMD 30
+/// (0.04 pulse/ms², complete edition §7-2-2, §8-2), 27 ms at the lowest (ACMD 1).
+pub(super) const SETTLE_GAP: Duration = Duration::from_millis(20);
 
 impl Approach {
     pub(super) const NONE: Approach = Approach {
@@ -60,6 +75,7 @@ impl Approach {
         measured: false,
         reads: 0,
         unseen: false,
+        settle_reads: 0,
     };
 
     /// A move command was accepted at `now`, with the position last read (for a relative
@@ -81,6 +97,7 @@ impl Approach {
             measured: false,
             reads: 0,
             unseen: true,
+            settle_reads: 0,
         };
     }
 
@@ -95,6 +112,12 @@ impl Approach {
         previous: Option<(Pulses, Instant)>,
     ) {
         let Some(target) = self.target else {
+            // Stopped (or a move without a target, where nothing settles): at rest once a read
+            // agrees with the one before.
+            if let Some(left) = self.settle_reads.checked_sub(1) {
+                let agrees = previous.is_some_and(|(before, _)| before == position);
+                self.settle_reads = if agrees { 0 } else { left };
+            }
             return;
         };
         self.reads = self.reads.saturating_add(1);
@@ -144,6 +167,20 @@ impl Approach {
     /// The axis is not moving any more (or never started): nothing to expect.
     pub(super) fn clear(&mut self) {
         *self = Approach::NONE;
+    }
+
+    /// The axis stopped: nothing to expect of its move, but its position is read until it
+    /// rests ([`SETTLE_READS`]).
+    pub(super) fn stopped(&mut self) {
+        *self = Approach {
+            settle_reads: SETTLE_READS,
+            ..Approach::NONE
+        };
+    }
+
+    /// Whether the axis stopped and its position has not been seen to rest yet.
+    pub(super) fn settling(&self) -> bool {
+        self.settle_reads > 0
     }
 
     /// When the axis is expected at its target, if that is known.
@@ -229,6 +266,41 @@ mod tests {
         assert_eq!(a.eta(), Some(Instant(180)), "there");
         a.clear();
         assert_eq!(a.eta(), None);
+    }
+
+    #[test]
+    fn a_stopped_axis_settles_when_two_reads_agree_or_after_its_reads() {
+        let read = |a: &mut Approach, position: i32, before: i32| {
+            a.position_read(
+                Instant(0),
+                Pulses(position),
+                Some((Pulses(before), Instant(0))),
+            )
+        };
+        let mut a = Approach::NONE;
+        assert!(!a.settling(), "not stopped");
+        a.stopped();
+        assert!(a.settling());
+        read(&mut a, 4_994, 3_000);
+        read(&mut a, 5_000, 4_994);
+        assert!(a.settling(), "still moving in its band");
+        read(&mut a, 5_000, 5_000);
+        assert!(!a.settling(), "two reads agree");
+        // A servo hunting a pulse either side: read no more than SETTLE_READS times.
+        a.stopped();
+        for i in 0..SETTLE_READS {
+            assert!(a.settling(), "read {i}");
+            read(
+                &mut a,
+                5_000 + i32::from(i % 2),
+                5_000 + i32::from((i + 1) % 2),
+            );
+        }
+        assert!(!a.settling());
+        // A new move ends it.
+        a.stopped();
+        a.command_accepted(Instant(0), &Command::MoveAbsolute(Pulses(0)), None);
+        assert!(!a.settling());
     }
 
     #[test]

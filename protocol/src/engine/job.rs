@@ -24,7 +24,8 @@ pub enum JobKind {
     Command(Command),
     /// Servo on or off, then wait until the status shows it.
     Servo(bool),
-    /// The homing procedure (complete edition §6-2): wait ready (PFIN), `o`, wait for ZFIN.
+    /// The homing procedure (complete edition §6-2): wait ready (PFIN), `o`, wait for ZFIN,
+    /// then read the position (0), so that it is known when the job is done.
     Home(HomeDirection),
     /// Q3, then wait for positioning complete.
     MoveToPoint(PositionNo),
@@ -185,8 +186,8 @@ pub(crate) enum Op {
     Await(Condition),
 }
 
-/// The last op of every move: read where it stopped, so that the job finishes with the final
-/// position already known (a PLC reads PNOW when PEND comes on).
+/// The last op of every move and of homing: read where it stopped, so that the job finishes
+/// with the final position already known (a PLC reads PNOW when PEND comes on).
 fn read_position(axis: Axis) -> Op {
     Op::Send(Step {
         request: Request::new(
@@ -224,6 +225,7 @@ pub(crate) fn program(job: &Job, index: usize) -> Option<Op> {
         (JobKind::Home(_), 0) => Op::Await(Condition::InPosition),
         (JobKind::Home(direction), 1) => return send(Command::Home(direction)),
         (JobKind::Home(_), 2) => Op::Await(Condition::Homed),
+        (JobKind::Home(_), 3) => read_position(axis),
         (JobKind::Jog(end), 0) => return send(Command::MoveAbsolute(end)),
         (JobKind::Stop, 0) => return send(Command::CancelMotion),
         (JobKind::AlarmReset, 0) => return send(Command::Servo(false)),

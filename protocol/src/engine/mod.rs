@@ -456,7 +456,7 @@ impl Engine {
             self.schedule.position_due(axis);
         }
         if stopped {
-            self.schedule.approach(axis).clear();
+            self.schedule.approach(axis).stopped();
         }
         if changed {
             self.emit(Event::Status { axis, report });

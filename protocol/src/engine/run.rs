@@ -158,12 +158,12 @@ impl Engine {
             .is_some_and(|active| active.attempt > 0)
     }
 
-    /// Whether the axis' job reads its position once it is in position (a move job): the
+    /// Whether the axis' job reads its position once it is in position (a move job, homing): the
     /// schedule need not read it as well.
     pub(super) fn job_reads_position(&self, axis: Axis) -> bool {
         self.active[axis].as_ref().is_some_and(|active| {
             let reads = |op: Option<Op>| match op {
-                Some(Op::Await(job::Condition::InPosition)) => true,
+                Some(Op::Await(job::Condition::InPosition | job::Condition::Homed)) => true,
                 Some(Op::Send(step)) => {
                     matches!(step.request.command, Command::ReadMemory { address } if address == crate::memory::PNOW)
                 }

@@ -17,8 +17,10 @@
 //!    not more than [`IDLE_RUN`] in a row before one of the rest (on a bus slower than its
 //!    nominal transaction time every idle axis would always be due).
 //! 5. **Other position reads**: movers (each as often as its part of the share allows, once a
-//!    cycle at least) and axes that just stopped (unless their move job reads it); at most
-//!    [`Config::position_reads_per_cycle`] per cycle.
+//!    cycle at least), axes that just stopped (unless their move job reads it), and axes that
+//!    stopped until two reads agree (they stop in their position band, short of where they
+//!    rest: [`approach`](super::approach)); at most [`Config::position_reads_per_cycle`] per
+//!    cycle.
 //! 6. **Movers a cycle after their last poll** (and axes with a job), the longest waiting
 //!    first: never less than a round robin would give them.
 //! 7. **Offline axes** are probed when their probe is due, with a doubling back-off from
@@ -41,7 +43,7 @@
 //! [`Config::probe_interval`]: super::Config::probe_interval
 //! [`Config::rejoin_while_moving`]: super::Config::rejoin_while_moving
 
-use super::approach::Approach;
+use super::approach::{Approach, SETTLE_GAP};
 use super::{timing, Engine, Link, Next, Origin, FIRST_PROBE};
 use crate::axes::{least, AxisMap, AxisSet};
 use crate::div::{div, divisor};
@@ -393,7 +395,17 @@ impl Engine {
                 .position_at
                 .is_none_or(|at| at + period <= pass.now)
         });
-        let due = stale.fold(self.schedule.position_due, AxisSet::with);
+        // A stopped axis is read again until two reads agree (it may have stopped short, in
+        // its position band), each read a gap after the last.
+        let settling = self.config.axes.iter().filter(|&a| {
+            self.schedule.approach[a].settling()
+                && self.axes[a]
+                    .position_at
+                    .is_some_and(|at| at + SETTLE_GAP <= pass.now)
+        });
+        let due = stale
+            .chain(settling)
+            .fold(self.schedule.position_due, AxisSet::with);
         // Urgent: a mover's estimate, and a position never read (every position register of
         // the axis waits for it).
         let urgent = |a: Axis| {

@@ -508,3 +508,88 @@ fn moves_are_seen_complete_soon_after_they_are_in_band_and_idle_axes_keep_their_
         );
     }
 }
+
+/// A home job is done with its position read after ZFIN: a PLC that reads PNOW when the home
+/// command's status says done gets 0, not where the axis was before or during homing (the job
+/// once ended on the status that showed ZFIN, before any read of the new position).
+#[test]
+fn a_home_job_ends_with_the_homed_position_read() {
+    let mut h = established(1);
+    let a = axis(0);
+    run_job(
+        &mut h,
+        Job {
+            axis: a,
+            kind: JobKind::MoveAbsolute(Pulses(-1_000)),
+        },
+        10 * S,
+    )
+    .expect_err("not homed yet: the move is refused");
+    for _ in 0..2 {
+        let home = run_job(
+            &mut h,
+            Job {
+                axis: a,
+                kind: JobKind::Home(HomeDirection::MotorEnd),
+            },
+            20 * S,
+        );
+        assert!(home.is_ok(), "{home:?}");
+        let state = h.engine.axis(a);
+        assert_eq!(state.position, Some(Pulses(0)), "PNOW when the job is done");
+        let homed_at = state.report_at.expect("a status showed ZFIN");
+        assert!(
+            state.position_at.is_some_and(|at| at >= homed_at),
+            "read after the status that showed the axis homed"
+        );
+        // Away from home for the second round, so that the read before homing is not 0.
+        run_job(
+            &mut h,
+            Job {
+                axis: a,
+                kind: JobKind::MoveAbsolute(Pulses(-1_000)),
+            },
+            10 * S,
+        )
+        .unwrap();
+    }
+}
+
+/// A move is done when the axis enters its position band (PFIN), and the job's position read
+/// comes then, while the axis still travels the rest of the band. The engine reads the stopped
+/// axis again until two reads agree, so that the position it keeps (PNOW for the PLC) is where
+/// the axis rests, not where it was seen in position.
+#[test]
+fn a_stopped_axis_position_is_read_again_until_it_rests() {
+    let mut h = homed(1);
+    let a = axis(0);
+    let stroke = h.bus.controller(a).unwrap().config().actuator.stroke as i32;
+    let target = Pulses(-stroke / 2);
+    // A gentle deceleration: the rest of the band takes tens of ms.
+    run_job(
+        &mut h,
+        Job {
+            axis: a,
+            kind: JobKind::DirectMove {
+                target,
+                relative: false,
+                velocity: Velocity::new(2_000).unwrap(),
+                acceleration: Acceleration::new(5).unwrap(),
+            },
+        },
+        10 * S,
+    )
+    .unwrap();
+    let at_done = h.engine.axis(a).position.expect("the job read it");
+    assert_ne!(
+        at_done, target,
+        "the case this test is about: the read that ended the job is short of the target"
+    );
+    h.run_until(h.now + 500 * MS);
+    assert_eq!(h.bus.controller(a).unwrap().position(), i64::from(target.0));
+    assert_eq!(
+        h.engine.axis(a).position,
+        Some(target),
+        "read once it rests"
+    );
+}
