@@ -17,6 +17,10 @@
 //! first and outside the per-cycle share of position reads. A mover whose command was accepted
 //! counts as moving until a status says otherwise (`unseen`): its last status, from before the
 //! command, says it stands.
+//!
+//! A move ends in its position band, not at rest, so the estimate's last duty is the stop: the
+//! stopped axis is read again until two reads agree ([`SETTLE_READS`]), so that the position the
+//! PLC sees is where the axis came to rest.
 
 use core::num::NonZeroU32;
 
