@@ -28,6 +28,9 @@ cargo clippy -p rc-gateway --target thumbv7m-none-eabi --no-default-features --f
 step "protocol: no_std build (with defmt) for the firmware target"
 cargo clippy -p protocol --target thumbv7em-none-eabihf --features defmt --locked -- -D warnings
 
+step "docs: host crates' API documentation, broken or private links denied"
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked -p protocol -p rc-host -p settings-store -p small-mem
+
 step "tests: protocol (codec, engine, Modbus, PIO, properties) and host (simulator, gateway, soak)"
 cargo test --locked
 

@@ -115,7 +115,7 @@ pub struct AxisMap<T>([T; AXES]);
 
 impl<T: Copy> AxisMap<T> {
     /// `value` for every axis. Not inlined, and the array made by a function of its own
-    /// ([`repeat`]), whose result is its return place: so the map is written where the caller
+    /// (`repeat`), whose result is its return place: so the map is written where the caller
     /// wants it. (`AxisMap([value; AXES])` here made the array in this frame and copied it out:
     /// 1.7 KB of stack at start-up for the engine's per-axis state, `scripts/stack_depth.py`.)
     #[inline(never)]

@@ -25,18 +25,18 @@
 //!   up to [`Config::retries`] resends; `m` is never resent (its outcome is reported unknown and
 //!   the position re-read), `t` is not resent, and a W4 is resent only after its T4;
 //! - order: a stop (`d`) before everything (never behind another axis' retry), then a pending
-//!   retry, then job frames, then polling ([`schedule`]);
+//!   retry, then job frames, then polling (`schedule`);
 //! - a job never runs late: one for an axis that is offline fails at once, and an axis that
 //!   goes offline takes its running and waiting jobs with it ([`JobError::Offline`]);
-//! - at start, the communication establishment procedure (§6-1, [`establish`]) if configured,
-//!   and later the rejoin of a power-cycled axis ([`rejoin`]).
+//! - at start, the communication establishment procedure (§6-1, `establish`) if configured,
+//!   and later the rejoin of a power-cycled axis (`rejoin`).
 //!
 //! | Module | What it holds |
 //! |---|---|
-//! | [`config`] | [`Config`] |
-//! | [`output`] | [`Output`], [`Event`], [`SubmitError`], [`BusCounters`] |
-//! | [`axis`] | What the engine knows about each axis ([`AxisState`]) |
-//! | [`job`] | Jobs as programs of frames and waits |
+//! | `config` | [`Config`] |
+//! | `output` | [`Output`], [`Event`], [`SubmitError`], [`BusCounters`] |
+//! | `axis` | What the engine knows about each axis ([`AxisState`]) |
+//! | `job` | Jobs as programs of frames and waits |
 //! | `run` | Running the jobs: activation, responses, waits, completion |
 //! | `schedule` | Polling: status round robin, position reads, probes of offline axes |
 //! | `approach` | When a mover is expected at its target (the schedule polls it then) |

@@ -12,7 +12,7 @@ use super::timing;
 
 impl Engine {
     /// Whether a frame ending at `now` may be the answer to `flight` (see
-    /// [`Config::wire_timing`]).
+    /// [`Config::wire_timing`](super::Config::wire_timing)).
     fn in_time(&self, flight: &InFlight, now: Instant) -> bool {
         !self.config.wire_timing || now >= flight.earliest_reply
     }

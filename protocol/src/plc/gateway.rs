@@ -93,7 +93,7 @@ impl Reason {
 /// While SON is held ON and the servo is off, it is turned on again at most this often.
 const SON_RETRY: Duration = Duration::from_millis(2000);
 
-/// The gateway; see the [module documentation](self).
+/// The gateway; see the module documentation (`protocol/src/plc/gateway.rs`).
 #[derive(Debug)]
 pub struct Gateway {
     pub(super) config: GatewayConfig,

@@ -1,5 +1,5 @@
 //! The gateway unit (id 63 by default, as IAI's RGW-SIO): the gateway's own settings, counters,
-//! the synchronized start and the command channel. See [`map`](super::map) for the table.
+//! the synchronized start and the command channel. See [`super::map`] for the table.
 //!
 //! Writes are checked register by register before any is applied; a register that exists but
 //! cannot be written answers 03, one that does not exist 02 (as the axis units do).

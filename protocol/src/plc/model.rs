@@ -16,7 +16,7 @@ use crate::modbus::{
 };
 use crate::time::Instant;
 
-/// The gateway answering one Modbus request; see the [module documentation](self).
+/// The gateway answering one Modbus request; see the module documentation (`protocol/src/plc/model.rs`).
 #[derive(Debug)]
 pub struct Registers<'a> {
     gateway: &'a mut Gateway,

@@ -1,7 +1,7 @@
 //! `rcframe encode`: build any command frame from its code and options.
 //!
 //! Each command of the documents is a subcommand named by its code (`n`, `Q3`, `R4`, ...). The
-//! ones `h` may buffer are a separate enum, [`Bufferable`], so that `h` takes exactly those.
+//! ones `h` may buffer are a separate enum, `Bufferable`, so that `h` takes exactly those.
 
 use crate::rcframe::units::{
     decimal, parse_accel, parse_axis, parse_hex_u32, parse_lead, parse_length, parse_point,

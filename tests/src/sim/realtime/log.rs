@@ -4,7 +4,7 @@
 use protocol::frame::{Frame, Packet};
 use protocol::{Deframer, Reply, Request};
 
-/// Decodes both directions for [`Options::log`].
+/// Decodes both directions for [`Options::log`](super::Options::log).
 #[derive(Clone, Debug, Default)]
 pub(super) struct FrameLog {
     from_master: Deframer,
