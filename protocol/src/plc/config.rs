@@ -107,6 +107,12 @@ pub(crate) fn complement_of(code: u16) -> Option<Complement> {
     }
 }
 
+/// A stroke's value (AXISCFG's two words, the stored record), 0.01 mm: 0 to i32::MAX (0 is
+/// one the PLC can set; a stroke above i32::MAX makes no sense).
+pub(crate) fn stroke_of(raw: u32) -> Option<Length> {
+    i32::try_from(raw).ok().map(Length)
+}
+
 /// Whether a gateway unit id is one (Serial Line §2.2's slave addresses).
 pub(crate) fn unit_ok(unit: u16) -> bool {
     (1..=247).contains(&unit)

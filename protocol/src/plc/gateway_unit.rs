@@ -7,7 +7,8 @@
 use super::axis_unit::{link_code, nth};
 use super::channel::Channel;
 use super::config::{
-    axis_of, complement_code, complement_of, home_of, unit_ok, watchdog_ok, Parity, WatchdogAction,
+    axis_of, complement_code, complement_of, home_of, stroke_of, unit_ok, watchdog_ok, Parity,
+    WatchdogAction,
 };
 use super::gateway::Gateway;
 use super::map::{self, *};
@@ -19,7 +20,7 @@ use crate::engine::{LinkError, MAX_RETRIES};
 use crate::line::Baud;
 use crate::modbus::{Exception, SlaveCounters};
 use crate::time::Duration;
-use crate::units::{Lead, Length};
+use crate::units::Lead;
 use crate::{Axis, PositionNo, Rtim};
 
 /// AXISCFG field offsets.
@@ -296,10 +297,11 @@ impl Gateway {
                 action.is_some()
             }
             G_PIO_AXIS => {
+                let axis = u8::try_from(value).ok().and_then(Axis::new);
                 if apply {
-                    self.config.pio_axis = u8::try_from(value).ok().and_then(Axis::new);
+                    self.config.pio_axis = axis;
                 }
-                value == 0xFFFF || value <= 15
+                value == 0xFFFF || axis.is_some()
             }
             G_SYNC_MASK => {
                 let valid = value & !self.config.bus.axes.0 == 0;
@@ -361,17 +363,18 @@ impl Gateway {
                 home.is_some()
             }
             axis_cfg::STROKE_HI | axis_cfg::STROKE_LO => {
-                if apply {
-                    let [hi, lo] = split(u32::try_from(c.stroke.0).unwrap_or(0));
-                    let (hi, lo) = if field == axis_cfg::STROKE_HI {
-                        (value, lo)
-                    } else {
-                        (hi, value)
-                    };
-                    c.stroke = Length(i32::try_from(join(hi, lo)).unwrap_or(i32::MAX));
+                // The other word stays as it is.
+                let [hi, lo] = split(u32::try_from(c.stroke.0).unwrap_or(0));
+                let (hi, lo) = if field == axis_cfg::STROKE_HI {
+                    (value, lo)
+                } else {
+                    (hi, value)
+                };
+                let stroke = stroke_of(join(hi, lo));
+                if let (true, Some(stroke)) = (apply, stroke) {
+                    c.stroke = stroke;
                 }
-                // The stroke's high word: strokes above i32::MAX (0.01 mm) make no sense.
-                field == axis_cfg::STROKE_LO || value < 0x8000
+                stroke.is_some()
             }
             axis_cfg::COMPLEMENT => {
                 let complement = complement_of(value);

@@ -29,7 +29,7 @@
 //! as a whole, never applied in part.
 
 use super::config::{
-    axis_of, complement_code, complement_of, home_of, unit_ok, watchdog_ok, AxisConfig,
+    axis_of, complement_code, complement_of, home_of, stroke_of, unit_ok, watchdog_ok, AxisConfig,
     GatewayConfig, Parity, PlcLine, WatchdogAction,
 };
 use crate::axes::AxisSet;
@@ -37,7 +37,7 @@ use crate::engine::MAX_RETRIES;
 use crate::line::Baud;
 use crate::modbus::crc;
 use crate::time::Duration;
-use crate::units::{Lead, Length};
+use crate::units::Lead;
 use crate::{Axis, Rtim};
 
 /// The format version this code writes and reads.
@@ -213,14 +213,12 @@ impl Settings {
                 .u8(at + 5)
                 .and_then(|c| complement_of(c.into()))
                 .ok_or(bad(at + 5))?;
-            // 0 included: AXISCFG takes any stroke of 0 to i32::MAX, and what the PLC can set
-            // must load again after a SAVE.
-            let stroke = r.i32(at + 6).filter(|&s| s >= 0).ok_or(bad(at + 6))?;
+            let stroke = r.u32(at + 6).and_then(stroke_of).ok_or(bad(at + 6))?;
             slot.scale.lead = lead;
             slot.scale.pulses_per_rev = pulses;
             slot.scale.home = home;
             slot.scale.complement = complement;
-            slot.stroke = Length(stroke);
+            slot.stroke = stroke;
         }
         let settings = Settings {
             unit,
@@ -276,9 +274,5 @@ impl Reader<'_> {
 
     fn u32(&self, at: usize) -> Option<u32> {
         self.array(at).map(u32::from_le_bytes)
-    }
-
-    fn i32(&self, at: usize) -> Option<i32> {
-        self.array(at).map(i32::from_le_bytes)
     }
 }
