@@ -440,9 +440,13 @@ impl Engine {
     }
 
     fn update_report(&mut self, now: Instant, axis: Axis, report: StatusReport) {
+        // A move commanded since the last status counts as moving, so that one that began and
+        // ended between two status reports (a short one, or one to a target already in its
+        // position band) is seen to stop too.
+        let commanded = self.schedule.approach(axis).unseen();
         let state = &mut self.axes[axis];
         let changed = state.report != Some(report);
-        let was_moving = state.moving();
+        let was_moving = state.moving() || commanded;
         state.report = Some(report);
         state.report_at = Some(now);
         let moving = state.moving();

@@ -389,3 +389,65 @@ fn the_rest_of_a_started_answer_is_due_at_the_line_rate() {
     assert_eq!(engine.frame_due(), None);
     assert!(engine.axis(axis(0)).report.is_some());
 }
+
+/// A move that begins and ends between two status reports (the first status after its command
+/// already shows it in position) counts as stopped too: its position is read again until two
+/// reads agree, as after any other stop. The controller here reads one pulse short at first,
+/// then where it rests.
+#[test]
+fn a_move_seen_only_in_position_is_read_again_until_it_rests() {
+    let mut engine = Engine::new(config(1));
+    let mut now = Instant(0);
+    let mut address = 0;
+    let mut pnow = 0i32;
+    let mut reads_after_done = Vec::new();
+    let mut done = false;
+    let mut submitted = false;
+    while now < Instant(2_000_000) {
+        let request = next_frame(&mut engine, &mut now);
+        let answer = match request.command {
+            Command::ReadMemory { address } if address == memory::PNOW => {
+                let value = pnow;
+                // The job's read finds it one pulse short; it rests at -4 from then on.
+                if submitted {
+                    pnow = -4;
+                }
+                if done {
+                    reads_after_done.push((now, value));
+                }
+                Reply::Memory {
+                    axis: request.axis,
+                    code: MemoryCode::ReadMemory,
+                    value: value as u32,
+                }
+            }
+            Command::MoveAbsolute(_) => {
+                pnow = -3;
+                ready(&request)
+            }
+            _ => answer(&request, &mut address),
+        };
+        reply(&mut engine, &mut now, answer);
+        for event in events(&mut engine) {
+            if let Event::JobDone { result, .. } = event {
+                assert_eq!(result, Ok(JobOutput::Value(-3i32 as u32)));
+                done = true;
+            }
+        }
+        if !submitted && engine.axis(axis(0)).position.is_some() {
+            engine
+                .submit(Job {
+                    axis: axis(0),
+                    kind: JobKind::MoveAbsolute(Pulses(-4)),
+                })
+                .unwrap();
+            submitted = true;
+        }
+    }
+    assert!(done);
+    assert_eq!(engine.axis(axis(0)).position, Some(Pulses(-4)));
+    // Read until two agree: -4 (differs from -3), -4 (agrees); each 20 ms or more after the last.
+    let values: Vec<i32> = reads_after_done.iter().map(|r| r.1).collect();
+    assert_eq!(values, [-4, -4]);
+    assert!(reads_after_done[1].0 .0 - reads_after_done[0].0 .0 >= 20_000);
+}
