@@ -62,7 +62,7 @@ const ESTIMATE_READS: u8 = 3;
 /// rest of the band: the read that ends a move can be up to a band short of where the axis
 /// stops, and an idle axis' position is not read otherwise. Bounded, so that a servo hunting
 /// a pulse either side costs nothing for long.
-pub(super) const SETTLE_READS: u8 = 8;
+const SETTLE_READS: u8 = 8;
 
 /// The least time between two reads of a settling axis, so that two reads agree only when the
 /// axis has rested in between: the last half pulse of a deceleration takes 5 ms at ACMD 30

@@ -158,18 +158,21 @@ impl Engine {
             .is_some_and(|active| active.attempt > 0)
     }
 
-    /// Whether the axis' job reads its position once it is in position (a move job, homing): the
-    /// schedule need not read it as well.
+    /// Whether the axis' job reads its position (R4 PNOW) now or as its next op (after the wait
+    /// that ends a move or homing): the schedule need not read it as well.
     pub(super) fn job_reads_position(&self, axis: Axis) -> bool {
         self.active[axis].as_ref().is_some_and(|active| {
-            let reads = |op: Option<Op>| match op {
-                Some(Op::Await(job::Condition::InPosition | job::Condition::Homed)) => true,
-                Some(Op::Send(step)) => {
-                    matches!(step.request.command, Command::ReadMemory { address } if address == crate::memory::PNOW)
-                }
-                _ => false,
+            let reads = |index: usize| {
+                matches!(
+                    program(&active.job, index),
+                    Some(Op::Send(step)) if matches!(
+                        step.request.command,
+                        Command::ReadMemory { address } if address == crate::memory::PNOW
+                    )
+                )
             };
-            reads(program(&active.job, usize::from(active.cursor)))
+            let at = usize::from(active.cursor);
+            reads(at) || reads(at + 1)
         })
     }
 
