@@ -153,7 +153,7 @@ impl PortMasks {
 
     fn add(&self, pin: PinId) {
         if let Some(mask) = self.0.get(usize::from(pin.port)) {
-            mask.fetch_or(1 << (pin.pin & 15), Ordering::Relaxed);
+            mask.fetch_or(1 << pin.number(), Ordering::Relaxed);
         }
     }
 
