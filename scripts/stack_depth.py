@@ -15,7 +15,6 @@ fault inside a handler, or an interrupt of a higher priority inside another one.
     python3 scripts/stack_depth.py OBJDUMP ELF [ROOT]   # prints the path, ROOT default `main`
 """
 
-import functools
 import re
 import subprocess
 import sys
@@ -72,7 +71,6 @@ def call_graph(objdump, elf_path):
 def deepest(frames, calls, root):
     """(bytes, path) of the deepest chain of direct calls from `root`; a recursion counts once."""
 
-    @functools.lru_cache(maxsize=None)
     def walk(function, outer):
         best = (0, ())
         for callee in calls.get(function, ()):

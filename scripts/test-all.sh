@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 
 step() { printf '\n==> %s\n' "$*"; }
 
-step "toolchain (rust-toolchain.toml: pinned rustc, thumbv7em-none-eabihf, thumbv7m-none-eabi, rustfmt, clippy)"
+step "toolchain (rust-toolchain.toml: pinned rustc, thumbv7em-none-eabihf, thumbv7m-none-eabi, rustfmt, clippy, llvm-tools)"
 # A plain `cargo` does not add the targets/components the file lists when the toolchain itself
 # is already installed; `rustup toolchain install` with no argument does.
 rustup toolchain install
