@@ -23,6 +23,16 @@ use crate::time::Duration;
 use crate::units::Lead;
 use crate::{Axis, PositionNo, Rtim};
 
+/// If `apply`, `slot` takes `parsed` when it is a value; whether it is one (the register's
+/// verdict). The shape of most registers: one conversion for the check and the store.
+fn store<T>(apply: bool, parsed: Option<T>, slot: &mut T) -> bool {
+    let valid = parsed.is_some();
+    if let (true, Some(value)) = (apply, parsed) {
+        *slot = value;
+    }
+    valid
+}
+
 /// AXISCFG field offsets.
 mod axis_cfg {
     pub const ENABLED: u16 = 0;
@@ -214,20 +224,16 @@ impl Gateway {
                 }
                 watchdog_ok(value)
             }
-            G_BUS_BAUD => {
-                let baud = Baud::from_bits_per_second(u32::from(value) * 100);
-                if let (true, Some(baud)) = (apply, baud) {
-                    self.persist.baud = baud;
-                }
-                baud.is_some()
-            }
-            G_BUS_RTIM => {
-                let rtim = u8::try_from(value).ok().and_then(Rtim::new);
-                if let (true, Some(rtim)) = (apply, rtim) {
-                    self.persist.rtim = rtim;
-                }
-                rtim.is_some()
-            }
+            G_BUS_BAUD => store(
+                apply,
+                Baud::from_bits_per_second(u32::from(value) * 100),
+                &mut self.persist.baud,
+            ),
+            G_BUS_RTIM => store(
+                apply,
+                u8::try_from(value).ok().and_then(Rtim::new),
+                &mut self.persist.rtim,
+            ),
             G_PLC_BAUD => {
                 let baud = u32::from(value) * 100;
                 if apply {
@@ -235,13 +241,11 @@ impl Gateway {
                 }
                 PLC_BAUDS.contains(&baud)
             }
-            G_PLC_PARITY => {
-                let parity = Parity::from_code(value);
-                if let (true, Some(parity)) = (apply, parity) {
-                    self.persist.plc.parity = parity;
-                }
-                parity.is_some()
-            }
+            G_PLC_PARITY => store(
+                apply,
+                Parity::from_code(value),
+                &mut self.persist.plc.parity,
+            ),
             // Not the unit of an axis that is (or will be) on the bus.
             G_UNIT_ID => {
                 let axes = AxisSet(self.config.bus.axes.0 | self.persist.axes.0);
@@ -289,13 +293,11 @@ impl Gateway {
                 true
             }
             G_APPLY => value == 0 || (value == 1 && self.bus_idle()),
-            G_WD_ACTION => {
-                let action = WatchdogAction::from_code(value);
-                if let (true, Some(action)) = (apply, action) {
-                    self.config.watchdog_action = action;
-                }
-                action.is_some()
-            }
+            G_WD_ACTION => store(
+                apply,
+                WatchdogAction::from_code(value),
+                &mut self.config.watchdog_action,
+            ),
             G_PIO_AXIS => {
                 let axis = u8::try_from(value).ok().and_then(Axis::new);
                 if apply {
@@ -341,27 +343,13 @@ impl Gateway {
         }
         let c = &mut self.config.axes[axis];
         match field {
-            axis_cfg::LEAD => {
-                let lead = Lead::from_hundredths(value);
-                if let (true, Some(lead)) = (apply, lead) {
-                    c.scale.lead = lead;
-                }
-                lead.is_some()
-            }
-            axis_cfg::PULSES => {
-                let pulses = core::num::NonZeroU16::new(value);
-                if let (true, Some(pulses)) = (apply, pulses) {
-                    c.scale.pulses_per_rev = pulses;
-                }
-                pulses.is_some()
-            }
-            axis_cfg::HOME => {
-                let home = home_of(value);
-                if let (true, Some(home)) = (apply, home) {
-                    c.scale.home = home;
-                }
-                home.is_some()
-            }
+            axis_cfg::LEAD => store(apply, Lead::from_hundredths(value), &mut c.scale.lead),
+            axis_cfg::PULSES => store(
+                apply,
+                core::num::NonZeroU16::new(value),
+                &mut c.scale.pulses_per_rev,
+            ),
+            axis_cfg::HOME => store(apply, home_of(value), &mut c.scale.home),
             axis_cfg::STROKE_HI | axis_cfg::STROKE_LO => {
                 // The other word stays as it is.
                 let [hi, lo] = split(u32::try_from(c.stroke.0).unwrap_or(0));
@@ -370,19 +358,9 @@ impl Gateway {
                 } else {
                     (hi, value)
                 };
-                let stroke = stroke_of(join(hi, lo));
-                if let (true, Some(stroke)) = (apply, stroke) {
-                    c.stroke = stroke;
-                }
-                stroke.is_some()
+                store(apply, stroke_of(join(hi, lo)), &mut c.stroke)
             }
-            axis_cfg::COMPLEMENT => {
-                let complement = complement_of(value);
-                if let (true, Some(complement)) = (apply, complement) {
-                    c.scale.complement = complement;
-                }
-                complement.is_some()
-            }
+            axis_cfg::COMPLEMENT => store(apply, complement_of(value), &mut c.scale.complement),
             _ => false,
         }
     }
