@@ -73,6 +73,68 @@ pub const SYSCLK_HZ: u32 = 80_000_000;
 #[cfg(feature = "hw")]
 pub const SETTINGS_RANGE: core::ops::Range<u32> = 0x000F_E000..0x0010_0000;
 
+/// The flash with the data cache off while it is written or erased: STM32L47x/L48x errata
+/// (ES0250), "Data cache might be corrupted during Flash memory read-while-write operation"
+/// (the settings pages are in bank 2, the program runs from bank 1). The workaround: the data
+/// cache off (ACR.DCEN) before each program or erase, reset (DCRST) and on again after.
+/// embassy-stm32 0.6.0 does not do it (later versions do).
+#[cfg(feature = "hw")]
+pub struct DcacheOff<F>(pub F);
+
+#[cfg(feature = "hw")]
+impl<F> DcacheOff<F> {
+    fn without_dcache<T>(&mut self, op: impl FnOnce(&mut F) -> T) -> T {
+        let acr = embassy_stm32::pac::FLASH.acr();
+        let cached = acr.read().dcen();
+        acr.modify(|w| w.set_dcen(false));
+        let result = op(&mut self.0);
+        if cached {
+            acr.modify(|w| w.set_dcrst(true));
+            acr.modify(|w| w.set_dcrst(false));
+            acr.modify(|w| w.set_dcen(true));
+        }
+        result
+    }
+}
+
+#[cfg(feature = "hw")]
+impl<F: embedded_storage::nor_flash::ErrorType> embedded_storage::nor_flash::ErrorType
+    for DcacheOff<F>
+{
+    type Error = F::Error;
+}
+
+#[cfg(feature = "hw")]
+impl<F: embedded_storage::nor_flash::ReadNorFlash> embedded_storage::nor_flash::ReadNorFlash
+    for DcacheOff<F>
+{
+    const READ_SIZE: usize = F::READ_SIZE;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        self.0.read(offset, bytes)
+    }
+
+    fn capacity(&self) -> usize {
+        self.0.capacity()
+    }
+}
+
+#[cfg(feature = "hw")]
+impl<F: embedded_storage::nor_flash::NorFlash> embedded_storage::nor_flash::NorFlash
+    for DcacheOff<F>
+{
+    const WRITE_SIZE: usize = F::WRITE_SIZE;
+    const ERASE_SIZE: usize = F::ERASE_SIZE;
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        self.without_dcache(|flash| flash.write(offset, bytes))
+    }
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.without_dcache(|flash| flash.erase(from, to))
+    }
+}
+
 /// Driver-enable lead and lag, in sample times (1/16 bit): half a bit either side of the
 /// characters, ample for RS485 transceivers (enable times of a few hundred ns). Assertion and
 /// de-assertion are equal because embassy-stm32 0.6.0 programs DEDT from the assertion time.

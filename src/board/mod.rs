@@ -69,11 +69,15 @@ pub struct Board {
     pub settings_flash: Option<SettingsFlash>,
 }
 
-/// The flash the settings store writes, as sequential-storage wants it (async over blocking).
+/// The chip's flash, blocking.
 #[cfg(feature = "hw")]
-pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<
-    embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>,
->;
+type Flash = embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>;
+/// The flash the settings store writes, as sequential-storage wants it (async over blocking);
+/// on the L475 with its data cache off while it writes ([`l475::DcacheOff`]).
+#[cfg(all(feature = "hw", feature = "board-l475"))]
+pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<l475::DcacheOff<Flash>>;
+#[cfg(all(feature = "hw", feature = "board-f103"))]
+pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<Flash>;
 /// No flash interface in QEMU.
 #[cfg(feature = "emulator")]
 pub type SettingsFlash = core::convert::Infallible;
@@ -144,9 +148,10 @@ fn pulled_off(pin: Peri<'static, AnyPin>) -> Input<'static> {
 pub(crate) fn settings_flash(
     flash: Peri<'static, embassy_stm32::peripherals::FLASH>,
 ) -> Option<SettingsFlash> {
-    Some(embassy_embedded_hal::adapter::BlockingAsync::new(
-        embassy_stm32::flash::Flash::new_blocking(flash),
-    ))
+    let flash = Flash::new_blocking(flash);
+    #[cfg(feature = "board-l475")]
+    let flash = l475::DcacheOff(flash);
+    Some(embassy_embedded_hal::adapter::BlockingAsync::new(flash))
 }
 
 #[cfg(feature = "emulator")]
