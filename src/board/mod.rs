@@ -170,6 +170,7 @@ pub struct Watchdog {
 impl Watchdog {
     #[cfg(feature = "hw")]
     pub(crate) fn new(iwdg: Peri<'static, embassy_stm32::peripherals::IWDG>) -> Watchdog {
+        freeze_watchdog_while_halted();
         let mut iwdg = embassy_stm32::wdg::IndependentWatchdog::new(iwdg, WATCHDOG_TIMEOUT_US);
         iwdg.unleash();
         Watchdog { iwdg }
@@ -185,4 +186,19 @@ impl Watchdog {
         #[cfg(feature = "hw")]
         self.iwdg.pet();
     }
+}
+
+/// The IWDG stops counting while a debug probe halts the core (DBGMCU, DBG_IWDG_STOP), so that a
+/// breakpoint, or the state after a panic (`udf`, where `probe-rs run` stops), can be inspected
+/// instead of being reset within a second. The bit acts only while a debugger holds the core
+/// halted; without a probe nothing halts the core, so it is set in every build. It survives a
+/// system reset (only a power-on reset clears DBGMCU).
+#[cfg(feature = "hw")]
+fn freeze_watchdog_while_halted() {
+    #[cfg(feature = "board-f103")]
+    embassy_stm32::pac::DBGMCU.cr().modify(|w| w.set_iwdg(true));
+    #[cfg(not(feature = "board-f103"))]
+    embassy_stm32::pac::DBGMCU
+        .apb1fzr1()
+        .modify(|w| w.set_iwdg(true));
 }
