@@ -95,23 +95,31 @@ pub const fn opposite(level: Level) -> Level {
 /// Half period of the run LED's blink.
 const RUN_BLINK: Duration = Duration::from_millis(500);
 
-/// Run (blinks while the gateway task makes progress), bus link and alarm LEDs, active high.
+/// Run (blinks while the gateway task makes progress), bus link and alarm LEDs, lit at the
+/// board's `LED_ON` level.
 pub struct Leds {
     run: Output<'static>,
     link: Output<'static>,
     alarm: Output<'static>,
+    on: Level,
     next_blink: Instant,
     /// The gateway task's progress count at the last blink.
     progress: u32,
 }
 
 impl Leds {
-    /// The LEDs, all off.
-    pub fn new(run: Output<'static>, link: Output<'static>, alarm: Output<'static>) -> Leds {
+    /// The LEDs, all off; `on` is the pin level that lights one.
+    pub fn new(
+        run: Output<'static>,
+        link: Output<'static>,
+        alarm: Output<'static>,
+        on: Level,
+    ) -> Leds {
         Leds {
             run,
             link,
             alarm,
+            on,
             next_blink: Instant::from_ticks(0),
             progress: 0,
         }
@@ -120,8 +128,9 @@ impl Leds {
     /// Shows (bus link good, alarm), and blinks the run LED if the gateway task's `progress`
     /// count moved since the last blink (a stuck task leaves it as it is).
     pub fn show(&mut self, now: Instant, indicators: protocol::node::Indicators, progress: u32) {
-        self.link.set_level(Level::from(indicators.link));
-        self.alarm.set_level(Level::from(indicators.alarm));
+        let level = |lit: bool| if lit { self.on } else { opposite(self.on) };
+        self.link.set_level(level(indicators.link));
+        self.alarm.set_level(level(indicators.alarm));
         if now >= self.next_blink && progress != self.progress {
             self.run.toggle();
             self.next_blink = now + RUN_BLINK;

@@ -10,15 +10,24 @@
 //! | RS485 **bus** TX / RX / DE | PA2 / PA3 / PA1 | USART2; DE a GPIO, active high |
 //! | RS485 **PLC** TX / RX / DE | PA9 / PA10 / PA8 | USART1; DE a GPIO, active high |
 //! | IN0-IN3 PC1 PC2 PC4 PC8 | PB12 PB13 PB14 PB15 | inputs: high = ON, pull-down (open = OFF) |
-//! | IN4, IN5 PC16 PC32 | PA11, PA12 | (the USB pins: USB unused) |
+//! | IN4, IN5 PC16 PC32 | PB4, PA15 | JTAG pins (pulled up only during reset, when no input is read) |
 //! | IN11 HOME, IN12 *STP | PB10, PB11 | |
 //! | IN13 CSTR, IN14 RES, IN15 SON | PB0, PB1, PA0 | |
 //! | Stop input | PA4 | safety: the stop is active while the input is OFF (open wire = stop) |
 //! | OUT0-OUT3 PM1 PM2 PM4 PM8 | PB5 PB6 PB7 PB8 | outputs: high = ON; every output low after reset, panic, HardFault |
 //! | OUT6 MOVE, OUT7 ZONE1 | PB9, PA5 | |
 //! | OUT10 HEND, OUT11 PEND, OUT12 SV | PA6, PA7, PB3 | |
-//! | OUT13 LINK, OUT14 *ALM | PB4, PA15 | |
-//! | LED run / bus link / alarm | PC13 (on board, blinks) / PC14 / PC15 | PC14/PC15 sink or source 3 mA at most: drive an LED through 1 kΩ |
+//! | OUT13 LINK, OUT14 *ALM | PA11, PB2 | PA11 is USB D- (no pull-up); PB2 is BOOT1 (100 kΩ to the BOOT1 jumper: leave it at 0) |
+//! | LED run / bus link / alarm | PC13 (on board) / PC14 / PC15 | lit **low** (the pin sinks): PC13-PC15 must not source current; LED from 3.3 V through 1 kΩ |
+//! | (unused) | PA12 | USB D+: the board's 1.5 kΩ pull-up (R10) beats any internal pull-down, so it carries no signal |
+//!
+//! **Pins during reset.** Until the firmware drives them, every pin is a floating input, except
+//! the JTAG pins PA15 and PB4 (pulled up) and PB3 (JTDO, floating): no output or driver enable is
+//! on a JTAG pin, so a pull-down on each output stage's input and on each transceiver's DE (10 kΩ)
+//! keeps every output OFF and both drivers off from power-up, while a probe holds the core in
+//! reset, and until start-up drives them. (Before: OUT13 and OUT14 were on PB4 and PA15 and read ON
+//! through every reset; IN5 on PA12 read ON with the input open and refused every CSTR.) While a
+//! probe halts a running core, the pins keep their state: a DE that was on stays on.
 
 use embassy_stm32::exti::{self, ExtiInput};
 use embassy_stm32::peripherals::{USART1, USART2};
@@ -26,8 +35,9 @@ use embassy_stm32::usart::{self, BufferedInterruptHandler, BufferedUart, ConfigE
 use embassy_stm32::{bind_interrupts, interrupt, Peripherals};
 
 use super::{
-    driver_enable, indicator_on_fault, input, line_config, output, settings_flash, Board, Watchdog,
-    BUS_RX, BUS_TX, BUS_TX_CAPACITY, INPUT_ON, OUTPUT_ON, PLC_RX, PLC_TX, PLC_TX_CAPACITY,
+    driver_enable, indicator_on_fault, input, led, line_config, output, settings_flash, Board,
+    Watchdog, BUS_RX, BUS_TX, BUS_TX_CAPACITY, INPUT_ON, OUTPUT_ON, PLC_RX, PLC_TX,
+    PLC_TX_CAPACITY,
 };
 use crate::discrete::{Inputs, Leds, Outputs};
 use crate::io::Pins;
@@ -38,6 +48,9 @@ use crate::serial::Rs485;
 pub const MODEL_NAME: &str = "STM32F103C8";
 /// System clock: the 8 MHz crystal through the PLL, the F103's maximum.
 const SYSCLK_HZ: u32 = 72_000_000;
+/// The LEDs are lit by a low level: PC13-PC15 may sink 3 mA but must not source current
+/// (datasheet, "Pin definitions" note), and the board's own PC13 LED hangs from 3.3 V.
+pub const LED_ON: embassy_stm32::gpio::Level = embassy_stm32::gpio::Level::Low;
 
 /// The flash pages `memory/f103c8.x` keeps out of the program for the settings: the last four
 /// 1 KiB pages (offsets from the start of flash).
@@ -117,22 +130,22 @@ pub fn board(
             (10, output(p.PA6)),
             (11, output(p.PA7)),
             (12, output(p.PB3)),
-            (13, output(p.PB4)),
-            (14, output(p.PA15)),
+            (13, output(p.PA11)),
+            (14, output(p.PB2)),
         ],
         OUTPUT_ON,
     );
     let bus_de = driver_enable(p.PA1);
     let plc_de = driver_enable(p.PA8);
-    let leds = Leds::new(output(p.PC13), output(p.PC14), indicator_on_fault(p.PC15));
+    let leds = Leds::new(led(p.PC13), led(p.PC14), indicator_on_fault(p.PC15), LED_ON);
     let inputs = Inputs::new(
         [
             (0, input(p.PB12)),
             (1, input(p.PB13)),
             (2, input(p.PB14)),
             (3, input(p.PB15)),
-            (4, input(p.PA11)),
-            (5, input(p.PA12)),
+            (4, input(p.PB4)),
+            (5, input(p.PA15)),
             (11, input(p.PB10)),
             (12, input(p.PB11)),
             (13, input(p.PB0)),

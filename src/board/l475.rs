@@ -33,7 +33,7 @@
 //! | OUT12 SV | PD2 | PMOD CN10 | |
 //! | OUT13 LINK | PD7 | PMOD CN10 | |
 //! | OUT14 *ALM | PD3 | PMOD CN10 (CTS) | |
-//! | LED run | PB14 | LED2 (green) | blinks 1 Hz while the gateway task runs |
+//! | LED run | PB14 | LED2 (green) | blinks 1 Hz while the gateway task runs; LEDs lit high |
 //! | LED bus link | PA5 | LED1 (green), Arduino D13 | |
 //! | LED alarm | PC9 | LED3 (yellow) | PC9 low lights LED4 (blue) instead |
 //!
@@ -54,7 +54,7 @@ use embassy_stm32::usart::{self, BufferedInterruptHandler, BufferedUart, ConfigE
 use embassy_stm32::{bind_interrupts, interrupt, Peripherals};
 
 use super::{
-    indicator_on_fault, input, line_config, output, settings_flash, Board, Watchdog, BUS_RX,
+    indicator_on_fault, input, led, line_config, output, settings_flash, Board, Watchdog, BUS_RX,
     BUS_TX, BUS_TX_CAPACITY, INPUT_ON, OUTPUT_ON, PLC_RX, PLC_TX, PLC_TX_CAPACITY,
 };
 use crate::discrete::{Inputs, Leds, Outputs};
@@ -66,6 +66,8 @@ use crate::serial::Rs485;
 pub const MODEL_NAME: &str = "B-L475E-IOT01A (STM32L475VG)";
 /// System clock: HSI16 through the PLL (no crystal needed), the STM32L475's maximum.
 pub const SYSCLK_HZ: u32 = 80_000_000;
+/// The LEDs are lit by a high level (the board's LED drivers).
+pub const LED_ON: embassy_stm32::gpio::Level = embassy_stm32::gpio::Level::High;
 
 /// The flash pages `memory/l475vg.x` keeps out of the program for the settings: the last four 2 KiB
 /// pages of bank 2 (offsets from the start of flash). Erasing them does not stall the program,
@@ -216,7 +218,7 @@ pub fn board(
         ],
         OUTPUT_ON,
     );
-    let leds = Leds::new(output(p.PB14), output(p.PA5), indicator_on_fault(p.PC9));
+    let leds = Leds::new(led(p.PB14), led(p.PA5), indicator_on_fault(p.PC9), LED_ON);
     let inputs = Inputs::new(
         [
             (0, input(p.PC5)),

@@ -16,14 +16,14 @@ pub mod f103;
 pub mod l475;
 
 #[cfg(feature = "board-f103")]
-pub use f103::{board, clock_config, reset_cause, uart_config, MODEL_NAME, SETTINGS_RANGE};
+pub use f103::{board, clock_config, reset_cause, uart_config, LED_ON, MODEL_NAME, SETTINGS_RANGE};
 /// The emulator has no settings store.
 #[cfg(all(feature = "board-l475", feature = "hw"))]
 pub use l475::SETTINGS_RANGE;
 #[cfg(feature = "emulator")]
 pub use l475::SYSCLK_HZ;
 #[cfg(feature = "board-l475")]
-pub use l475::{board, clock_config, reset_cause, uart_config, MODEL_NAME};
+pub use l475::{board, clock_config, reset_cause, uart_config, LED_ON, MODEL_NAME};
 
 use embassy_stm32::gpio::{AnyPin, Input, Level, Output, Pin, Pull, Speed};
 use embassy_stm32::usart;
@@ -107,9 +107,15 @@ pub(crate) fn output(pin: Peri<'static, impl Pin>) -> Output<'static> {
     fault_driven(pin.into(), off, off, Speed::Low)
 }
 
-/// An LED that a fault turns on (the alarm LED).
+/// An LED, off, and off on a fault.
+pub(crate) fn led(pin: Peri<'static, impl Pin>) -> Output<'static> {
+    let off = opposite(LED_ON);
+    fault_driven(pin.into(), off, off, Speed::Low)
+}
+
+/// An LED, off, that a fault turns on (the alarm LED).
 pub(crate) fn indicator_on_fault(pin: Peri<'static, impl Pin>) -> Output<'static> {
-    fault_driven(pin.into(), Level::Low, Level::High, Speed::Low)
+    fault_driven(pin.into(), opposite(LED_ON), LED_ON, Speed::Low)
 }
 
 /// A driver-enable pin driven by software (a board without hardware DE), off, and off on a fault.
