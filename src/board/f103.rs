@@ -7,8 +7,8 @@
 //!
 //! | Signal | Pin | Notes |
 //! |---|---|---|
-//! | RS485 **bus** TX / RX / DE | PA2 / PA3 / PA1 | USART2; DE a GPIO, active high |
-//! | RS485 **PLC** TX / RX / DE | PA9 / PA10 / PA8 | USART1; DE a GPIO, active high |
+//! | RS485 **bus** TX / RX / DE | PA2 / PA3 / PA1 | USART2 (36 MHz APB1); DE a GPIO, active high |
+//! | RS485 **PLC** TX / RX / DE | PA9 / PA10 / PA8 | USART1 (72 MHz APB2); DE a GPIO, active high |
 //! | IN0-IN3 PC1 PC2 PC4 PC8 | PB12 PB13 PB14 PB15 | inputs: high = ON, pull-down (open = OFF) |
 //! | IN4, IN5 PC16 PC32 | PB4, PA15 | JTAG pins (pulled up only during reset, when no input is read) |
 //! | IN11 HOME, IN12 *STP | PB10, PB11 | |
@@ -48,6 +48,10 @@ use crate::serial::Rs485;
 pub const MODEL_NAME: &str = "STM32F103C8";
 /// System clock: the 8 MHz crystal through the PLL, the F103's maximum.
 const SYSCLK_HZ: u32 = 72_000_000;
+/// The bus UART's (USART2's) kernel clock: PCLK1, the system clock halved.
+pub const BUS_UART_HZ: u32 = SYSCLK_HZ / 2;
+/// The PLC UART's (USART1's) kernel clock: PCLK2, the system clock.
+pub const PLC_UART_HZ: u32 = SYSCLK_HZ;
 /// The LEDs are lit by a low level: PC13-PC15 may sink 3 mA but must not source current
 /// (datasheet, "Pin definitions" note), and the board's own PC13 LED hangs from 3.3 V.
 pub const LED_ON: embassy_stm32::gpio::Level = embassy_stm32::gpio::Level::Low;

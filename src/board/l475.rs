@@ -7,7 +7,7 @@
 //! | RS485 **bus** TX | PA0 | Arduino D1 | UART4 (QEMU `-serial` #3) |
 //! | RS485 bus RX | PA1 | Arduino D0 | |
 //! | RS485 bus DE | PA15 | Arduino D9 | hardware driver enable (CR3.DEM), active high |
-//! | RS485 **PLC** TX | PD5 | PMOD CN10 (UART) | USART2 (QEMU `-serial` #1) |
+//! | RS485 **PLC** TX | PD5 | PMOD CN10 (UART) | USART2 (QEMU `-serial` #1), clocked by HSI16 |
 //! | RS485 PLC RX | PD6 | PMOD CN10 | |
 //! | RS485 PLC DE | PD4 | PMOD CN10 (RTS) | hardware driver enable, active high |
 //! | IN0 PC1 | PC5 | Arduino A0 | inputs: high = ON, pull-down (open = OFF) |
@@ -66,6 +66,13 @@ use crate::serial::Rs485;
 pub const MODEL_NAME: &str = "B-L475E-IOT01A (STM32L475VG)";
 /// System clock: HSI16 through the PLL (no crystal needed), the STM32L475's maximum.
 pub const SYSCLK_HZ: u32 = 80_000_000;
+/// The bus UART's (UART4's) kernel clock: PCLK1, the system clock (APB1 not divided).
+pub const BUS_UART_HZ: u32 = SYSCLK_HZ;
+/// The PLC UART's (USART2's) kernel clock: HSI16, not PCLK1. At 80 MHz the divider for
+/// 1.2 kbit/s (66,667) is over the 16-bit BRR, and the driver refuses the rate after it has
+/// disabled the UART: the PLC line went dead until a factory reset. From 16 MHz every PLCBAUD
+/// fits (13,333 at 1.2 kbit/s, 139 at 115.2 kbit/s: 0.08 % fast).
+pub const PLC_UART_HZ: u32 = 16_000_000;
 /// The LEDs are lit by a high level (the board's LED drivers).
 pub const LED_ON: embassy_stm32::gpio::Level = embassy_stm32::gpio::Level::High;
 
@@ -164,6 +171,8 @@ pub fn clock_config() -> embassy_stm32::Config {
         divr: Some(PllRDiv::DIV2),
     });
     config.rcc.sys = Sysclk::PLL1_R;
+    // USART2 (the PLC line) from HSI16: see [`PLC_UART_HZ`].
+    config.rcc.mux.usart2sel = embassy_stm32::rcc::mux::Usartsel::HSI;
     config
 }
 

@@ -16,14 +16,19 @@ pub mod f103;
 pub mod l475;
 
 #[cfg(feature = "board-f103")]
-pub use f103::{board, clock_config, reset_cause, uart_config, LED_ON, MODEL_NAME, SETTINGS_RANGE};
+pub use f103::{
+    board, clock_config, reset_cause, uart_config, BUS_UART_HZ, LED_ON, MODEL_NAME, PLC_UART_HZ,
+    SETTINGS_RANGE,
+};
 /// The emulator has no settings store.
 #[cfg(all(feature = "board-l475", feature = "hw"))]
 pub use l475::SETTINGS_RANGE;
 #[cfg(feature = "emulator")]
 pub use l475::SYSCLK_HZ;
 #[cfg(feature = "board-l475")]
-pub use l475::{board, clock_config, reset_cause, uart_config, LED_ON, MODEL_NAME};
+pub use l475::{
+    board, clock_config, reset_cause, uart_config, BUS_UART_HZ, LED_ON, MODEL_NAME, PLC_UART_HZ,
+};
 
 use embassy_stm32::gpio::{AnyPin, Input, Level, Output, Pin, Pull, Speed};
 use embassy_stm32::usart;
@@ -94,9 +99,56 @@ pub fn line_config(baud: u32, parity: protocol::plc::Parity) -> usart::Config {
     // Wake the task for every byte: the protocol stamps arrival times (Modbus t3.5, §5 time-outs),
     // and QEMU never sets ISR.IDLE, which is the other wake-up.
     config.eager_reads = Some(1);
+    // The transceiver's receiver output is off (high impedance) while its driver is on: /RE is
+    // tied to DE, during every transmission and the break. Pulled up, RX idles at the mark
+    // level then instead of floating into junk bytes and framing errors.
+    config.rx_pull = Pull::Up;
     uart_config(&mut config);
     config
 }
+
+/// Whether a UART clocked at `kernel_hz` makes `baud` as embassy-stm32 0.6.0 programs it
+/// (`usart::find_and_set_brr`): the divider `kernel_hz / baud`, rounded, 16 to 0xFFFF with
+/// 16-times oversampling (BRR is 16 bits on both chips), within 1 % of the rate (Modbus and the
+/// controllers tolerate about 2 %). Out of that range the driver refuses the rate, after it has
+/// disabled the UART.
+pub const fn divider_fits(kernel_hz: u32, baud: u32) -> bool {
+    if baud == 0 {
+        return false;
+    }
+    let divider = (kernel_hz + baud / 2) / baud;
+    if divider < 16 || divider > 0xFFFF {
+        return false;
+    }
+    let made = kernel_hz / divider;
+    let error = made.abs_diff(baud);
+    error * 100 <= baud
+}
+
+/// Every rate the PLC (PLCBAUD) or the bus (BUSBAUD, and the rate after a break) may ask of this
+/// board's UARTs is one they can make: checked when the firmware is built, for the board it is
+/// built for. (A rate the PLC saved and the UART refused would leave the line dead at every
+/// start.)
+const _: () = {
+    let plc = protocol::plc::settings::PLC_BAUDS;
+    let mut i = 0;
+    while i < plc.len() {
+        assert!(
+            divider_fits(PLC_UART_HZ, plc[i]),
+            "a PLC rate this board's UART cannot make"
+        );
+        i += 1;
+    }
+    let bus = protocol::line::Baud::ALL;
+    let mut i = 0;
+    while i < bus.len() {
+        assert!(
+            divider_fits(BUS_UART_HZ, bus[i].bits_per_second()),
+            "a bus rate this board's UART cannot make"
+        );
+        i += 1;
+    }
+};
 
 // The pin helpers below take any pin and set it up in one function for all (`AnyPin`): the
 // board sets up 30 pins, and one copy of each set-up per pin type cost about 1 KB of flash.
