@@ -7,6 +7,14 @@
 //! node's own deadline; feed what came and everything else already waiting (ingress before
 //! egress); then carry out the node's actions until it has none; tell the I/O task what the
 //! outputs and LEDs show; feed the watchdog.
+//!
+//! No await in the loop lasts longer than a bus frame (16.7 ms at 9.6 kbit/s), a rate change or
+//! a flash write: a PLC reply is handed to its UART and left to it (255 bytes take 2.3 s at
+//! 1.2 kbit/s with parity, longer than the watchdog's timeout), and its line is settled (the
+//! driver released once the last stop bit has left) at every await that follows. So the stop
+//! input, the bus and the watchdog are served while a long reply is on the wire.
+
+use core::pin::pin;
 
 use embassy_futures::select::{select4, Either4};
 use embassy_time::Timer;
@@ -14,6 +22,7 @@ use embassy_time::Timer;
 use crate::board::Board;
 use crate::io::{self, Sample, SAMPLES};
 use crate::node::{Action, Instant, Node};
+use crate::serial::Rs485;
 use crate::settings::Settings;
 use protocol::line::LineAction;
 use protocol::plc::Store;
@@ -42,11 +51,18 @@ async fn deadline(at: Option<Instant>) {
 /// Reads the bus, but not before `hold`: until then the frame that has started is still coming
 /// in ([`Node::bus_frame_due`]), and its bytes wait in the UART's buffer. A wake per frame
 /// instead of one per byte (32 per transaction, with the echo): measured by `scripts/cpu-load.sh`.
-async fn bus_read(bus: &mut crate::serial::Rs485, buf: &mut [u8], hold: Option<Instant>) -> usize {
+async fn bus_read(bus: &mut Rs485, buf: &mut [u8], hold: Option<Instant>) -> usize {
     if let Some(Instant(us)) = hold {
         Timer::at(embassy_time::Instant::from_micros(us)).await;
     }
     bus.read(buf).await
+}
+
+/// Reads the PLC line once the reply on it, if any, has left: the PLC sends its next request
+/// only after it, and the receiver is off while the driver is on.
+async fn plc_read(plc: &mut Rs485, buf: &mut [u8]) -> usize {
+    plc.settle().await;
+    plc.read(buf).await
 }
 
 /// The emulator build only: the harness writes `true` here (QEMU's qtest, found by its symbol)
@@ -55,6 +71,13 @@ async fn bus_read(bus: &mut crate::serial::Rs485, buf: &mut [u8], hold: Option<I
 #[cfg(feature = "emulator")]
 #[used]
 static EMU_PANIC: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+
+/// The emulator build only: the harness writes `true` here to make the gateway task stop making
+/// progress (it spins without yielding), so that the emulator's model of the watchdog
+/// (`systick`) is shown to reset a stuck firmware.
+#[cfg(feature = "emulator")]
+#[used]
+static EMU_STALL: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
 
 /// Runs the gateway forever.
 #[embassy_executor::task]
@@ -72,10 +95,7 @@ pub async fn run(
     let baud = node.gateway().engine().line_baud();
     board.bus.set_baud(baud.bits_per_second()).await;
     let plc = node.gateway().config().plc;
-    board
-        .plc
-        .set_config(&crate::board::line_config(plc.baud, plc.parity))
-        .await;
+    board.plc.set_line(plc.baud, plc.parity).await;
     // The harness waits for this line: both UARTs receive at their settings from now on.
     info!("ready");
     let first = SAMPLES.try_take().unwrap_or(boot);
@@ -92,7 +112,7 @@ pub async fn run(
         let hold = node.bus_frame_due();
         let event = select4(
             bus_read(&mut board.bus, &mut bus_buf, hold),
-            board.plc.read(&mut plc_buf),
+            plc_read(&mut board.plc, &mut plc_buf),
             SAMPLES.wait(),
             deadline(protocol::time::earliest(
                 node.poll_at(),
@@ -116,6 +136,10 @@ pub async fn run(
         if EMU_PANIC.load(core::sync::atomic::Ordering::Relaxed) {
             panic!("requested by the emulator harness");
         }
+        #[cfg(feature = "emulator")]
+        while EMU_STALL.load(core::sync::atomic::Ordering::Relaxed) {
+            core::hint::spin_loop();
+        }
         // Whatever else has arrived meanwhile goes in before anything goes out.
         loop {
             let n = board.bus.read_ready(&mut bus_buf).await;
@@ -133,31 +157,39 @@ pub async fn run(
 
         clock = now();
         while let Some(action) = node.poll(clock) {
+            let Board { bus, plc, .. } = &mut *board;
             match action {
-                Action::Bus(frame) => board.bus.send(&frame).await,
-                Action::Reply(reply) => board.plc.send(reply).await,
+                Action::Bus(frame) => plc.settle_then(pin!(bus.send(&frame))).await,
+                // Left to the UART: see the module documentation.
+                Action::Reply(reply) => plc.start_send(reply).await,
                 Action::Line(LineAction::SetBaud(baud)) => {
-                    board.bus.set_baud(baud.bits_per_second()).await
+                    plc.settle_then(pin!(bus.set_baud(baud.bits_per_second())))
+                        .await
                 }
-                Action::Line(LineAction::BreakStart) => board.bus.break_start().await,
-                Action::Line(LineAction::BreakEnd) => board.bus.break_end().await,
+                Action::Line(LineAction::BreakStart) => {
+                    plc.settle_then(pin!(bus.break_start())).await
+                }
+                Action::Line(LineAction::BreakEnd) => bus.break_end().await,
                 Action::Line(LineAction::CommChange) => {
-                    board.bus.send(&protocol::frame::COMM_CHANGE).await
+                    plc.settle_then(pin!(bus.send(&protocol::frame::COMM_CHANGE)))
+                        .await
                 }
-                Action::PlcLine(line) => {
-                    let config = crate::board::line_config(line.baud, line.parity);
-                    board.plc.set_config(&config).await
-                }
+                // After the reply to the write that asked for it has left.
+                Action::PlcLine(line) => plc.set_line(line.baud, line.parity).await,
                 Action::Store(Store::Save(record)) => {
+                    // The reply to SAVE leaves first: on the F103 an erase stops the CPU, and
+                    // with it the interrupt that feeds the UART, for 20-40 ms.
+                    plc.settle().await;
                     let saved = settings.save(&record);
                     node.stored(saved);
                 }
                 Action::Store(store @ (Store::FactoryReset | Store::Restart)) => {
+                    // The reply to the write that asked for it goes out first (and before an
+                    // erase stops the F103's CPU).
+                    plc.settle().await;
                     if matches!(store, Store::FactoryReset) {
                         settings.factory_reset();
                     }
-                    // The reply to the write that asked for it has gone out first.
-                    board.plc.flush().await;
                     cortex_m::peripheral::SCB::sys_reset();
                 }
             }

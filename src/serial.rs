@@ -1,17 +1,34 @@
 //! An RS485 line: a buffered UART with a driver enable, by hardware (the UART's DE output, USART
 //! v3/v4 chips such as the L4) or by a GPIO set before a write and cleared once the last stop bit
-//! has left (F1), and the operations the protocol asks of the bus (send then wait for
-//! transmission complete, rate change, break).
+//! has left (F1), and the operations the protocol asks of the line (send, wait for transmission
+//! complete, rate and framing change, break).
+//!
+//! A send has two halves: [`Rs485::start_send`] puts the bytes into the UART's ring, which its
+//! interrupt empties onto the wire, and [`Rs485::settle`] waits until the last stop bit has left
+//! and releases the driver. The gateway task starts a PLC reply and goes on with the bus, the
+//! stop input and the watchdog while it is on the wire (a 255-byte reply lasts 2.3 s at
+//! 1.2 kbit/s with parity), settling the line at every await ([`Rs485::settle_then`]).
 
+use core::future::Future;
+use core::pin::Pin;
+
+use embassy_futures::select::select;
 use embassy_stm32::gpio::Output;
 use embassy_stm32::usart::BufferedUart;
+#[cfg(feature = "emulator")]
+use embassy_time::Instant;
+use embassy_time::{Duration, Timer};
 use embedded_io_async::{Read, ReadReady, Write};
+use protocol::plc::Parity;
 
+use crate::board::{line_config, UartRegs};
 use crate::pins::LineBreak;
 
 /// One RS485 line. Receiving continues in the UART's ring buffer while the task awaits a send.
 pub struct Rs485 {
     uart: BufferedUart<'static>,
+    /// The UART's registers, for the transmission-complete check the driver's own can miss.
+    regs: UartRegs,
     /// Size of the TX ring: a write never exceeds it (the driver refuses longer writes).
     tx_capacity: usize,
     /// How this line holds a break, if it is the bus.
@@ -19,24 +36,55 @@ pub struct Rs485 {
     in_break: bool,
     /// The driver enable, if software drives it (no hardware DE on the chip).
     de: Option<Output<'static>>,
+    /// The rate and parity in force (what a refused change falls back to).
+    baud: u32,
+    parity: Parity,
+    /// Bytes have been started and not yet settled.
+    sending: bool,
+    /// The emulator build only: until when the bytes started last are on the wire (QEMU moves
+    /// them at once), if this line is paced ([`Rs485::paced`]).
+    #[cfg(feature = "emulator")]
+    wire_until: Option<Instant>,
+    #[cfg(feature = "emulator")]
+    paced: bool,
 }
 
 impl Rs485 {
-    /// Wraps a UART: built with `new_with_de` (hardware DE, `de` is `None`), or without a DE
-    /// pin, which `de` then is (driven low: the transmitter off).
+    /// Wraps a UART running at `baud` and `parity` ([`line_config`]): built with `new_with_de`
+    /// (hardware DE, `de` is `None`), or without a DE pin, which `de` then is (driven low: the
+    /// transmitter off).
     pub fn new(
         uart: BufferedUart<'static>,
+        regs: UartRegs,
         tx_capacity: usize,
+        (baud, parity): (u32, Parity),
         line_break: Option<LineBreak>,
         de: Option<Output<'static>>,
     ) -> Rs485 {
         Rs485 {
             uart,
+            regs,
             tx_capacity,
             line_break,
             in_break: false,
             de,
+            baud,
+            parity,
+            sending: false,
+            #[cfg(feature = "emulator")]
+            wire_until: None,
+            #[cfg(feature = "emulator")]
+            paced: false,
         }
+    }
+
+    /// The emulator build only: a send lasts as long as its bytes would take on the wire, as on
+    /// the board (QEMU's UART moves them at once), so that the emulator tests see a long reply
+    /// at a low rate as the board's gateway task does.
+    #[cfg(feature = "emulator")]
+    pub fn paced(mut self) -> Rs485 {
+        self.paced = true;
+        self
     }
 
     /// Waits for received bytes; how many were copied (0 after a receive error, which is logged:
@@ -51,8 +99,13 @@ impl Rs485 {
         }
     }
 
-    /// The received bytes already buffered, without waiting (0 when none).
+    /// The received bytes already buffered, without waiting (0 when none, and while a send on
+    /// this line has not settled: the other end answers only after it, so what is there is read
+    /// once the line has settled, and a reply is never started behind an unsettled one).
     pub async fn read_ready(&mut self, buf: &mut [u8]) -> usize {
+        if self.sending {
+            return 0;
+        }
         match self.uart.read_ready() {
             Ok(true) => self.read(buf).await,
             _ => 0,
@@ -60,9 +113,16 @@ impl Rs485 {
     }
 
     /// Transmits `bytes` and returns once the last stop bit has left (transmission complete), so
-    /// that the line may turn around or change rate. Cancelling it is safe (bytes already queued
-    /// are sent, the driver enable is dropped by hardware).
+    /// that the line may turn around or change rate.
     pub async fn send(&mut self, bytes: &[u8]) {
+        self.start_send(bytes).await;
+        self.settle().await;
+    }
+
+    /// Drives the line and hands `bytes` to the UART, which sends them while the caller goes on;
+    /// [`Rs485::settle`] waits for the end. A send still in progress is settled first.
+    pub async fn start_send(&mut self, bytes: &[u8]) {
+        self.settle().await;
         if self.in_break {
             // The node never sends during a break; if it did, the frame would be lost on a line
             // held low, so end the break first.
@@ -72,42 +132,108 @@ impl Rs485 {
         if let Some(de) = self.de.as_mut() {
             de.set_high();
         }
-        for chunk in bytes.chunks(self.tx_capacity.max(1)) {
-            // Flush after each chunk: the driver's `write` waits for free space without
-            // registering a waker, so never write more than the empty ring holds.
-            if self.uart.write_all(chunk).await.is_err() || self.uart.flush().await.is_err() {
-                warn!("uart: transmit error");
+        self.sending = true;
+        #[cfg(feature = "emulator")]
+        if self.paced {
+            self.wire_until = Some(Instant::now() + self.wire_time(bytes.len()));
+        }
+        // One write: a frame always fits the empty ring (a PLC ADU is 256 bytes at most, a bus
+        // frame 16), and the driver's `write` takes all of it or waits for room without
+        // registering a waker; a longer one it refuses.
+        if self.uart.write(bytes).await.is_err() {
+            warn!("uart: transmit error");
+        }
+    }
+
+    /// Waits until everything started has left the line, then releases the driver. At once when
+    /// nothing was started; cancelling it is safe (the next call waits again).
+    pub async fn settle(&mut self) {
+        if !self.sending {
+            return;
+        }
+        let _ = self.uart.flush().await;
+        // embassy-stm32 0.6.0 can report completion early: its interrupt enables the
+        // transmission-complete interrupt when the slice it takes from the TX ring has one byte
+        // left, which is also the byte before the ring wraps; served late, after that byte has
+        // left, it takes TC for the end of the whole transmission, and then goes on with the
+        // bytes after the wrap. Its interrupt enables say whether it has (`UartRegs`): a
+        // character time per look, at most a ring's worth.
+        let char_time = self.char_time();
+        for _ in 0..self.tx_capacity {
+            if self.regs.transmission_complete() {
                 break;
             }
+            Timer::after(char_time).await;
         }
-        // `flush` returned: transmission complete, the line may turn around.
+        #[cfg(feature = "emulator")]
+        if let Some(until) = self.wire_until {
+            Timer::at(until).await;
+            self.wire_until = None;
+        }
+        // Transmission complete: the line may turn around.
         if let Some(de) = self.de.as_mut() {
             de.set_low();
         }
+        self.sending = false;
+    }
+
+    /// Runs `work` while settling this line: a send that ends meanwhile releases its driver at
+    /// once, whatever `work` waits for (a PLC reply ending while the task sends on the bus).
+    /// (Not generic: one copy for every kind of work.)
+    pub async fn settle_then(&mut self, work: Pin<&mut dyn Future<Output = ()>>) {
+        let settle = async {
+            self.settle().await;
+            core::future::pending::<()>().await
+        };
+        select(work, settle).await;
     }
 
     /// Changes the rate (both directions) after any transmission in progress has completed.
     pub async fn set_baud(&mut self, bits_per_second: u32) {
-        if self.uart.flush().await.is_err() || self.uart.set_baudrate(bits_per_second).is_err() {
-            error!("uart: rate {} refused", bits_per_second);
+        self.set_line(bits_per_second, self.parity).await
+    }
+
+    /// Changes rate and framing after any transmission in progress has completed. A change the
+    /// UART refuses (a divider its clock cannot make) leaves the line as it was: the driver has
+    /// disabled the UART and its interrupt by then, and the old settings enable them again.
+    pub async fn set_line(&mut self, baud: u32, parity: Parity) {
+        self.flush().await;
+        for (baud, parity) in [(baud, parity), (self.baud, self.parity)] {
+            if self.uart.set_config(&line_config(baud, parity)).is_ok() {
+                self.baud = baud;
+                self.parity = parity;
+                return;
+            }
+            error!("uart: rate {} refused", baud);
         }
     }
 
-    /// Changes rate and framing after any transmission in progress has completed.
-    pub async fn set_config(&mut self, config: &embassy_stm32::usart::Config) {
-        if self.uart.flush().await.is_err() || self.uart.set_config(config).is_err() {
-            error!("uart: configuration refused");
-        }
+    /// The time one character takes: a start bit, 8 data bits, the parity bit if any, a stop
+    /// bit; rounded up to the microsecond.
+    pub fn char_time(&self) -> Duration {
+        let bits: u64 = if matches!(self.parity, Parity::None) {
+            10
+        } else {
+            11
+        };
+        Duration::from_micros((bits * 1_000_000).div_ceil(u64::from(self.baud.max(1))))
+    }
+
+    /// The time `n` characters take on the wire.
+    #[cfg(feature = "emulator")]
+    fn wire_time(&self, n: usize) -> Duration {
+        self.char_time() * n as u32
     }
 
     /// Waits until everything written has left the line.
     pub async fn flush(&mut self) {
-        let _ = self.uart.flush().await;
+        self.sending = true;
+        self.settle().await;
     }
 
     /// Starts holding the line low (driver enabled), after any transmission has completed.
     pub async fn break_start(&mut self) {
-        let _ = self.uart.flush().await;
+        self.flush().await;
         match &self.line_break {
             Some(line_break) => {
                 if let Some(de) = self.de.as_mut() {

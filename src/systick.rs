@@ -4,8 +4,12 @@
 //! SysTick interrupts every millisecond; `now()` adds the counter's progress within the current
 //! millisecond, so time has microsecond resolution. Timers are checked on each interrupt: they
 //! fire at most 1 ms late, which the emulator tests (generous time-outs) do not notice.
+//!
+//! The same interrupt runs the emulator's model of the independent watchdog (QEMU has no IWDG):
+//! [`watchdog_start`], [`watchdog_pet`].
 
 use core::cell::{Cell, RefCell};
+use core::sync::atomic::{AtomicU32, Ordering};
 use core::task::Waker;
 
 use cortex_m::peripheral::syst::SystClkSource;
@@ -67,12 +71,44 @@ impl Driver for SysTickDriver {
 
 #[exception]
 fn SysTick() {
-    critical_section::with(|cs| {
+    let ms = critical_section::with(|cs| {
         let ms = DRIVER.ms.borrow(cs).get() + 1;
         DRIVER.ms.borrow(cs).set(ms);
         DRIVER
             .queue
             .borrow_ref_mut(cs)
             .next_expiration(ms * TICKS_PER_MS);
+        ms
     });
+    watchdog_check(ms as u32);
+}
+
+/// The model of the IWDG: the milliseconds it allows between two pets (0: not started), and the
+/// millisecond of the last pet. Like the IWDG, once started it cannot be stopped.
+static WATCHDOG_LIMIT_MS: AtomicU32 = AtomicU32::new(0);
+static WATCHDOG_PET_MS: AtomicU32 = AtomicU32::new(0);
+
+/// Starts the watchdog model: it resets the chip `timeout_us` after the last pet.
+pub fn watchdog_start(timeout_us: u32) {
+    watchdog_pet();
+    WATCHDOG_LIMIT_MS.store(timeout_us / 1000, Ordering::Relaxed);
+}
+
+/// Restarts the watchdog model's count, as `IndependentWatchdog::pet` does the IWDG's.
+pub fn watchdog_pet() {
+    let ms = critical_section::with(|cs| DRIVER.ms.borrow(cs).get());
+    WATCHDOG_PET_MS.store(ms as u32, Ordering::Relaxed);
+}
+
+/// On every SysTick: past the limit, what the IWDG does (a reset), with a line for the harness.
+/// QEMU resets the machine as the board would; the reset cause is not kept (QEMU models no reset
+/// flags, and the loader clears RAM), so RESETCAUSE does not say "watchdog" here as it does on the
+/// board.
+fn watchdog_check(now_ms: u32) {
+    let limit = WATCHDOG_LIMIT_MS.load(Ordering::Relaxed);
+    let since = now_ms.wrapping_sub(WATCHDOG_PET_MS.load(Ordering::Relaxed));
+    if limit != 0 && since > limit {
+        error!("watchdog: no progress for {} ms, reset", since);
+        SCB::sys_reset();
+    }
 }

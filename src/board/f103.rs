@@ -36,7 +36,7 @@ use embassy_stm32::{bind_interrupts, interrupt, Peripherals};
 
 use super::{
     driver_enable, indicator_on_fault, input, led, line_config, output, settings_flash, Board,
-    Watchdog, BUS_RX, BUS_TX, BUS_TX_CAPACITY, INPUT_ON, OUTPUT_ON, PLC_RX, PLC_TX,
+    UartRegs, Watchdog, BUS_RX, BUS_TX, BUS_TX_CAPACITY, INPUT_ON, OUTPUT_ON, PLC_RX, PLC_TX,
     PLC_TX_CAPACITY,
 };
 use crate::discrete::{Inputs, Leds, Outputs};
@@ -181,8 +181,22 @@ pub fn board(
     )?;
 
     let board = Board {
-        bus: Rs485::new(bus, BUS_TX_CAPACITY, Some(line_break), Some(bus_de)),
-        plc: Rs485::new(plc, PLC_TX_CAPACITY, None, Some(plc_de)),
+        bus: Rs485::new(
+            bus,
+            UartRegs(embassy_stm32::pac::USART2),
+            BUS_TX_CAPACITY,
+            (super::BUS_INITIAL_BAUD, protocol::plc::Parity::None),
+            Some(line_break),
+            Some(bus_de),
+        ),
+        plc: Rs485::new(
+            plc,
+            UartRegs(embassy_stm32::pac::USART1),
+            PLC_TX_CAPACITY,
+            (plc_line.baud, plc_line.parity),
+            None,
+            Some(plc_de),
+        ),
         watchdog: Watchdog::new(p.IWDG),
         settings_flash: settings_flash(p.FLASH),
     };

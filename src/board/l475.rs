@@ -6,7 +6,7 @@
 //! |---|---|---|---|
 //! | RS485 **bus** TX | PA0 | Arduino D1 | UART4 (QEMU `-serial` #3) |
 //! | RS485 bus RX | PA1 | Arduino D0 | |
-//! | RS485 bus DE | PA15 | Arduino D9 | hardware driver enable (CR3.DEM), active high |
+//! | RS485 bus DE | PA15 | Arduino D9 | hardware driver enable (CR3.DEM), active high; **pull down externally** (≤ 4.7 kΩ): PA15 is JTDI, pulled up during reset |
 //! | RS485 **PLC** TX | PD5 | PMOD CN10 (UART) | USART2 (QEMU `-serial` #1), clocked by HSI16 |
 //! | RS485 PLC RX | PD6 | PMOD CN10 | |
 //! | RS485 PLC DE | PD4 | PMOD CN10 (RTS) | hardware driver enable, active high |
@@ -40,6 +40,15 @@
 //! The 24 V input and output stages (opto-couplers, high-side drivers) are not on this board: the
 //! table assumes non-inverting stages (3.3 V high = signal ON), hence `INPUT_ON` / `OUTPUT_ON`.
 //!
+//! **From reset until the firmware drives them**, every pin of the table is high-impedance (analog
+//! mode on the L4), except PA15 and PB4, which are JTAG pins with internal pull-ups (30-50 kΩ)
+//! until the firmware takes them: each output stage and the bus transceiver's DE need a pull-down
+//! on the carrier (10 kΩ on an output stage's input; ≤ 4.7 kΩ on PA15, which then stays below
+//! 0.6 V against the pull-up), or an output and the bus driver would be ON during reset.
+//! PB4 is an input (RES): its pull-up during reset does nothing. The same holds while a debug
+//! probe holds the core in reset; while a probe halts a running core, the pins keep their last
+//! state (the hardware DE still drops at the end of a character).
+//!
 //! # Emulator
 //! QEMU's `b-l475e-iot01a` connects `-serial` #0..#4 to USART1, USART2, USART3, UART4, UART5
 //! (#1 and #3 are proven by the emulator tests). The harness gives #1 (PLC) and #3 (bus) host
@@ -54,8 +63,8 @@ use embassy_stm32::usart::{self, BufferedInterruptHandler, BufferedUart, ConfigE
 use embassy_stm32::{bind_interrupts, interrupt, Peripherals};
 
 use super::{
-    indicator_on_fault, input, led, line_config, output, settings_flash, Board, Watchdog, BUS_RX,
-    BUS_TX, BUS_TX_CAPACITY, INPUT_ON, OUTPUT_ON, PLC_RX, PLC_TX, PLC_TX_CAPACITY,
+    indicator_on_fault, input, led, line_config, output, settings_flash, Board, UartRegs, Watchdog,
+    BUS_RX, BUS_TX, BUS_TX_CAPACITY, INPUT_ON, OUTPUT_ON, PLC_RX, PLC_TX, PLC_TX_CAPACITY,
 };
 use crate::discrete::{Inputs, Leds, Outputs};
 use crate::io::Pins;
@@ -270,9 +279,27 @@ pub fn board(
         line_config(plc_line.baud, plc_line.parity),
     )?;
 
+    let plc = Rs485::new(
+        plc,
+        UartRegs(embassy_stm32::pac::USART2),
+        PLC_TX_CAPACITY,
+        (plc_line.baud, plc_line.parity),
+        None,
+        None,
+    );
+    // The emulator's PLC replies last as long as on the wire: see `Rs485::paced`.
+    #[cfg(feature = "emulator")]
+    let plc = plc.paced();
     let board = Board {
-        bus: Rs485::new(bus, BUS_TX_CAPACITY, Some(line_break), None),
-        plc: Rs485::new(plc, PLC_TX_CAPACITY, None, None),
+        bus: Rs485::new(
+            bus,
+            UartRegs(embassy_stm32::pac::UART4),
+            BUS_TX_CAPACITY,
+            (super::BUS_INITIAL_BAUD, protocol::plc::Parity::None),
+            Some(line_break),
+            None,
+        ),
+        plc,
         watchdog: Watchdog::new(p.IWDG),
         settings_flash: settings_flash(p.FLASH),
     };

@@ -46,10 +46,16 @@ pub const BUS_INITIAL_BAUD: u32 = protocol::line::BAUD_AFTER_BREAK.bits_per_seco
 pub const INPUT_ON: Level = Level::High;
 /// Level of an output pin while its signal is ON (OFF, the safe state, is the other level).
 pub const OUTPUT_ON: Level = Level::High;
-/// The gateway task must make progress at least this often, or the IWDG resets the chip.
-/// Generous: a 256-byte reply at 9.6 kbit/s keeps the task in one `await` for 267 ms.
-#[cfg(feature = "hw")]
+/// The gateway task must make progress at least this often, or the IWDG resets the chip: its
+/// loop passes every 100 ms at least, and no await in it lasts longer than a bus frame, a rate
+/// change or a flash write (a PLC reply is left to the UART: `gateway`).
 const WATCHDOG_TIMEOUT_US: u32 = 1_000_000;
+/// The shortest time [`WATCHDOG_TIMEOUT_US`] may really be: the IWDG counts the LSI, which the
+/// driver takes for its nominal 40 kHz (F103) or 32 kHz (L4); it runs at 30-60 kHz on the F103
+/// (datasheet), so the timeout is 0.67-1.33 s there (29.5-34 kHz on the L4: 0.94-1.08 s). The
+/// emulator's model of the watchdog expires after this.
+#[cfg(feature = "emulator")]
+pub const WATCHDOG_SHORTEST_US: u32 = WATCHDOG_TIMEOUT_US / 60 * 40;
 
 // UART ring buffers, in .bss. Each holds at least what the task writes or may leave unread at
 // once: a 16-byte bus frame (the task takes a bus frame once it is whole: four fit), a Modbus RTU
@@ -150,6 +156,21 @@ const _: () = {
     }
 };
 
+/// A UART's registers, read below the driver to confirm the end of a transmission.
+#[derive(Clone, Copy)]
+pub struct UartRegs(pub embassy_stm32::pac::usart::Usart);
+
+impl UartRegs {
+    /// The driver's interrupt has nothing left to do for a transmission: it stopped taking bytes
+    /// from its ring (TXEIE off: the ring is empty) and has handled the transmission-complete
+    /// interrupt of the last byte (TCIE off). The TC flag itself cannot tell: the driver clears
+    /// it when it handles it.
+    pub fn transmission_complete(&self) -> bool {
+        let cr1 = self.0.cr1().read();
+        !cr1.txeie() && !cr1.tcie()
+    }
+}
+
 // The pin helpers below take any pin and set it up in one function for all (`AnyPin`): the
 // board sets up 30 pins, and one copy of each set-up per pin type cost about 1 KB of flash.
 
@@ -219,7 +240,8 @@ pub(crate) fn settings_flash(
     None
 }
 
-/// The independent watchdog on the board; nothing in the emulator (QEMU has no IWDG model).
+/// The independent watchdog on the board; in the emulator (QEMU has no IWDG model) a model of
+/// it on the SysTick interrupt (`systick`), with the shortest timeout the board's may have.
 pub struct Watchdog {
     #[cfg(feature = "hw")]
     iwdg: embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
@@ -236,6 +258,7 @@ impl Watchdog {
 
     #[cfg(feature = "emulator")]
     pub(crate) fn new(_iwdg: Peri<'static, embassy_stm32::peripherals::IWDG>) -> Watchdog {
+        crate::systick::watchdog_start(WATCHDOG_SHORTEST_US);
         Watchdog {}
     }
 
@@ -243,6 +266,8 @@ impl Watchdog {
     pub fn pet(&mut self) {
         #[cfg(feature = "hw")]
         self.iwdg.pet();
+        #[cfg(feature = "emulator")]
+        crate::systick::watchdog_pet();
     }
 }
 

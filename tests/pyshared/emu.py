@@ -507,7 +507,7 @@ def elf_symbols(path):
             if symbol.name in wanted:
                 found[symbol.name] = symbol["st_value"]
             else:  # mangled: rc_gateway::gateway::EMU_PANIC, rc_gateway::rt::load::EMU_BUSY_US
-                for name in ("EMU_PANIC", "EMU_BUSY_US", "EMU_CLOCK_US", "EMU_STOP_WAKES"):
+                for name in ("EMU_PANIC", "EMU_STALL", "EMU_BUSY_US", "EMU_CLOCK_US", "EMU_STOP_WAKES"):
                     if name in symbol.name:
                         found[name] = symbol["st_value"]
         return found
