@@ -18,8 +18,10 @@ QEMU runs without `-icount`: its virtual clock is then the host's, the clock rc-
 With `-icount shift=auto` the guest's clock runs fast to catch up after any stall of QEMU, so the
 firmware's reply time-outs expire early against rc-sim's real-time controllers (seen: retries
 colliding with late replies, axes going offline).
-Before resuming, RAM between the end of the firmware's statics and the top of the stack is painted
-with a pattern; `stop()` returns the stack high-water mark (the lowest overwritten address).
+Before resuming, the stack region is painted with a pattern: [`_stack_end`, `_stack_start`), which
+flip-link's layout puts at the bottom of RAM, from the start of RAM up to the statics (`.data`,
+`.bss`, `.uninit` lie above it, untouched); `stop()` returns the stack high-water mark (the lowest
+overwritten address).
 
 Nothing is skipped: a missing QEMU, rc-sim or firmware ELF raises `EmulatorError`. Every wait is
 bounded and `stop()` always kills QEMU and rc-sim.
@@ -372,7 +374,11 @@ class Emulator:
     # ------------------------------------------------------------------ stack
 
     def _stack_region(self):
-        return self.symbols["__sheap"], self.symbols["_stack_start"]
+        """[bottom, top) of the stack: cortex-m-rt's `_stack_end` and `_stack_start`. With flip-link
+        (.cargo/config.toml) the bottom is the start of RAM and the top lies right below `.data`;
+        with cortex-m-rt's own layout they would be the end of the statics and the end of RAM. Nothing
+        else lives there before the firmware starts."""
+        return self.symbols["_stack_end"], self.symbols["_stack_start"]
 
     def _paint_stack(self):
         low, high = self._stack_region()
@@ -501,7 +507,7 @@ def _listening(port):
 def elf_symbols(path):
     with open(path, "rb") as f:
         table = ELFFile(f).get_section_by_name(".symtab")
-        wanted = ("__sheap", "_stack_start", "__ebss", "__sbss", "__sdata")
+        wanted = ("_stack_end", "_stack_start", "__sheap", "__ebss", "__sbss", "__sdata")
         found = {}
         for symbol in table.iter_symbols():
             if symbol.name in wanted:
