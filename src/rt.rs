@@ -55,6 +55,8 @@ pub fn run<T: 'static>(make: impl FnOnce() -> T, init: impl FnOnce(Spawner, &'st
         // SAFETY: `poll` is called only here, in thread mode, never re-entrantly; the executor is
         // 'static and every task was spawned on it through its own spawner.
         unsafe { executor.poll() };
+        #[cfg(feature = "emulator")]
+        overflow::on_request();
         // Sleep unless something was woken meanwhile. Interrupts are masked for the check, so a
         // wake between the check and WFI leaves the interrupt pending, and WFI returns at once.
         cortex_m::interrupt::free(|_| {
@@ -202,6 +204,39 @@ extern "C" fn hard_fault(sp: u32) -> ! {
     cortex_m::peripheral::SCB::sys_reset();
     #[cfg(feature = "emulator")]
     halt()
+}
+
+/// The emulator build only: a stack overflow on request, to prove the guard on the real ELF
+/// (`test_stack_overflow_faults_and_leaves_outputs_safe` in tests/emu/test_firmware.py).
+#[cfg(feature = "emulator")]
+mod overflow {
+    use core::hint::black_box;
+    use core::sync::atomic::{AtomicBool, Ordering};
+
+    /// Set by the harness through qtest, by its symbol (`request_stack_overflow` in
+    /// tests/pyshared/emu.py). `#[used]` and an atomic, like `EMU_PANIC` in src/gateway.rs: nothing
+    /// in the program stores to it, which would otherwise let the compiler drop the check.
+    #[used]
+    static EMU_OVERFLOW: AtomicBool = AtomicBool::new(false);
+
+    /// Checked after every poll of the executor (every wake).
+    pub(super) fn on_request() {
+        if EMU_OVERFLOW.load(Ordering::Relaxed) {
+            black_box(recurse(0));
+        }
+    }
+
+    /// Recursion without bound, 512 bytes of stack a level: the array is handed to `black_box`
+    /// (so it is really in the frame) and read after the call (so the call is not a tail call).
+    #[inline(never)]
+    fn recurse(depth: u32) -> u32 {
+        let mut frame = [0u8; 512];
+        black_box(&mut frame);
+        if black_box(depth) == u32::MAX {
+            return 0;
+        }
+        recurse(depth + 1).wrapping_add(u32::from(frame[depth as usize % frame.len()]))
+    }
 }
 
 /// After a panic. On the board: an undefined instruction, which a debug probe (`probe-rs run`)

@@ -232,6 +232,8 @@ class Emulator:
         self.with_plc = plc
         self.qemu_args = list(qemu_args)
         self.accel = accel
+        # Off after a deliberate overflow (`request_stack_overflow`): the whole region is used then.
+        self.measure_stack = True
         self.plc_port = None
         self.log_lines = []
         self.log_lock = threading.Lock()
@@ -354,7 +356,7 @@ class Emulator:
     def stop(self):
         hwm = None
         try:
-            if self.qtest is not None and not self._dead():
+            if self.qtest is not None and not self._dead() and self.measure_stack:
                 hwm = self.stack_high_water_mark()
         except Exception as error:  # the measurement must never hide the test's own result
             print(f"stack high-water mark not measured: {error}")
@@ -394,6 +396,13 @@ class Emulator:
     def request_panic(self):
         """Makes the gateway task panic (emulator build only: `EMU_PANIC` in src/gateway.rs)."""
         self.qtest.cmd(f"writeb {self.symbols['EMU_PANIC']:#x} 0x1")
+
+    def request_stack_overflow(self):
+        """Makes the firmware recurse without bound on its next wake (emulator build only:
+        `EMU_OVERFLOW` in src/rt.rs). Its stack high-water mark is then the whole stack region, not
+        a figure of the firmware's: `stop()` does not measure it."""
+        self.measure_stack = False
+        self.qtest.cmd(f"writeb {self.symbols['EMU_OVERFLOW']:#x} 0x1")
 
     # ------------------------------------------------------------------ the bus, as rc-sim saw it
 
@@ -513,7 +522,7 @@ def elf_symbols(path):
             if symbol.name in wanted:
                 found[symbol.name] = symbol["st_value"]
             else:  # mangled: rc_gateway::gateway::EMU_PANIC, rc_gateway::rt::load::EMU_BUSY_US
-                for name in ("EMU_PANIC", "EMU_BUSY_US", "EMU_CLOCK_US", "EMU_STOP_WAKES"):
+                for name in ("EMU_PANIC", "EMU_OVERFLOW", "EMU_BUSY_US", "EMU_CLOCK_US", "EMU_STOP_WAKES"):
                     if name in symbol.name:
                         found[name] = symbol["st_value"]
         return found
