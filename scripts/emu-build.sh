@@ -19,6 +19,8 @@ emu=$root/target/emu
 patch_file=$root/emu/embassy-stm32-0.6.0-qemu.patch
 
 rustup toolchain install >/dev/null 2>&1 || rustup toolchain install
+# The firmware's linker (.cargo/config.toml).
+scripts/flip-link-install.sh
 lock_before=$(sha256sum Cargo.lock)
 cargo fetch --locked --target "$target" >/dev/null
 

@@ -21,6 +21,8 @@ check=0
 [[ ${1:-} == --check ]] && check=1
 
 rustup toolchain install >/dev/null 2>&1 || rustup toolchain install
+# The firmware's linker (.cargo/config.toml).
+scripts/flip-link-install.sh
 cargo fw --locked --quiet
 # The F103 build as it is flashed (`cargo fw-run-f103`).
 cargo fw-f103 --locked --quiet

@@ -1,5 +1,6 @@
 """scripts/size-report.sh's arithmetic: flash and static RAM of each board's ELF from its section
-headers, the stack (the emulator's high-water mark, or the start-up path of the hardware build by
+headers, the room the layout leaves the stack (flip-link's: from the start of RAM up to the
+statics), the stack (the emulator's high-water mark, or the start-up path of the hardware build by
 its call graph if that is deeper: scripts/stack_depth.py), each against its budget, and where
 the bytes go (by crate, and the largest symbols).
 
@@ -73,11 +74,16 @@ def report(name, elf_path, flash_region, ram_region, flash_budget, ram_budget, s
         flash = {s.name: s["sh_size"] for s in sections
                  if inside(load.get(s.name, s["sh_addr"]), flash_region) and s["sh_type"] != "SHT_NOBITS"}
         ram = {s.name: s["sh_size"] for s in sections if inside(s["sh_addr"], ram_region)}
+        symtab = elf.get_section_by_name(".symtab")
         symbols = sorted(
             ((sym["st_size"], sym.name, "flash" if inside(sym["st_value"], flash_region) else "ram")
-             for sym in elf.get_section_by_name(".symtab").iter_symbols()
+             for sym in symtab.iter_symbols()
              if sym["st_size"] and sym["st_info"]["type"] in ("STT_FUNC", "STT_OBJECT")),
             reverse=True)
+        # The stack's region, [_stack_end, _stack_start): with flip-link (.cargo/config.toml) from
+        # the start of RAM up to the statics, so that an overflow faults at the start of RAM.
+        bounds = {sym.name: sym["st_value"] for sym in symtab.iter_symbols()
+                  if sym.name in ("_stack_end", "_stack_start")}
     flash_total, static_ram = sum(flash.values()), sum(ram.values())
     over = []
     print(f"{name}: {elf_path}")
@@ -85,6 +91,10 @@ def report(name, elf_path, flash_region, ram_region, flash_budget, ram_budget, s
     print(f"  flash        {kib(flash_total)}  budget {kib(flash_budget)}  {verdict(flash_total, flash_budget)}"
           f"   ({', '.join(f'{k} {v}' for k, v in flash.items())})")
     print(f"  static RAM   {kib(static_ram)}   ({', '.join(f'{k} {v}' for k, v in ram.items())})")
+    if len(bounds) == 2:
+        room = bounds["_stack_start"] - bounds["_stack_end"]
+        print(f"  stack room   {kib(room)}   ({room} B, {bounds['_stack_end']:#x}-{bounds['_stack_start']:#x}: "
+              f"{'the start of RAM up to the statics; an overflow faults' if bounds['_stack_end'] == ram_region[0] else 'above the statics'})")
     print(f"  stack HWM    {kib(stack)}   ({stack} B, {stack_where}; emulator build of the L475)")
     # The hardware build's start-up (the settings load from flash, which QEMU cannot run) by its
     # call graph, with the deepest interrupt on top.

@@ -9,8 +9,10 @@ function (a tail call, counted on top of its caller's frame: an over-count too).
 are not followed: the executor polls the tasks through function pointers, so the tasks' stacks
 are the emulator's measurement, not this one. One interrupt or fault comes on top: the deepest
 handler of the vector table plus the frame the core stacks on entry (32 bytes; 104 with the FPU's
-registers on the hard-float target; and 4 for the entry's alignment). Nesting is not counted: a
-fault inside a handler, or an interrupt of a higher priority inside another one.
+registers on the hard-float target; and 4 for the entry's alignment). A handler that moves the
+stack pointer itself (`msr msp`: the HardFault entry of src/rt.rs, which runs on a fresh stack from
+the top, so that it works after an overflow) does not come on top, only its entry frame. Nesting
+is not counted: a fault inside a handler, or an interrupt of a higher priority inside another one.
 
     python3 scripts/stack_depth.py OBJDUMP ELF [ROOT]   # prints the path, ROOT default `main`
 """
@@ -37,15 +39,17 @@ STACKING = [
 CONDITIONS = "eq|ne|cs|hs|cc|lo|mi|pl|vs|vc|hi|ls|ge|lt|gt|le"
 CALL = re.compile(rf"\t(bl|b)(?:{CONDITIONS})?(?:\.w)?\t0x[0-9a-f]+ <([^>+]*)>")
 FUNCTION = re.compile(r"^([0-9a-f]+) <(.*)>:")
+SETS_MSP = re.compile(r"\tmsr\tmsp, ")
 # The vector table's first two words: the initial stack pointer and the reset handler.
 FIRST_HANDLER = 8
 
 
 def call_graph(objdump, elf_path):
-    """Frame size and direct callees of every function, and each function's name by address."""
+    """Frame size and direct callees of every function, each function's name by address, and the
+    functions that set the main stack pointer (`msr msp`)."""
     text = subprocess.run([objdump, "-d", "--no-show-raw-insn", elf_path],
                           check=True, capture_output=True, text=True).stdout
-    frames, calls, at, current = {}, {}, {}, None
+    frames, calls, at, own_stack, current = {}, {}, {}, set(), None
     for line in text.splitlines():
         m = FUNCTION.match(line)
         if m:
@@ -65,7 +69,9 @@ def call_graph(objdump, elf_path):
         m = CALL.search(line)
         if m and m.group(2) != current:
             calls[current].add(m.group(2))
-    return frames, calls, at
+        if SETS_MSP.search(line):
+            own_stack.add(current)
+    return frames, calls, at, own_stack
 
 
 def deepest(frames, calls, root):
@@ -99,11 +105,12 @@ def handlers(elf_path, at):
 
 def worst_case(objdump, elf_path, root="main"):
     """(total, path, path bytes, handler, handler bytes, entry frame, frames) for `root`."""
-    frames, calls, at = call_graph(objdump, elf_path)
+    frames, calls, at, own_stack = call_graph(objdump, elf_path)
     if root not in frames:
         sys.exit(f"stack_depth: no function {root!r} in {elf_path}")
     path_bytes, path = deepest(frames, calls, root)
     names, hard_float = handlers(elf_path, at)
+    names -= own_stack
     handler, handler_bytes = max(((n, deepest(frames, calls, n)[0]) for n in names),
                                  key=lambda x: x[1], default=("none", 0))
     entry = (104 if hard_float else 32) + 4

@@ -13,6 +13,9 @@ step "toolchain (rust-toolchain.toml: pinned rustc, thumbv7em-none-eabihf, thumb
 # is already installed; `rustup toolchain install` with no argument does.
 rustup toolchain install
 
+step "flip-link: the firmware's linker (.cargo/config.toml: the stack below the statics, so an overflow faults)"
+scripts/flip-link-install.sh
+
 step "format"
 cargo fmt --all -- --check
 

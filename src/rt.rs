@@ -1,6 +1,13 @@
 //! The runtime glue that needs `unsafe`, all of it here: the executor loop, the panic handler
 //! and the HardFault handler.
 //!
+//! The stack: flip-link (`.cargo/config.toml`) links the firmware with the stack at the bottom of
+//! RAM, from `_stack_start` (right below `.data`) down to the start of RAM, and the statics above
+//! it. An overflow therefore runs off the start of RAM, which faults (a bus fault, escalated to a
+//! HardFault), instead of silently overwriting the statics. The core cannot stack the exception
+//! frame there either, so the HardFault entry below moves to a stack of its own before any Rust
+//! code runs.
+//!
 //! The executor is embassy's raw executor polled from thread mode, sleeping with WFI between
 //! polls. (embassy's thread executor sleeps with WFE; under QEMU that busy-waits and starves the
 //! SysTick time driver. WFI is as good on silicon, so both builds use this loop.)
@@ -8,7 +15,6 @@
 use core::panic::PanicInfo;
 use core::sync::atomic::{AtomicBool, Ordering};
 
-use cortex_m_rt::{exception, ExceptionFrame};
 use embassy_executor::{raw, Spawner};
 use static_cell::StaticCell;
 
@@ -49,6 +55,8 @@ pub fn run<T: 'static>(make: impl FnOnce() -> T, init: impl FnOnce(Spawner, &'st
         // SAFETY: `poll` is called only here, in thread mode, never re-entrantly; the executor is
         // 'static and every task was spawned on it through its own spawner.
         unsafe { executor.poll() };
+        #[cfg(feature = "emulator")]
+        overflow::on_request();
         // Sleep unless something was woken meanwhile. Interrupts are masked for the check, so a
         // wake between the check and WFI leaves the interrupt pending, and WFI returns at once.
         cortex_m::interrupt::free(|_| {
@@ -138,21 +146,103 @@ fn panic(info: &PanicInfo) -> ! {
     halt()
 }
 
-/// A bus fault, an undefined instruction, a stack overflow into the vector table...: outputs safe,
-/// report where, then reset (board) or end the emulator with a failure status.
-#[exception]
-unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
+// The HardFault entry, the symbol the vector table names (cortex-m-rt's `HardFault_` is only
+// the default its link.x `PROVIDE`s). No Rust and no stack before `msr msp`: after a stack
+// overflow the stack pointer lies below RAM (flip-link's layout), the core could not stack the
+// exception frame, and the first push there would fault inside the HardFault handler, which locks
+// the core up. So: r0 = the stack pointer of the code that faulted (the process stack if
+// EXC_RETURN's bit 2 says so; the firmware runs everything on the main stack), then the main
+// stack back to its top, `_stack_start` (right below `.data`), then the Rust handler. Whatever
+// the faulting code kept at the top of the stack is overwritten: the handler never returns.
+core::arch::global_asm!(
+    ".section .text.HardFault,\"ax\",%progbits",
+    ".global HardFault",
+    ".type HardFault,%function",
+    ".p2align 2",
+    ".thumb_func",
+    "HardFault:",
+    "mrs r0, msp",
+    "tst lr, #4",
+    "it ne",
+    "mrsne r0, psp",
+    "movw r1, :lower16:_stack_start",
+    "movt r1, :upper16:_stack_start",
+    "msr msp, r1",
+    "b {handler}",
+    ".size HardFault, . - HardFault",
+    handler = sym hard_fault,
+);
+
+unsafe extern "C" {
+    /// The top of the stack (cortex-m-rt; with flip-link, right below `.data`): only its address.
+    static _stack_start: u32;
+    /// The bottom of the stack (cortex-m-rt; with flip-link, the start of RAM): only its address.
+    static _stack_end: u32;
+}
+
+/// A bus fault, an undefined instruction, a stack overflow...: outputs safe, report where, then
+/// reset (board) or halt (emulator). Runs on the stack `HardFault` gave it; `sp`: the stack pointer
+/// of the code that faulted, where the core stacked the exception frame if it could.
+extern "C" fn hard_fault(sp: u32) -> ! {
     pins::force_safe();
-    error!("HardFault at pc {}", frame.pc());
+    let bottom = core::ptr::addr_of!(_stack_end) as u32;
+    let top = core::ptr::addr_of!(_stack_start) as u32;
+    // The frame (r0-r3, r12, lr, pc, xpsr) is there only if it lies inside the stack; after an
+    // overflow it does not (the stack pointer is below RAM), and reading it would fault again.
+    // (This handler's own few dozen bytes at the top of the stack could overwrite a frame only
+    // from a fault before `main`: past it, the run loop's frame holds the 11 KB node.)
+    if sp >= bottom && sp <= top.saturating_sub(32) {
+        // SAFETY: eight words inside the stack region, 4-aligned (the core keeps SP so).
+        let pc = unsafe { core::ptr::read_volatile((sp as *const u32).add(6)) };
+        error!("HardFault at pc {:#x}, sp {:#x}", pc, sp);
+    } else {
+        error!("HardFault, sp {:#x} outside the stack: stack overflow", sp);
+    }
+    // The board: start again (outputs stay OFF through the reset). The emulator: halt, as after a
+    // panic, so that the harness can read the pins (tests/emu/test_firmware.py).
+    #[cfg(feature = "hw")]
+    cortex_m::peripheral::SCB::sys_reset();
     #[cfg(feature = "emulator")]
-    cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
-    cortex_m::peripheral::SCB::sys_reset()
+    halt()
+}
+
+/// The emulator build only: a stack overflow on request, to prove the guard on the real ELF
+/// (`test_stack_overflow_faults_and_leaves_outputs_safe` in tests/emu/test_firmware.py).
+#[cfg(feature = "emulator")]
+mod overflow {
+    use core::hint::black_box;
+    use core::sync::atomic::{AtomicBool, Ordering};
+
+    /// Set by the harness through qtest, by its symbol (`request_stack_overflow` in
+    /// tests/pyshared/emu.py). `#[used]` and an atomic, like `EMU_PANIC` in src/gateway.rs: nothing
+    /// in the program stores to it, which would otherwise let the compiler drop the check.
+    #[used]
+    static EMU_OVERFLOW: AtomicBool = AtomicBool::new(false);
+
+    /// Checked after every poll of the executor (every wake).
+    pub(super) fn on_request() {
+        if EMU_OVERFLOW.load(Ordering::Relaxed) {
+            black_box(recurse(0));
+        }
+    }
+
+    /// Recursion without bound, 512 bytes of stack a level: the array is handed to `black_box`
+    /// (so it is really in the frame) and read after the call (so the call is not a tail call).
+    #[inline(never)]
+    fn recurse(depth: u32) -> u32 {
+        let mut frame = [0u8; 512];
+        black_box(&mut frame);
+        if black_box(depth) == u32::MAX {
+            return 0;
+        }
+        recurse(depth + 1).wrapping_add(u32::from(frame[depth as usize % frame.len()]))
+    }
 }
 
 /// After a panic. On the board: an undefined instruction, which a debug probe (`probe-rs run`)
 /// stops at, showing the log above; without a probe it is a HardFault, which resets the chip
-/// (outputs stay OFF through the reset). In the emulator: stay halted with interrupts masked,
-/// so that the harness can read the pins.
+/// (outputs stay OFF through the reset). In the emulator (after a panic or a HardFault): stay
+/// halted with interrupts masked, so that the harness can read the pins.
 fn halt() -> ! {
     #[cfg(feature = "hw")]
     cortex_m::asm::udf();

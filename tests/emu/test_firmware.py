@@ -1,6 +1,8 @@
-"""The firmware itself in QEMU: it boots, its task runs, and on a panic the outputs go to their
-safe state (every PIO output OFF, the alarm LED on, both RS485 drivers released) before anything
-else, and it stays halted."""
+"""The firmware itself in QEMU: it boots, its task runs, and on a panic or a stack overflow (a
+HardFault) the outputs go to their safe state (every PIO output OFF, the alarm LED on, both RS485
+drivers released) before anything else, and it stays halted."""
+
+import re
 
 from emu import BUS_DE, BUS_TX, INPUTS, LED_ALARM, LED_RUN, MODE_AF, MODE_OUTPUT, OUTPUTS, PLC_DE, STOP_INPUT
 from plc import LINK, LINK_ONLINE, unit, wait_for
@@ -34,6 +36,37 @@ def test_panic_leaves_outputs_safe_and_drivers_off(emu):
     assert emu.plc.raw_exchange(bytes([1, 3, 0x90, 0x05, 0, 1, 0xB9, 0x0B]), wait=0.5) == b""
     assert len(emu.bus_commands()) == sent
     assert set(OUTPUTS) >= {SV, LINK_OUT}
+
+
+def test_stack_overflow_faults_and_leaves_outputs_safe(emu):
+    # flip-link's layout: the stack at the bottom of RAM, the statics above it. An overflow runs off
+    # the start of RAM and faults there; the HardFault entry moves to a stack of its own (the core
+    # could not stack its frame below RAM), and the handler, whose masks are statics the overflow
+    # did not reach, forces the outputs safe. In the emulator build it then halts rather than
+    # ending QEMU, so that the pins can be read.
+    emu.set_pin(STOP_INPUT, True)
+    emu.set_pin(INPUTS[STP_N], True)
+    emu.set_pin(INPUTS[SON], True)
+    wait_for(lambda: emu.plc.read(unit(0), LINK)[0] == LINK_ONLINE, 20, "axis 0 online")
+    wait_for(lambda: emu.outputs() >> SV & 1 and emu.outputs() >> LINK_OUT & 1, 10, "SV and LINK on")
+    emu.request_stack_overflow()
+    line = emu.wait_log("HardFault", 5)
+    assert "stack overflow" in line, line
+    sp = int(re.search(r"sp (0x[0-9a-f]+)", line).group(1), 16)
+    bottom = emu.symbols["_stack_end"]
+    assert sp < bottom, f"faulted below the start of RAM ({bottom:#x}): sp {sp:#x}"
+    # The painted stack region used to within one recursion level (512 bytes) of its bottom.
+    room = emu.symbols["_stack_start"] - bottom
+    assert emu.stack_high_water_mark() > room - 1024, "the stack ran down to the bottom of RAM"
+    assert emu.outputs() == 0, f"every output OFF: {emu.outputs():#06x}"
+    assert emu.odr(LED_ALARM) == 1
+    for de in (BUS_DE, PLC_DE):
+        assert (emu.mode(de), emu.odr(de)) == (MODE_OUTPUT, 0), f"DE {de} released"
+    # Halted, not locked up or reset: QEMU runs on, nothing more goes out, no Modbus answer.
+    sent = len(emu.bus_commands())
+    assert emu.plc.raw_exchange(bytes([1, 3, 0x90, 0x05, 0, 1, 0xB9, 0x0B]), wait=0.5) == b""
+    assert len(emu.bus_commands()) == sent
+    emu._check_alive("halted after the HardFault")
 
 
 def test_the_establishment_break_holds_tx_low_with_the_driver_on(emu):

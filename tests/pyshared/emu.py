@@ -18,8 +18,10 @@ QEMU runs without `-icount`: its virtual clock is then the host's, the clock rc-
 With `-icount shift=auto` the guest's clock runs fast to catch up after any stall of QEMU, so the
 firmware's reply time-outs expire early against rc-sim's real-time controllers (seen: retries
 colliding with late replies, axes going offline).
-Before resuming, RAM between the end of the firmware's statics and the top of the stack is painted
-with a pattern; `stop()` returns the stack high-water mark (the lowest overwritten address).
+Before resuming, the stack region is painted with a pattern: [`_stack_end`, `_stack_start`), which
+flip-link's layout puts at the bottom of RAM, from the start of RAM up to the statics (`.data`,
+`.bss`, `.uninit` lie above it, untouched); `stop()` returns the stack high-water mark (the lowest
+overwritten address).
 
 Nothing is skipped: a missing QEMU, rc-sim or firmware ELF raises `EmulatorError`. Every wait is
 bounded and `stop()` always kills QEMU and rc-sim.
@@ -230,6 +232,8 @@ class Emulator:
         self.with_plc = plc
         self.qemu_args = list(qemu_args)
         self.accel = accel
+        # Off after a deliberate overflow (`request_stack_overflow`): the whole region is used then.
+        self.measure_stack = True
         self.plc_port = None
         self.log_lines = []
         self.log_lock = threading.Lock()
@@ -352,7 +356,7 @@ class Emulator:
     def stop(self):
         hwm = None
         try:
-            if self.qtest is not None and not self._dead():
+            if self.qtest is not None and not self._dead() and self.measure_stack:
                 hwm = self.stack_high_water_mark()
         except Exception as error:  # the measurement must never hide the test's own result
             print(f"stack high-water mark not measured: {error}")
@@ -372,7 +376,11 @@ class Emulator:
     # ------------------------------------------------------------------ stack
 
     def _stack_region(self):
-        return self.symbols["__sheap"], self.symbols["_stack_start"]
+        """[bottom, top) of the stack: cortex-m-rt's `_stack_end` and `_stack_start`. With flip-link
+        (.cargo/config.toml) the bottom is the start of RAM and the top lies right below `.data`;
+        with cortex-m-rt's own layout they would be the end of the statics and the end of RAM. Nothing
+        else lives there before the firmware starts."""
+        return self.symbols["_stack_end"], self.symbols["_stack_start"]
 
     def _paint_stack(self):
         low, high = self._stack_region()
@@ -388,6 +396,13 @@ class Emulator:
     def request_panic(self):
         """Makes the gateway task panic (emulator build only: `EMU_PANIC` in src/gateway.rs)."""
         self.qtest.cmd(f"writeb {self.symbols['EMU_PANIC']:#x} 0x1")
+
+    def request_stack_overflow(self):
+        """Makes the firmware recurse without bound on its next wake (emulator build only:
+        `EMU_OVERFLOW` in src/rt.rs). Its stack high-water mark is then the whole stack region, not
+        a figure of the firmware's: `stop()` does not measure it."""
+        self.measure_stack = False
+        self.qtest.cmd(f"writeb {self.symbols['EMU_OVERFLOW']:#x} 0x1")
 
     # ------------------------------------------------------------------ the bus, as rc-sim saw it
 
@@ -501,13 +516,14 @@ def _listening(port):
 def elf_symbols(path):
     with open(path, "rb") as f:
         table = ELFFile(f).get_section_by_name(".symtab")
-        wanted = ("__sheap", "_stack_start", "__ebss", "__sbss", "__sdata")
+        wanted = ("_stack_end", "_stack_start", "__sheap", "__ebss", "__sbss", "__sdata")
         found = {}
         for symbol in table.iter_symbols():
             if symbol.name in wanted:
                 found[symbol.name] = symbol["st_value"]
             else:  # mangled: rc_gateway::gateway::EMU_PANIC, rc_gateway::rt::load::EMU_BUSY_US
-                for name in ("EMU_PANIC", "EMU_STALL", "EMU_BUSY_US", "EMU_CLOCK_US", "EMU_STOP_WAKES"):
+                for name in ("EMU_PANIC", "EMU_STALL", "EMU_OVERFLOW", "EMU_BUSY_US", "EMU_CLOCK_US",
+                             "EMU_STOP_WAKES"):
                     if name in symbol.name:
                         found[name] = symbol["st_value"]
         return found
