@@ -170,8 +170,8 @@ impl Rs485 {
             Timer::at(until).await;
             self.wire_until = None;
         }
-        // Transmission complete: the line may turn around.
-        if let Some(de) = self.de.as_mut() {
+        // Transmission complete: the line may turn around (unless a break holds it).
+        if let Some(de) = self.de.as_mut().filter(|_| !self.in_break) {
             de.set_low();
         }
         self.sending = false;
