@@ -30,7 +30,7 @@
 //! 0x0000 / 0xFF00 (also clear the event log, which this slave does not keep); anything else
 //! answers 03.
 
-use super::slave::SlaveCounters;
+use super::counters::SlaveCounters;
 
 /// An FC08 sub-function other than Return Query Data.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

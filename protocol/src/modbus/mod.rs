@@ -73,6 +73,7 @@
 pub mod adu;
 pub mod bits;
 pub mod client;
+mod counters;
 pub mod crc;
 pub mod diag;
 pub mod ident;
@@ -82,11 +83,12 @@ pub mod slave;
 
 pub use adu::{Adu, FrameError, MAX_ADU_LEN, MAX_PDU_LEN};
 pub use bits::{Bits, BitsMut};
+pub use counters::SlaveCounters;
 pub use diag::Diagnostic;
 pub use ident::{Identity, ReadDevId};
 pub use pdu::{PduError, Request};
 pub use rtu::{t1_5, t3_5, Receiver, ReceiverCounters};
-pub use slave::{Handled, ReplyBuffer, Slave, SlaveCounters};
+pub use slave::{Handled, ReplyBuffer, Slave};
 
 use core::fmt;
 

@@ -1,0 +1,86 @@
+//! What the slave counts: [`SlaveCounters`], shared by the [`Slave`](super::Slave) that counts
+//! and by FC08 Diagnostics ([`diag`](super::diag)), which reports the counts since its last
+//! clear. A leaf: it depends on no other module here but the [`Exception`] it counts by.
+
+use super::Exception;
+
+/// What the slave has counted (wrapping counters).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SlaveCounters {
+    /// Frames with a good CRC handed to [`Slave::handle`](super::Slave::handle), for any unit.
+    pub frames: u32,
+    /// Bursts with a bad CRC seen by [`Slave::poll`](super::Slave::poll).
+    pub crc_errors: u32,
+    /// Bursts of fewer than 4 bytes seen by [`Slave::poll`](super::Slave::poll).
+    pub too_short: u32,
+    /// Bursts longer than 256 bytes seen by [`Slave::poll`](super::Slave::poll).
+    pub too_long: u32,
+    /// Bursts broken by a t1.5 gap seen by [`Slave::poll`](super::Slave::poll).
+    pub bad_gaps: u32,
+    /// Frames for other units, and broadcasts that are not writes. Every frame is ignored,
+    /// answered ([`replies`](Self::replies)) or [`unanswered`](Self::unanswered).
+    pub ignored: u32,
+    /// Broadcast writes (applied or refused).
+    pub broadcasts: u32,
+    /// Broadcast writes refused (invalid, or the model returned an exception).
+    pub broadcast_errors: u32,
+    /// Exception 01 replies.
+    pub illegal_function: u32,
+    /// Exception 02 replies.
+    pub illegal_data_address: u32,
+    /// Exception 03 replies.
+    pub illegal_data_value: u32,
+    /// Exception 04 replies.
+    pub server_device_failure: u32,
+    /// Replies produced, normal and exception.
+    pub replies: u32,
+    /// PDUs that are not requests (to a served unit or broadcast).
+    pub malformed: u32,
+    /// Frames to a unit served, or broadcast (FC08's server message count).
+    pub served: u32,
+    /// Of those, frames not answered: broadcasts, malformed, Listen Only (FC08's server no
+    /// response count).
+    pub unanswered: u32,
+}
+
+impl SlaveCounters {
+    pub(super) const ZERO: SlaveCounters = SlaveCounters {
+        frames: 0,
+        crc_errors: 0,
+        too_short: 0,
+        too_long: 0,
+        bad_gaps: 0,
+        ignored: 0,
+        broadcasts: 0,
+        broadcast_errors: 0,
+        illegal_function: 0,
+        illegal_data_address: 0,
+        illegal_data_value: 0,
+        server_device_failure: 0,
+        replies: 0,
+        malformed: 0,
+        served: 0,
+        unanswered: 0,
+    };
+
+    /// The number of replies with `exception`.
+    pub fn exceptions(&self, exception: Exception) -> u32 {
+        match exception {
+            Exception::IllegalFunction => self.illegal_function,
+            Exception::IllegalDataAddress => self.illegal_data_address,
+            Exception::IllegalDataValue => self.illegal_data_value,
+            Exception::ServerDeviceFailure => self.server_device_failure,
+        }
+    }
+
+    /// The counter of replies with `exception`, to count one more.
+    pub(super) fn exception_counter(&mut self, exception: Exception) -> &mut u32 {
+        match exception {
+            Exception::IllegalFunction => &mut self.illegal_function,
+            Exception::IllegalDataAddress => &mut self.illegal_data_address,
+            Exception::IllegalDataValue => &mut self.illegal_data_value,
+            Exception::ServerDeviceFailure => &mut self.server_device_failure,
+        }
+    }
+}
