@@ -1,6 +1,6 @@
 //! What the gateway is set up with.
 
-use super::persist::Boot;
+use super::boot::Boot;
 use crate::axes::{AxisMap, AxisSet};
 use crate::engine::Config;
 use crate::modbus::Identity;

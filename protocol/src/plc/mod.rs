@@ -21,9 +21,10 @@
 //! | `failsafe`, `sync`, `channel`, `points`, `persist` | The parts with state of their own |
 //! | [`settings`] | What survives a power cycle, as stored bytes |
 //! | [`map`], `registers`, [`table`] | The register map as data; status words; table rows |
-//! | `config` | [`GatewayConfig`] |
+//! | `config`, `boot` | [`GatewayConfig`]; [`Boot`], what the firmware says about the start |
 
 mod axis_unit;
+mod boot;
 mod channel;
 mod config;
 mod failsafe;
@@ -38,6 +39,7 @@ pub mod settings;
 mod sync;
 pub mod table;
 
+pub use boot::{Boot, ConfigSource, ResetCause};
 pub use config::{
     AxisConfig, GatewayConfig, Parity, PlcLine, WatchdogAction, DEFAULT_GATEWAY_UNIT,
     DEFAULT_WATCHDOG_MS, IDENTITY,
@@ -45,5 +47,5 @@ pub use config::{
 pub use failsafe::{CAUSE_STOP_INPUT, CAUSE_WATCHDOG};
 pub use gateway::{CommandState, Gateway, Reason};
 pub use model::{diagnostic, Registers};
-pub use persist::{Boot, ConfigSource, ResetCause, Store};
+pub use persist::Store;
 pub use points::CACHED_ROWS;
