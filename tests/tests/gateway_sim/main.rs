@@ -4,6 +4,7 @@
 //! calls the Modbus slave makes.
 #![allow(clippy::inconsistent_digit_grouping)]
 
+mod axis_map;
 mod commands;
 mod review;
 mod second_review;
