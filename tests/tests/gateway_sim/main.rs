@@ -1,13 +1,17 @@
 //! The PLC side against simulated controllers, in virtual time: the register map, command
 //! edges and their status, validation (exceptions, and nothing reaches the bus), the fail-safe,
-//! the synchronized start and the command channel. Requests are Modbus RTU frames to the
-//! calls the Modbus slave makes.
+//! the synchronized start, the command channel, the position table and the gateway's settings.
+//! Requests are Modbus RTU frames to the calls the Modbus slave makes. One file per subject.
 #![allow(clippy::inconsistent_digit_grouping)]
 
 mod axis_map;
+mod command_channel;
 mod commands;
-mod review;
-mod second_review;
+mod direct_move;
+mod gateway_settings;
+mod held_son;
+mod position_table;
+mod sync_start;
 
 use protocol::line::Baud;
 use protocol::modbus::Exception;

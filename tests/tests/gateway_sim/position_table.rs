@@ -1,7 +1,7 @@
-//! Regressions from a second review: the position-table cache, APPLY, refused relative moves,
-//! the synchronized restart and the held SON.
+//! The position table at 0x1000: rows read on demand and written whole, the row cache against
+//! table writes and the command channel, reads that never reach the bus, and what a table write
+//! leaves alone.
 
-use protocol::line::Baud;
 use protocol::modbus::Exception;
 use protocol::plc::map::*;
 use protocol::plc::CommandState;
@@ -9,10 +9,8 @@ use protocol::units::Length;
 use rc_host::node_harness::NodeHarness;
 
 use crate::{
-    axis, coil, gateway, gateway_with, home, pnow_mm100, read, scale, settle, unit, write, MS, S,
+    axis, gateway, gateway_with, home, pnow_mm100, read, scale, settle, unit, write, MS, S,
 };
-
-// ---------------------------------------------------------------- regressions from a second review
 
 const ROW3: u16 = 0x1000 + 16 * 3;
 
@@ -48,6 +46,70 @@ fn stored_pos(h: &NodeHarness, a: u8, p: usize) -> i32 {
 
 fn stored_mm100(pcmd: i32) -> i32 {
     scale().position_to_wire(Length(pcmd)).unwrap().0
+}
+
+#[test]
+fn position_table_rows_read_on_demand_and_written_whole() {
+    let mut h = gateway(1);
+    let row = |n: u16| 0x1000 + 16 * n;
+    // Not read yet: exception 04 while the gateway fetches it, then the row.
+    assert_eq!(
+        read(&mut h, unit(0), row(3), 16),
+        Err(Exception::ServerDeviceFailure)
+    );
+    h.run_until(h.now + 200 * MS);
+    let r3 = read(&mut h, unit(0), row(3), 16).unwrap();
+    assert_eq!((r3[0], r3[1]), (0, 40_00), "PCMD 40.00 mm");
+    // Write row 5: 62.50 mm, band 0.10 mm, 80 mm/s, 0.3 G (DCMD = ACMD).
+    let mut values = [0u16; 16];
+    values[1] = 62_50;
+    values[3] = 10;
+    values[5] = 80_00;
+    values[10] = 30;
+    values[11] = 30;
+    write(&mut h, unit(0), row(5), &values).unwrap();
+    // A PLC sees the row stored by reading it back (04 until the verified row is there).
+    let mut r5 = Err(Exception::ServerDeviceFailure);
+    for _ in 0..100 {
+        h.run_until(h.now + 20 * MS);
+        r5 = read(&mut h, unit(0), row(5), 16);
+        if r5.is_ok() {
+            break;
+        }
+    }
+    let r5 = r5.unwrap();
+    assert_eq!(
+        (r5[1], r5[3], r5[5], r5[10], r5[11]),
+        (62_50, 10, 80_00, 30, 30),
+        "{r5:?}"
+    );
+    // The same row again: nothing is written (no command taken, no V5).
+    let taken = read(&mut h, unit(0), CMCT, 1).unwrap();
+    write(&mut h, unit(0), row(5), &values).unwrap();
+    assert_eq!(read(&mut h, unit(0), CMCT, 1).unwrap(), taken);
+    // CSTR to point 5 goes there.
+    home(&mut h, 0);
+    write(&mut h, unit(0), POSR, &[5]).unwrap();
+    write(&mut h, unit(0), DRG1, &[DRG1_SON | DRG1_CSTR]).unwrap();
+    assert_eq!(settle(&mut h, 0, 10 * S), (CommandState::Done, 0));
+    assert_eq!(pnow_mm100(&mut h, 0), 62_50);
+    // Refused: part of a row, an unsupported field, beyond the stroke.
+    assert_eq!(
+        write(&mut h, unit(0), row(5) + 2, &[0, 10]),
+        Err(Exception::IllegalDataAddress)
+    );
+    let mut zoned = values;
+    zoned[7] = 1;
+    assert_eq!(
+        write(&mut h, unit(0), row(6), &zoned),
+        Err(Exception::IllegalDataValue)
+    );
+    let mut far = values;
+    far[0] = 1;
+    assert_eq!(
+        write(&mut h, unit(0), row(6), &far),
+        Err(Exception::IllegalDataValue)
+    );
 }
 
 /// A table read that started before a write must not put the old row back in the cache (a
@@ -113,58 +175,6 @@ fn an_abandoned_channel_write_invalidates_the_cached_row() {
     );
 }
 
-/// APPLY (a break and the whole establishment, during which no stop reaches an axis) is
-/// refused while anything moves, runs or waits, or while an establishment runs.
-#[test]
-fn apply_is_refused_unless_the_bus_is_idle() {
-    let mut h = gateway_with(2, 100_00, None, &[1]);
-    home(&mut h, 0);
-    write(&mut h, unit(0), DIRECT, &[0, 95_00, 0, 10, 0, 5_00, 30]).unwrap();
-    h.run_until(h.now + 200 * MS);
-    assert_eq!(
-        write(&mut h, 63, G_APPLY, &[1]),
-        Err(Exception::IllegalDataValue)
-    );
-    coil(&mut h, unit(0), COIL_STOP, true).unwrap();
-    h.run_until(h.now + 500 * MS);
-    write(&mut h, 63, G_BUS_BAUD, &[384]).unwrap();
-    write(&mut h, 63, G_APPLY, &[1]).unwrap();
-    h.run_until(h.now + 300 * MS);
-    assert!(h.node.gateway().engine().establishing());
-    assert_eq!(
-        write(&mut h, 63, G_APPLY, &[1]),
-        Err(Exception::IllegalDataValue),
-        "not twice"
-    );
-    for _ in 0..60 {
-        h.run_until(h.now + 100 * MS);
-        let _ = read(&mut h, 63, G_VERSION, 1);
-    }
-    assert_eq!(h.bus.controller(axis(0)).unwrap().baud(), Baud::B38400);
-    assert_eq!(read(&mut h, unit(0), LINK, 1).unwrap(), [1]);
-}
-
-/// A relative direct move is checked from where the axis is: only from rest with nothing
-/// queued (else it would run from the end of the queued move, past the stroke).
-#[test]
-fn a_relative_move_behind_another_is_refused() {
-    let mut h = gateway_with(1, 60_00, None, &[]);
-    home(&mut h, 0);
-    write(&mut h, unit(0), DIRECT, &[0, 55_00, 0, 10, 0, 50_00, 30]).unwrap();
-    let relative = [0, 40_00, 0, 10, 0, 50_00, 30, 0, 1 << 3];
-    assert_eq!(
-        write(&mut h, unit(0), DIRECT, &relative),
-        Err(Exception::ServerDeviceFailure)
-    );
-    assert_eq!(settle(&mut h, 0, 10 * S), (CommandState::Done, 0));
-    assert_eq!(
-        write(&mut h, unit(0), DIRECT, &relative),
-        Err(Exception::IllegalDataValue),
-        "55 + 40 > 60 mm"
-    );
-    assert!(pnow_mm100(&mut h, 0) <= 60_00);
-}
-
 /// Invalid reads of the table (FC04, or a range starting at an undefined address) get 02 and
 /// put nothing on the bus.
 #[test]
@@ -188,46 +198,6 @@ fn invalid_table_reads_never_reach_the_bus() {
     assert_eq!(q1, 0);
 }
 
-/// A failed synchronized start may leave an `h` queued behind a move; a new start is refused
-/// until it is out of the way, so it can never be taken for the new start's.
-#[test]
-fn a_sync_restart_waits_for_the_old_attempt() {
-    let mut h = gateway_with(3, 100_00, None, &[]);
-    for a in 0..3 {
-        home(&mut h, a);
-        write(&mut h, unit(a), POSR, &[3]).unwrap();
-    }
-    write(&mut h, unit(0), DIRECT, &[0, 20_00, 0, 10, 0, 5_00, 30]).unwrap();
-    write(&mut h, unit(2), DIRECT, &[0, 30_00, 0, 10, 0, 5_00, 30]).unwrap();
-    h.run_until(h.now + 100 * MS);
-    write(&mut h, 63, G_SYNC_MASK, &[0b111]).unwrap();
-    write(&mut h, 63, G_SYNC_START, &[1]).unwrap();
-    coil(&mut h, unit(1), COIL_STOP, true).unwrap();
-    h.run_until(h.now + 100 * MS);
-    assert_eq!(read(&mut h, 63, G_SYNC_STATUS, 1).unwrap(), [3]);
-    write(&mut h, 63, G_SYNC_MASK, &[0b100]).unwrap();
-    assert_eq!(
-        write(&mut h, 63, G_SYNC_START, &[1]),
-        Err(Exception::ServerDeviceFailure)
-    );
-    // Once the old `h`s are done (and cancelled), the start goes ahead for axis 2 alone.
-    let mut started = false;
-    for _ in 0..600 {
-        h.run_until(h.now + 20 * MS);
-        if !started {
-            started = write(&mut h, 63, G_SYNC_START, &[1]).is_ok();
-        }
-    }
-    assert!(started);
-    assert_eq!(read(&mut h, 63, G_SYNC_STATUS, 1).unwrap(), [2]);
-    assert_eq!(
-        pnow_mm100(&mut h, 0),
-        20_00,
-        "axis 0 (not in the mask) did not move"
-    );
-    assert_eq!(pnow_mm100(&mut h, 2), 40_00);
-}
-
 /// A table write does not take over CMST (nor unmask PEND of a starting move).
 #[test]
 fn a_table_write_leaves_the_command_status_alone() {
@@ -242,30 +212,6 @@ fn a_table_write_leaves_the_command_status_alone() {
         read(&mut h, unit(0), DSS1, 1).unwrap()[0] >> 3 & 1,
         0,
         "PEND off while starting"
-    );
-}
-
-/// SON held: the servo an alarm reset turned off comes back on, without a command in CMST.
-#[test]
-fn held_son_turns_the_servo_back_on_without_touching_cmst() {
-    let mut h = gateway(1);
-    home(&mut h, 0);
-    h.bus
-        .inject_alarm(axis(0), protocol::alarm::AlarmCode(0xC0))
-        .unwrap();
-    h.run_until(h.now + 100 * MS);
-    write(&mut h, unit(0), DRG1, &[DRG1_SON | DRG1_ALRS]).unwrap();
-    assert_eq!(settle(&mut h, 0, 2 * S), (CommandState::Done, 0));
-    let status = read(&mut h, unit(0), CMST, 4).unwrap();
-    for _ in 0..60 {
-        h.run_until(h.now + 50 * MS);
-        let _ = read(&mut h, unit(0), CMST, 1);
-    }
-    assert!(h.bus.controller(axis(0)).unwrap().servo(), "servo back on");
-    assert_eq!(
-        read(&mut h, unit(0), CMST, 4).unwrap(),
-        status,
-        "CMST/CMCT untouched"
     );
 }
 
