@@ -25,7 +25,12 @@
 //! - **[`Action::Bus`]**: write the 16 bytes and wait until the last one has left the shift
 //!   register (`flush`, transmission complete) before releasing the driver (DE) and listening:
 //!   the answer can start RTIM (3 ms) after the command's last stop bit.
-//! - **[`Action::Reply`]**: the same on the PLC line (write, flush, release DE).
+//! - **[`Action::Reply`]**: write it on the PLC line; the caller may go on with other actions
+//!   while it is on the wire (255 bytes take 2.3 s at 1.2 kbit/s), as long as it flushes it and
+//!   releases DE before it hands the node any more PLC bytes (the PLC answers only after the
+//!   reply, and the receiver is off while the driver is on), before [`Action::PlcLine`] and
+//!   before [`Action::Store`]. The PLC watchdog counts the PLC's silence from the reply's end,
+//!   at the line's rate.
 //! - **[`Action::Line`]**: [`LineAction::SetBaud`] only after the previous transmission has been
 //!   flushed (a rate change mid-byte garbles it); [`LineAction::BreakStart`] holds the bus' TX
 //!   low (the driver enabled) until [`LineAction::BreakEnd`]; [`LineAction::CommChange`] writes
@@ -112,10 +117,12 @@
 //! assert!(board.bus_tx.starts_with(b"\x020n"));
 //! ```
 
-use crate::engine::{JobKind, Output};
+use crate::engine::Output;
 use crate::frame::FRAME_LEN;
-use crate::line::LineAction;
-use crate::modbus::{Handled, Receiver, ReceiverCounters, ReplyBuffer, Slave, SlaveCounters};
+use crate::line::{Baud, LineAction};
+use crate::modbus::{
+    chars_time, Handled, Receiver, ReceiverCounters, ReplyBuffer, Slave, SlaveCounters,
+};
 use crate::pio::{self, Pio, PioInputs, PioOutputs};
 use crate::plc::{Gateway, GatewayConfig, PlcLine, Store};
 use crate::time::{earliest, Duration, Instant};
@@ -227,17 +234,15 @@ impl Node {
         };
         let state = *self.gateway.engine().axis(axis);
         let link_ok = !self.gateway.engine().establishing();
-        let (outputs, job) = self.pio.sample(now, inputs, &state, link_ok);
+        let home = self.gateway.config().axes[axis].scale.home;
+        let (outputs, job) = self.pio.sample(now, inputs, &state, link_ok, home);
         self.outputs = outputs;
         if let Some(kind) = job {
-            // The direction is the axis' configured one (AXISCFG).
-            let kind = match kind {
-                JobKind::Home(_) => JobKind::Home(self.gateway.config().axes[axis].scale.home),
-                other => other,
-            };
             // A refusal is shown in CMST (or, for an axis that went offline between the sample
-            // and now, not taken at all): the PIO has nothing to add.
-            let _ = self.gateway.command(axis, kind);
+            // and now, not taken at all), and on the outputs: the PIO stops waiting for it.
+            if self.gateway.command(axis, kind).is_err() {
+                self.pio.refused();
+            }
             self.dirty = true;
         }
     }
@@ -272,11 +277,16 @@ impl Node {
         {
             // Any valid request to the gateway or its axes is the PLC's sign of life, whether
             // it reads, writes, asks for an echo, gets an exception or no answer (Listen Only).
-            self.gateway.plc_activity(now);
+            // Its silence counts from the end of the reply: the PLC cannot ask again before
+            // (at 1.2 kbit/s a 125-register reply takes 2.3 s, longer than the watchdog's 1 s).
             self.dirty = true;
             if let Handled::Reply(_) = handled {
-                return Some(Action::Reply(self.reply.as_bytes()));
+                let reply = self.reply.as_bytes();
+                let on_wire = chars_time(reply.len(), self.gateway.config().plc.baud);
+                self.gateway.plc_activity(now, now + on_wire);
+                return Some(Action::Reply(reply));
             }
+            self.gateway.plc_activity(now, now);
         }
         if let Some(line) = self.gateway.take_plc_line() {
             self.receiver = plc_receiver(line.baud, self.gateway.config().plc_frame_gap);
@@ -330,6 +340,26 @@ impl Node {
         self.outputs
     }
 
+    /// The rate the bus line is to run at: the UART starts at it (the node asks for every
+    /// change after that with [`LineAction::SetBaud`]).
+    pub fn bus_baud(&self) -> Baud {
+        self.gateway.engine().line_baud()
+    }
+
+    /// The PLC line's settings: the UART starts at them (the node asks for every change after
+    /// that with [`Action::PlcLine`]).
+    pub fn plc_line(&self) -> PlcLine {
+        self.gateway.config().plc
+    }
+
+    /// How often the inputs must be sampled ([`sample_inputs`](Node::sample_inputs)): every
+    /// [`pio::SAMPLE_PERIOD`] while a PIO axis is configured (the PIO's debounce and settle
+    /// times count in its samples); `None` when only a change matters (the stop input: the
+    /// PIO inputs then mean nothing).
+    pub fn sample_period(&self) -> Option<Duration> {
+        self.gateway.config().pio_axis.map(|_| pio::SAMPLE_PERIOD)
+    }
+
     /// The indicator LEDs.
     pub fn indicators(&self) -> Indicators {
         Indicators {
@@ -338,7 +368,9 @@ impl Node {
         }
     }
 
-    /// The gateway (for diagnostics: its engine, configuration and command states).
+    /// The gateway (for tests and tools: its engine, configuration and command states). The
+    /// firmware asks the node itself ([`bus_baud`](Node::bus_baud), [`plc_line`](Node::plc_line),
+    /// [`sample_period`](Node::sample_period)); `tests/tests/layering.rs` holds it to that.
     pub fn gateway(&self) -> &Gateway {
         &self.gateway
     }

@@ -167,3 +167,46 @@ fn alarm_shows_on_pm_and_res_clears_it() {
     // SON is still on: the PIO turns the servo back on after the reset turned it off.
     r.until(3_000, |o| o.sv());
 }
+
+/// A strobe the gateway refuses (the cabinet's stop input is open while *STP is ON: two
+/// terminals) does not leave PEND off waiting for a move that will not come: PEND and PM show
+/// where the axis is, and CMST says why (failed, reason 10).
+#[test]
+fn a_refused_strobe_shows_pend_at_the_point_the_axis_is_at() {
+    let mut r = rig();
+    r.set(PioInputs::SON, true);
+    r.run(100);
+    r.set(PioInputs::HOME, true);
+    r.run(20);
+    r.set(PioInputs::HOME, false);
+    r.until(5_000, |o| o.hend() && o.pend());
+    let at = r.h.bus.controller(axis0()).unwrap().position();
+    // The stop input opens; *STP stays ON.
+    let step = |r: &mut Rig, ms: u64| {
+        for _ in 0..ms {
+            r.h.inputs = Some(r.inputs);
+            r.h.node.set_stop_input(Instant(r.h.now), true);
+            r.h.run_for(MS);
+            r.outputs = r.h.outputs;
+        }
+    };
+    step(&mut r, 50);
+    r.inputs = r.inputs.with_position(PositionNo::new(5).unwrap());
+    step(&mut r, 10);
+    r.set(PioInputs::CSTR, true);
+    step(&mut r, 30);
+    r.set(PioInputs::CSTR, false);
+    step(&mut r, 200);
+    assert_eq!(
+        r.h.bus.controller(axis0()).unwrap().position(),
+        at,
+        "nothing moved"
+    );
+    assert_eq!(
+        r.h.node.gateway().command_state(axis0()),
+        (protocol::plc::CommandState::Failed, 10 << 8),
+        "CMST: failed, STP/EMG or the stop input"
+    );
+    assert!(r.outputs.pend(), "PEND back on: {:?}", r.outputs);
+    assert_eq!(r.outputs.pm(), 0, "at home, not at point 5");
+}

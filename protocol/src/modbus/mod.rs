@@ -87,7 +87,7 @@ pub use counters::SlaveCounters;
 pub use diag::Diagnostic;
 pub use ident::{Identity, ReadDevId};
 pub use pdu::{PduError, Request};
-pub use rtu::{t1_5, t3_5, Receiver, ReceiverCounters};
+pub use rtu::{chars_time, t1_5, t3_5, Receiver, ReceiverCounters};
 pub use slave::{Handled, ReplyBuffer, Slave};
 
 use core::fmt;

@@ -36,6 +36,16 @@ const fn tenths_of_char(tenths: u64, baud_bps: u32) -> Duration {
     Duration((tenths * BITS_PER_CHAR * 1_000_000).div_ceil(bps * 10))
 }
 
+/// How long `len` characters take on the line at `baud_bps` (11 bits each), rounded up.
+///
+/// ```
+/// use protocol::modbus::chars_time;
+/// assert_eq!(chars_time(255, 1_200).as_micros(), 2_337_500); // a 125-register reply
+/// ```
+pub const fn chars_time(len: usize, baud_bps: u32) -> Duration {
+    tenths_of_char(len as u64 * 10, baud_bps)
+}
+
 /// The end-of-frame silence t3.5 (Serial Line §2.5.1.1): 3.5 character times of 11 bits,
 /// rounded up to a microsecond, or 1750 µs above 19200 baud.
 ///

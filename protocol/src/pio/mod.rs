@@ -11,7 +11,7 @@
 //!
 //! ```text
 //! let inputs = PioInputs::from_bits(read_pins());
-//! let (outputs, job) = pio.sample(now, inputs, engine.axis(axis), true);
+//! let (outputs, job) = pio.sample(now, inputs, engine.axis(axis), true, home);
 //! if let Some(kind) = job { engine.submit(Job { axis, kind })?; }
 //! write_pins(outputs.bits());
 //! ```
@@ -29,7 +29,7 @@
 //! | PC4 | IN2 | ON = 1 | Position number bit 2 | IN2 PC4 |
 //! | PC8 | IN3 | ON = 1 | Position number bit 3 (positions 0-15) | IN3 PC8 |
 //! | PC16, PC32 | IN4, IN5 | ON = 1 | The Robo Cylinder has 16 positions: ON when a strobe latches refuses that strobe (no move) | IN4 PC16, IN5 PC32 |
-//! | HOME | IN11 | rising edge | Home (`o`, direction from [`Config::home_direction`]) | IN11 HOME |
+//! | HOME | IN11 | rising edge | Home (`o`, in the axis' direction, AXISCFG) | IN11 HOME |
 //! | *STP | IN12 | negative: OFF = stop | OFF: cancel the motion (`d`) at once; while OFF, CSTR and HOME are ignored. ON again does not resume | IN12 *STP (pause) |
 //! | CSTR | IN13 | rising edge | Start: latch PC1-PC8, move to that point (Q3) | IN13 CSTR |
 //! | RES | IN14 | rising edge | Alarm reset (servo off, `r03`), only while an alarm is active | IN14 RES |
@@ -136,6 +136,10 @@ use crate::engine::{AxisState, JobKind, Link};
 use crate::time::{Duration, Instant};
 use crate::{HomeDirection, PositionNo, StatusReport};
 use debounce::Debouncer;
+
+/// The inputs are sampled this often (about: every time in this module is only as fine as
+/// the sample period): 1 ms, so that the 6 ms debounce is six samples.
+pub const SAMPLE_PERIOD: Duration = Duration::from_millis(1);
 
 /// While *STP is OFF and the axis still reports moving, the stop is repeated this often.
 pub const STOP_REPEAT: Duration = Duration::from_millis(100);
@@ -257,19 +261,16 @@ pub struct Config {
     /// PC1-PC8 must have been stable this long when a CSTR strobe latches them; a strobe waits
     /// until they have (0: latch at the edge). Default 6 ms.
     pub settle: Duration,
-    /// The direction HOME homes in.
-    pub home_direction: HomeDirection,
     /// While the reported servo state differs from SON, the servo job is repeated this often
     /// (at least [`SERVO_RETRY_MIN`]). Default 1 s.
     pub servo_retry: Duration,
 }
 
 impl Config {
-    /// 6 ms debounce and settle (IAI's input time constant), motor-end homing, 1 s servo retry.
+    /// 6 ms debounce and settle (IAI's input time constant), 1 s servo retry.
     pub const DEFAULT: Config = Config {
         debounce: Duration::from_millis(6),
         settle: Duration::from_millis(6),
-        home_direction: HomeDirection::MotorEnd,
         servo_retry: Duration::from_millis(1000),
     };
 }
@@ -416,6 +417,15 @@ impl Pio {
         self.outputs
     }
 
+    /// The gateway refused the job the last [`sample`](Pio::sample) returned (the stop input
+    /// holds the axis, the queue is full: CMST shows why): nothing will run, so the outputs
+    /// follow the status again from the next sample rather than wait, PEND off, for a move or
+    /// home that is not coming. A PLC that strobed a point then sees PEND with the point the
+    /// axis is at.
+    pub fn refused(&mut self) {
+        self.waiting = None;
+    }
+
     /// Whether a CSTR strobe waits for PC1-PC8 to settle, or a move or home waits to be returned.
     pub fn motion_pending(&self) -> bool {
         self.strobe || self.pending_move.is_some() || self.pending_home
@@ -425,13 +435,15 @@ impl Pio {
     ///
     /// `axis` is the engine's state of the axis; `link_ok` is the gateway's verdict on it (for
     /// example `false` while the bus is being set up). The link counts as up only if `link_ok`,
-    /// the engine has the axis [`Online`](Link::Online) and a status has been received.
+    /// the engine has the axis [`Online`](Link::Online) and a status has been received. `home`
+    /// is the direction the axis homes in (its configuration's, the one fact for every face).
     pub fn sample(
         &mut self,
         now: Instant,
         inputs: PioInputs,
         axis: &AxisState,
         link_ok: bool,
+        home: HomeDirection,
     ) -> (PioOutputs, Option<JobKind>) {
         let report = axis.report.filter(|_| link_ok && axis.link == Link::Online);
 
@@ -503,7 +515,7 @@ impl Pio {
             self.pending_move = self.inputs().position();
         }
 
-        let job = self.next_job(now, axis, report);
+        let job = self.next_job(now, axis, report, home);
 
         if let (Some(waiting), Some(report)) = (self.waiting.as_mut(), report.as_ref()) {
             if waiting.update(axis, report) {
@@ -520,6 +532,7 @@ impl Pio {
         now: Instant,
         axis: &AxisState,
         report: Option<StatusReport>,
+        home: HomeDirection,
     ) -> Option<JobKind> {
         if self.stop_due {
             self.stop_due = false;
@@ -548,7 +561,7 @@ impl Pio {
         if self.pending_home {
             self.pending_home = false;
             self.waiting = Some(Await::new(Target::Home, now, axis, &report));
-            return Some(JobKind::Home(self.config.home_direction));
+            return Some(JobKind::Home(home));
         }
         if let Some(point) = self.pending_move.take() {
             self.waiting = Some(Await::new(Target::Point(point), now, axis, &report));

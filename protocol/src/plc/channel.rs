@@ -10,19 +10,19 @@
 //! when the value is already stored (RESP word 4 = 0xFFFF), so the controller's non-volatile
 //! memory (about 100,000 writes per area) is never worn by unchanged data.
 
-use super::gateway::Reason;
-use super::map::{G_REQUEST, G_RESPONSE};
+use super::command::Reason;
+use super::map::{G_REQUEST, G_REQUEST_LEN, G_RESPONSE, G_RESPONSE_LEN};
+use super::refused::Refused;
 use super::registers::{join, split};
 use crate::axes::AxisSet;
 use crate::engine::{Engine, Job, JobError, JobId, JobKind, JobOutput};
 use crate::memory::PointField;
-use crate::modbus::Exception;
 use crate::{Address, Axis, PositionNo};
 
 /// Registers of the request block: code, axis, point, field, value high, value low.
-pub(super) const REQ_LEN: usize = 6;
+pub(super) const REQ_LEN: usize = G_REQUEST_LEN as usize;
 /// Registers of the response block: code, error, value high, value low, V5 write count.
-pub(super) const RESP_LEN: usize = 5;
+pub(super) const RESP_LEN: usize = G_RESPONSE_LEN as usize;
 
 /// Request code: read a field.
 const READ_FIELD: u16 = 1;
@@ -80,13 +80,6 @@ impl Channel {
         at(G_REQUEST, &self.request).or_else(|| at(G_RESPONSE, &self.response))
     }
 
-    /// Whether `address` is a request register (writable).
-    pub(super) fn is_request(address: u16) -> bool {
-        address
-            .checked_sub(G_REQUEST)
-            .is_some_and(|i| usize::from(i) < REQ_LEN)
-    }
-
     /// The request block as a write of `values` at `address` would leave it, if the write
     /// touches it.
     pub(super) fn after_write(&self, address: u16, values: &[u16]) -> Option<Request> {
@@ -113,7 +106,7 @@ impl Channel {
         &self,
         request: Request,
         axes: AxisSet,
-    ) -> Result<Option<(Axis, PositionNo)>, Exception> {
+    ) -> Result<Option<(Axis, PositionNo)>, Refused> {
         let [code, axis, point, offset, _, _] = request;
         if code == 0 {
             return Ok(None);
@@ -123,20 +116,20 @@ impl Channel {
             return Ok(None);
         }
         if !matches!(self.state, State::Idle) || self.response[0] != 0 {
-            return Err(Exception::ServerDeviceFailure);
+            return Err(Refused::Busy);
         }
         let axis = u8::try_from(axis)
             .ok()
             .and_then(Axis::new)
             .filter(|&a| axes.contains(a))
-            .ok_or(Exception::IllegalDataValue)?;
+            .ok_or(Refused::OutOfRange)?;
         let point = u8::try_from(point)
             .ok()
             .and_then(PositionNo::new)
-            .ok_or(Exception::IllegalDataValue)?;
-        field(offset).ok_or(Exception::IllegalDataValue)?;
+            .ok_or(Refused::OutOfRange)?;
+        field(offset).ok_or(Refused::OutOfRange)?;
         if code != READ_FIELD && code != WRITE_FIELD {
-            return Err(Exception::IllegalDataValue);
+            return Err(Refused::OutOfRange);
         }
         Ok(Some((axis, point)))
     }
@@ -147,7 +140,7 @@ impl Channel {
         request: Request,
         start: Option<(Axis, PositionNo)>,
         engine: &mut Engine,
-    ) -> Result<(), Exception> {
+    ) -> Result<(), Refused> {
         let Some((axis, point)) = start else {
             self.request = request;
             if request[0] == 0 && matches!(self.state, State::Answered) {
@@ -158,14 +151,14 @@ impl Channel {
             return Ok(());
         };
         if !engine.online(axis) {
-            return Err(Exception::ServerDeviceFailure);
+            return Err(Refused::Offline);
         }
         let id = engine
             .submit(Job {
                 axis,
                 kind: JobKind::ReadPoint(point),
             })
-            .map_err(|_| Exception::ServerDeviceFailure)?;
+            .map_err(|_| Refused::QueueFull)?;
         self.request = request;
         self.state = State::Reading(id, request);
         Ok(())

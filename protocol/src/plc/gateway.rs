@@ -8,87 +8,20 @@
 //! and drives the [`Engine`]; none calls back into the gateway: it reports what happened and the
 //! gateway updates what the PLC sees.
 
-use super::axis_unit::{Motion, PlcAxis};
 use super::channel::Channel;
+use super::command::{CommandState, Motion, PlcAxis, Reason};
 use super::config::GatewayConfig;
 use super::failsafe::{FailSafe, Trip};
 use super::persist::{Persist, Store};
 use super::points::PointCache;
+use super::refused::Refused;
 use super::sync::{SyncEnd, SyncStart};
 use crate::axes::{AxisMap, AxisSet};
 use crate::engine::{
     Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Link, Output, SubmitError,
 };
-use crate::modbus::Exception;
 use crate::time::{earliest, Duration, Instant};
 use crate::Axis;
-
-/// The fate of an axis' last command, as CMST shows it.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum CommandState {
-    /// No command yet.
-    #[default]
-    Idle = 0,
-    /// Accepted, running.
-    Taken = 1,
-    /// Finished.
-    Done = 2,
-    /// Failed; CMER says why.
-    Failed = 3,
-}
-
-/// Why a command failed: the high byte of CMER (the low byte carries the RC code, if any).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Reason {
-    /// No failure.
-    None = 0,
-    /// No valid answer from the axis after the retries.
-    Timeout = 1,
-    /// An `m` got no answer: it may or may not have moved.
-    OutcomeUnknown = 2,
-    /// The controller rejected the command (low byte: its warning code).
-    Rejected = 3,
-    /// The axis went into alarm (low byte: the alarm code).
-    Alarm = 4,
-    /// The controller answered something else than expected.
-    Unexpected = 5,
-    /// A stop cancelled it.
-    Cancelled = 6,
-    /// The read-back differs from what was written.
-    VerifyFailed = 7,
-    /// The move did not complete within the motion time-out.
-    WaitTimeout = 8,
-    /// The gateway's job queue was full.
-    QueueFull = 9,
-    /// Refused: STP/EMG or the stop input is active, no motion may start.
-    Paused = 10,
-    /// The axis went offline before the command could run; it will not run late.
-    Offline = 11,
-}
-
-impl Reason {
-    /// The CMER value: this reason in the high byte, `rc` (a controller code) in the low.
-    pub const fn code(self, rc: u8) -> u16 {
-        (self as u16) << 8 | rc as u16
-    }
-
-    /// The CMER value of a failed job.
-    pub fn of(error: JobError) -> u16 {
-        match error {
-            JobError::Timeout => Reason::Timeout.code(0),
-            JobError::OutcomeUnknown => Reason::OutcomeUnknown.code(0),
-            JobError::Rejected(c) => Reason::Rejected.code(c.0),
-            JobError::Alarm(c) => Reason::Alarm.code(c.0),
-            JobError::Unexpected => Reason::Unexpected.code(0),
-            JobError::Cancelled => Reason::Cancelled.code(0),
-            JobError::VerifyFailed => Reason::VerifyFailed.code(0),
-            JobError::WaitTimeout => Reason::WaitTimeout.code(0),
-            JobError::Offline => Reason::Offline.code(0),
-        }
-    }
-}
 
 /// While SON is held ON and the servo is off, it is turned on again at most this often.
 const SON_RETRY: Duration = Duration::from_millis(2000);
@@ -165,11 +98,12 @@ impl Gateway {
         changed
     }
 
-    /// A valid Modbus request to the gateway or one of its axes arrived: the PLC is alive
-    /// (re-arms the watchdog).
-    pub fn plc_activity(&mut self, now: Instant) {
+    /// A valid Modbus request to the gateway or one of its axes arrived at `now`: the PLC is
+    /// alive (re-arms the watchdog), and its silence counts from `quiet_from` (the end of the
+    /// reply, or `now` when there is none).
+    pub fn plc_activity(&mut self, now: Instant, quiet_from: Instant) {
         self.now = now;
-        self.failsafe.activity(now);
+        self.failsafe.activity(quiet_from);
     }
 
     /// The stop input (a safety input, wired like PIO *STP): `active` when it is OFF. Its
@@ -310,13 +244,14 @@ impl Gateway {
     }
 
     /// Submit a command for the PLC (a register write, or the PIO logic's strobe) and record its
-    /// fate in CMST/CMER. Motion is refused while STP/EMG or the stop input is active; anything
-    /// but a stop is refused with 04 (nothing recorded) while the axis does not answer, so that
-    /// it can never run late when the axis appears.
-    pub fn command(&mut self, axis: Axis, kind: JobKind) -> Result<(), Exception> {
+    /// fate in CMST/CMER. Motion is refused while STP/EMG or the stop input is active
+    /// ([`Refused::Stopped`], recorded); a full queue is refused and recorded too; anything but a
+    /// stop is refused while the axis does not answer ([`Refused::Offline`], nothing recorded),
+    /// so that it can never run late when the axis appears.
+    pub fn command(&mut self, axis: Axis, kind: JobKind) -> Result<(), Refused> {
         let stop = kind == JobKind::Stop;
         if !stop && !self.engine.online(axis) {
-            return Err(Exception::ServerDeviceFailure);
+            return Err(Refused::Offline);
         }
         // (A stop does not move the axis: it is never blocked.)
         let motion = Motion::of(&kind);
@@ -339,9 +274,7 @@ impl Gateway {
                     self.sync_ended(end);
                 }
             }
-            return result
-                .map(|_| ())
-                .map_err(|_| Exception::ServerDeviceFailure);
+            return result.map(|_| ()).map_err(|_| Refused::QueueFull);
         }
         let plc = &mut self.axes[axis];
         match result {
@@ -354,11 +287,21 @@ impl Gateway {
                 plc.sync = false;
                 plc.state = CommandState::Failed;
                 plc.reason = reason.code(0);
-                match reason {
-                    Reason::QueueFull => Err(Exception::ServerDeviceFailure),
-                    _ => Ok(()),
-                }
+                Err(match reason {
+                    Reason::QueueFull => Refused::QueueFull,
+                    _ => Refused::Stopped,
+                })
             }
+        }
+    }
+
+    /// [`command`](Self::command) for a PLC write: a command that STP, EMG or the stop input holds
+    /// is taken, and fails at once (CMST 3, reason 10), as a PCON takes a start it does not carry
+    /// out; the write stands. The other refusals refuse the write.
+    pub(super) fn command_written(&mut self, axis: Axis, kind: JobKind) -> Result<(), Refused> {
+        match self.command(axis, kind) {
+            Err(Refused::Stopped) => Ok(()),
+            other => other,
         }
     }
 

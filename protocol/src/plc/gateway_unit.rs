@@ -4,56 +4,23 @@
 //! Writes are checked register by register before any is applied; a register that exists but
 //! cannot be written answers 03, one that does not exist 02 (as the axis units do).
 
-use super::axis_unit::{link_code, nth};
-use super::channel::Channel;
-use super::config::{
-    axis_of, complement_code, complement_of, home_of, stroke_of, unit_ok, watchdog_ok, Parity,
-    WatchdogAction,
-};
+use super::axis_unit::link_code;
+use super::config::{axis_of, complement_code};
 use super::gateway::Gateway;
-use super::map::{self, *};
+use super::map::*;
 use super::persist::Store;
+use super::refused::Refused;
 use super::registers::{join, split};
-use super::settings::PLC_BAUDS;
+use super::write::{axis_cfg, nth, per_axis, AxisSetting, GatewayWrite};
 use crate::axes::AxisSet;
-use crate::engine::{LinkError, MAX_RETRIES};
-use crate::line::Baud;
+use crate::engine::LinkError;
 use crate::modbus::{Exception, SlaveCounters};
 use crate::time::Duration;
-use crate::units::Lead;
-use crate::{Axis, PositionNo, Rtim};
-
-/// If `apply`, `slot` takes `parsed` when it is a value; whether it is one (the register's
-/// verdict). The shape of most registers: one conversion for the check and the store.
-fn store<T>(apply: bool, parsed: Option<T>, slot: &mut T) -> bool {
-    let valid = parsed.is_some();
-    if let (true, Some(value)) = (apply, parsed) {
-        *slot = value;
-    }
-    valid
-}
-
-/// AXISCFG field offsets.
-mod axis_cfg {
-    pub const ENABLED: u16 = 0;
-    pub const LEAD: u16 = 1;
-    pub const HOME: u16 = 2;
-    pub const PULSES: u16 = 3;
-    pub const STROKE_HI: u16 = 4;
-    pub const STROKE_LO: u16 = 5;
-    pub const COMPLEMENT: u16 = 6;
-}
+use crate::Axis;
 
 /// DIAG word offsets past the seven u32 counters.
 const DIAG_LINK: u16 = 14;
 const DIAG_LAST_ERROR: u16 = 15;
-
-/// The axis and field offset of an address in a per-axis block of `len` registers at `base`.
-fn per_axis(address: u16, base: u16, len: u16) -> Option<(Axis, u16)> {
-    let offset = address.checked_sub(base)?;
-    let axis = Axis::new(u8::try_from(offset / len).ok()?)?;
-    Some((axis, offset % len))
-}
 
 /// Register `offset` of a block of u32 counters, two registers each, high word first.
 fn counter_register(counters: &[u32], offset: u16) -> u16 {
@@ -67,11 +34,7 @@ fn counter_register(counters: &[u32], offset: u16) -> u16 {
 impl Gateway {
     /// One register of the gateway unit. What takes work to compute (the version, the uptime)
     /// is computed only for its own registers, not for every register read.
-    pub(super) fn gateway_read(
-        &self,
-        address: u16,
-        link: &SlaveCounters,
-    ) -> Result<u16, Exception> {
+    pub(super) fn gateway_read(&self, address: u16, link: &SlaveCounters) -> Result<u16, Refused> {
         Ok(match address {
             G_VERSION | 0x0001 => {
                 let (major, minor, patch) = self.config.identity.version();
@@ -142,7 +105,7 @@ impl Gateway {
                     let values = [c.unsolicited, c.events_lost, c.queue_full, c.establishments];
                     return Ok(counter_register(&values, offset));
                 }
-                return Err(Exception::IllegalDataAddress);
+                return Err(Refused::NoSuchAddress);
             }
         })
     }
@@ -198,180 +161,96 @@ impl Gateway {
                 .all(|a| !self.engine.busy(a) && !self.engine.axis(a).moving())
     }
 
-    /// One gateway register write, checked, and carried out if `apply` (the command channel
-    /// and SYNCSTART aside, which [`gateway_write`](Self::gateway_write) does itself). A write
-    /// runs this twice: first every register is checked (02 for an address that does not
-    /// exist, 03 for a read-only register or a value out of range) and nothing changes, then
-    /// every register is applied in order. One function for both, so that each register's
-    /// rule and conversion are written (and in the firmware) once. When applying, the verdicts
-    /// do not count (the map look-up and APPLY's idle test are skipped; the other rules are
-    /// worked out and ignored): the check said yes to each, and an earlier register of the same
-    /// write (APPLY, say) may have changed what a later one's rule looks at.
-    fn gateway_register(&mut self, address: u16, value: u16, apply: bool) -> Result<(), Exception> {
-        if !apply && !map::gateway_writable(address).ok_or(Exception::IllegalDataAddress)? {
-            return Err(Exception::IllegalDataValue);
-        }
-        let valid = match address {
-            G_FAILSAFE => {
-                if apply {
-                    self.failsafe.clear();
-                }
-                value == 0
-            }
-            G_WATCHDOG => {
-                if apply {
-                    self.config.watchdog = Duration::from_millis(u64::from(value));
-                }
-                watchdog_ok(value)
-            }
-            G_BUS_BAUD => store(
-                apply,
-                Baud::from_bits_per_second(u32::from(value) * 100),
-                &mut self.persist.baud,
-            ),
-            G_BUS_RTIM => store(
-                apply,
-                u8::try_from(value).ok().and_then(Rtim::new),
-                &mut self.persist.rtim,
-            ),
-            G_PLC_BAUD => {
-                let baud = u32::from(value) * 100;
-                if apply {
-                    self.persist.plc.baud = baud;
-                }
-                PLC_BAUDS.contains(&baud)
-            }
-            G_PLC_PARITY => store(
-                apply,
-                Parity::from_code(value),
-                &mut self.persist.plc.parity,
-            ),
-            // Not the unit of an axis that is (or will be) on the bus.
-            G_UNIT_ID => {
+    /// The rules of a parsed write that depend on the gateway's state, checked before any
+    /// register of the write is carried out: APPLY only while nothing moves, runs or waits; a
+    /// unit id that is not an axis' (enabled, or to be on APPLY); an axis enabled whose unit is
+    /// not the gateway's; a synchronized-start mask of axes on the bus.
+    fn admit(&self, write: GatewayWrite) -> Result<(), Refused> {
+        let admitted = match write {
+            GatewayWrite::Apply => self.bus_idle(),
+            GatewayWrite::UnitId(unit) => {
                 let axes = AxisSet(self.config.bus.axes.0 | self.persist.axes.0);
-                let unit = u8::try_from(value);
-                if let (true, Ok(unit)) = (apply, unit) {
-                    self.persist.unit = unit;
-                }
-                unit_ok(value) && unit.is_ok_and(|u| axis_of(u, axes).is_none())
+                axis_of(unit, axes).is_none()
             }
-            G_SAVE | G_RESTART => {
-                if apply && value == 1 {
-                    if address == G_SAVE {
-                        self.persist.save(&self.config);
-                    } else {
-                        self.persist.request = Some(Store::Restart);
-                    }
-                }
-                value <= 1
+            GatewayWrite::Axis(axis, AxisSetting::Enabled(true)) => {
+                axis.get() + 1 != self.persist.unit
             }
-            G_FACTORY => {
-                if apply && value == FACTORY_KEY {
-                    self.persist.request = Some(Store::FactoryReset);
-                }
-                value == 0 || value == FACTORY_KEY
-            }
-            G_RETRIES => {
-                if apply {
-                    self.engine
-                        .set_retries(u8::try_from(value).unwrap_or(MAX_RETRIES));
-                }
-                value <= u16::from(MAX_RETRIES)
-            }
-            G_APPLY if apply => {
-                if value == 1 {
-                    let pending = self.persist.pending(&self.config);
-                    self.plc_line_changed |= pending.plc != self.config.plc;
-                    self.config.plc = pending.plc;
-                    self.config.unit = pending.unit;
-                    self.config.bus.axes = pending.bus.axes;
-                    self.config.bus.baud = pending.bus.baud;
-                    self.config.bus.rtim = pending.bus.rtim;
-                    self.engine
-                        .reconfigure(pending.bus.axes, pending.bus.baud, pending.bus.rtim);
-                }
-                true
-            }
-            G_APPLY => value == 0 || (value == 1 && self.bus_idle()),
-            G_WD_ACTION => store(
-                apply,
-                WatchdogAction::from_code(value),
-                &mut self.config.watchdog_action,
-            ),
-            G_PIO_AXIS => {
-                let axis = u8::try_from(value).ok().and_then(Axis::new);
-                if apply {
-                    self.config.pio_axis = axis;
-                }
-                value == 0xFFFF || axis.is_some()
-            }
-            G_SYNC_MASK => {
-                let valid = value & !self.config.bus.axes.0 == 0;
-                if apply {
-                    self.sync.set_mask(AxisSet(value));
-                }
-                valid
-            }
-            G_SYNC_START => value <= 1,
-            a if Channel::is_request(a) => true,
-            a => match per_axis(a, G_AXIS_CONFIG, G_AXIS_CONFIG_LEN) {
-                Some((axis, field)) => self.axis_config_register(axis, field, value, apply),
-                None => false,
-            },
+            GatewayWrite::SyncMask(mask) => mask.0 & !self.config.bus.axes.0 == 0,
+            _ => true,
         };
-        if valid || apply {
+        if admitted {
             Ok(())
         } else {
-            Err(Exception::IllegalDataValue)
+            Err(Refused::OutOfRange)
         }
     }
 
-    /// AXISCFG field `field` of `axis`: whether `value` is valid, and if `apply` it is stored
-    /// (see [`gateway_register`](Self::gateway_register)).
-    fn axis_config_register(&mut self, axis: Axis, field: u16, value: u16, apply: bool) -> bool {
-        if field == axis_cfg::ENABLED {
-            // An axis whose unit is the gateway's cannot be enabled.
-            let valid = value == 0 || (value == 1 && axis.get() + 1 != self.persist.unit);
-            if apply {
-                self.persist.axes = if value == 1 {
+    /// Carries out one admitted register write (the command channel's block and SYNCSTART
+    /// aside, which [`gateway_write`](Self::gateway_write) does itself).
+    #[inline(never)]
+    fn apply(&mut self, write: GatewayWrite) {
+        match write {
+            GatewayWrite::Nothing | GatewayWrite::ChannelRequest | GatewayWrite::SyncStart => {}
+            GatewayWrite::AckFailsafe => self.failsafe.clear(),
+            GatewayWrite::Watchdog(ms) => {
+                self.config.watchdog = Duration::from_millis(u64::from(ms))
+            }
+            GatewayWrite::WatchdogAction(action) => self.config.watchdog_action = action,
+            GatewayWrite::BusBaud(baud) => self.persist.baud = baud,
+            GatewayWrite::BusRtim(rtim) => self.persist.rtim = rtim,
+            GatewayWrite::Retries(retries) => self.engine.set_retries(retries),
+            GatewayWrite::PlcBaud(hundreds) => self.persist.plc.baud = u32::from(hundreds) * 100,
+            GatewayWrite::PlcParity(parity) => self.persist.plc.parity = parity,
+            GatewayWrite::UnitId(unit) => self.persist.unit = unit,
+            GatewayWrite::Apply => {
+                let pending = self.persist.pending(&self.config);
+                self.plc_line_changed |= pending.plc != self.config.plc;
+                self.config.plc = pending.plc;
+                self.config.unit = pending.unit;
+                self.config.bus.axes = pending.bus.axes;
+                self.config.bus.baud = pending.bus.baud;
+                self.config.bus.rtim = pending.bus.rtim;
+                self.engine
+                    .reconfigure(pending.bus.axes, pending.bus.baud, pending.bus.rtim);
+            }
+            GatewayWrite::Save => self.persist.save(&self.config),
+            GatewayWrite::Restart => self.persist.request = Some(Store::Restart),
+            GatewayWrite::FactoryReset => self.persist.request = Some(Store::FactoryReset),
+            GatewayWrite::PioAxis(axis) => self.config.pio_axis = axis,
+            GatewayWrite::SyncMask(mask) => self.sync.set_mask(mask),
+            GatewayWrite::Axis(axis, setting) => self.apply_axis_setting(axis, setting),
+        }
+    }
+
+    /// An AXISCFG field of `axis`, stored.
+    fn apply_axis_setting(&mut self, axis: Axis, setting: AxisSetting) {
+        let c = &mut self.config.axes[axis];
+        // The stroke's other word stays as it is.
+        let [hi, lo] = split(u32::try_from(c.stroke.0).unwrap_or(0));
+        match setting {
+            AxisSetting::Enabled(on) => {
+                self.persist.axes = if on {
                     self.persist.axes.with(axis)
                 } else {
                     self.persist.axes.without(axis)
                 };
             }
-            return valid;
-        }
-        let c = &mut self.config.axes[axis];
-        match field {
-            axis_cfg::LEAD => store(apply, Lead::from_hundredths(value), &mut c.scale.lead),
-            axis_cfg::PULSES => store(
-                apply,
-                core::num::NonZeroU16::new(value),
-                &mut c.scale.pulses_per_rev,
-            ),
-            axis_cfg::HOME => store(apply, home_of(value), &mut c.scale.home),
-            axis_cfg::STROKE_HI | axis_cfg::STROKE_LO => {
-                // The other word stays as it is.
-                let [hi, lo] = split(u32::try_from(c.stroke.0).unwrap_or(0));
-                let (hi, lo) = if field == axis_cfg::STROKE_HI {
-                    (value, lo)
-                } else {
-                    (hi, value)
-                };
-                store(apply, stroke_of(join(hi, lo)), &mut c.stroke)
-            }
-            axis_cfg::COMPLEMENT => store(apply, complement_of(value), &mut c.scale.complement),
-            _ => false,
+            AxisSetting::Lead(lead) => c.scale.lead = lead,
+            AxisSetting::Home(home) => c.scale.home = home,
+            AxisSetting::Pulses(pulses) => c.scale.pulses_per_rev = pulses,
+            AxisSetting::StrokeHigh(hi) => c.stroke = stroke(hi, lo),
+            AxisSetting::StrokeLow(lo) => c.stroke = stroke(hi, lo),
+            AxisSetting::Complement(complement) => c.scale.complement = complement,
         }
     }
 
-    /// FC06/FC10 to the gateway unit: every register checked, then applied in order; the
-    /// command channel's request block as a whole, and SYNCSTART last (with the mask the same
-    /// write sets).
-    pub(super) fn gateway_write(&mut self, address: u16, values: &[u16]) -> Result<(), Exception> {
+    /// FC06/FC10 to the gateway unit: every register parsed and admitted, then carried out in
+    /// order (parsed again: parsing is pure); the command channel's request block as a whole,
+    /// and SYNCSTART last (with the mask the same write sets).
+    pub(super) fn gateway_write(&mut self, address: u16, values: &[u16]) -> Result<(), Refused> {
         for (i, &value) in values.iter().enumerate() {
-            let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
-            self.gateway_register(a, value, false)?;
+            let a = nth(address, i).ok_or(Refused::NoSuchAddress)?;
+            self.admit(GatewayWrite::parse(a, value)?)?;
         }
         let at = |register: u16| {
             register
@@ -393,22 +272,24 @@ impl Gateway {
             self.channel.store(request, start, &mut self.engine)?;
         }
         for (i, &value) in values.iter().enumerate() {
-            if let Some(a) = nth(address, i) {
-                // Checked above: applying cannot fail.
-                let _ = self.gateway_register(a, value, true);
+            // Parsed and admitted above: parsed again, it is the same write.
+            if let Some(write) = nth(address, i).and_then(|a| GatewayWrite::parse(a, value).ok()) {
+                self.apply(write);
             }
         }
         if start_sync {
             let blocked = self.blocked();
             let mask = self.sync.mask();
             let axes = &self.axes;
-            let posr = |axis: Axis| {
-                PositionNo::new(u8::try_from(axes[axis].posr).unwrap_or(0))
-                    .unwrap_or(PositionNo::MIN)
-            };
-            self.sync.start(blocked, posr, &mut self.engine)?;
+            self.sync
+                .start(blocked, |axis| axes[axis].posr, &mut self.engine)?;
             self.sync_taken(mask);
         }
         Ok(())
     }
+}
+
+/// A stroke from AXISCFG's two words: within i32 by [`AxisSetting::StrokeHigh`]'s range.
+fn stroke(hi: u16, lo: u16) -> crate::units::Length {
+    crate::units::Length(i32::try_from(join(hi, lo)).unwrap_or(i32::MAX))
 }

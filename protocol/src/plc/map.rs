@@ -182,10 +182,14 @@ pub const G_SYNC_STATUS: u16 = 0x000D;
 pub const G_AXIS_CONFIG: u16 = 0x0100;
 /// Registers per axis in the configuration block.
 pub const G_AXIS_CONFIG_LEN: u16 = 8;
-/// Command channel request (5 registers), ROBONET-style handshake.
+/// Command channel request ([`G_REQUEST_LEN`] registers), ROBONET-style handshake.
 pub const G_REQUEST: u16 = 0x0200;
-/// Command channel response (5 registers).
+/// Registers of the command channel's request block.
+pub const G_REQUEST_LEN: u16 = 6;
+/// Command channel response ([`G_RESPONSE_LEN`] registers).
 pub const G_RESPONSE: u16 = 0x0210;
+/// Registers of the command channel's response block.
+pub const G_RESPONSE_LEN: u16 = 5;
 /// Per-axis diagnostics: 16 registers per axis from here.
 pub const G_DIAG: u16 = 0x0400;
 /// Registers per axis in the diagnostics block.
@@ -345,8 +349,8 @@ pub const MAP: &[Entry] = &[
     e(Unit::Gateway, Holding, G_SYNC_START, 1, "SYNCSTART", "", "1", true, "Write 1: every axis of SYNCMASK moves to its POSR at the same instant (h, then one t)", Gateway),
     e(Unit::Gateway, Status, G_SYNC_STATUS, 1, "SYNCSTAT", "", "0-3", false, "0 idle, 1 running, 2 done (every axis started; each axis' CMST follows its move to the end), 3 failed", Gateway),
     e(Unit::Gateway, Holding, G_AXIS_CONFIG, 128, "AXISCFG", "", "", true, "Per axis n at 0x0100+8n: enabled (taken on APPLY or at the next start), lead (0.01 mm), home (7 motor/8 far end), pulses/rev, stroke (2, 0.01 mm), complement (1/2)", Gateway),
-    e(Unit::Gateway, Holding, G_REQUEST, 6, "REQ", "", "", true, "Command channel request: code (1 read field, 2 write field), axis, point, field (offset from 0x400), value high, value low", Gateway),
-    e(Unit::Gateway, Status, G_RESPONSE, 5, "RESP", "", "", false, "Command channel response: code (|0x8000 on error), error (as CMER), value high, value low, V5 write count (0xFFFF: value already stored, nothing written)", Gateway),
+    e(Unit::Gateway, Holding, G_REQUEST, G_REQUEST_LEN, "REQ", "", "", true, "Command channel request: code (1 read field, 2 write field), axis, point, field (offset from 0x400), value high, value low", Gateway),
+    e(Unit::Gateway, Status, G_RESPONSE, G_RESPONSE_LEN, "RESP", "", "", false, "Command channel response: code (|0x8000 on error), error (as CMER), value high, value low, V5 write count (0xFFFF: value already stored, nothing written)", Gateway),
     e(Unit::Gateway, Status, G_DIAG, 256, "DIAG", "count", "", false, "Per axis n at 0x0400+16n: frames sent, replies, time-outs, BCC errors, bad replies, retries, rejections (u32 each), link, last error", Gateway),
     e(Unit::Gateway, Status, G_BUS, 8, "BUS", "count", "", false, "Unsolicited frames, events lost, queue full, establishments (u32 each)", Gateway),
     e(Unit::Gateway, Status, G_PLC, 14, "PLCLINK", "count", "", false, "Modbus frames, CRC errors, exceptions, replies, other units, broadcasts, malformed (u32 each)", Gateway),

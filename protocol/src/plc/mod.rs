@@ -15,6 +15,8 @@
 //!
 //! | Module | What it holds |
 //! |---|---|
+//! | [`write`] | What a PLC's write means: typed writes, each register's range and conversion once |
+//! | `command` | What the PLC sees of a command: [`CommandState`], [`Reason`], an axis' PLC-side state |
 //! | `gateway` | [`Gateway`]: commands and their fate, events, the held SON |
 //! | `model` | [`Registers`]: which unit, which addresses exist |
 //! | `axis_unit`, `gateway_unit` | The registers of an axis unit and of the gateway unit |
@@ -22,10 +24,12 @@
 //! | [`settings`] | What survives a power cycle, as stored bytes |
 //! | [`map`], `registers`, [`table`] | The register map as data; status words; table rows |
 //! | `config`, `boot` | [`GatewayConfig`]; [`Boot`], what the firmware says about the start |
+//! | `refused` | [`Refused`]: why a request is refused, before any face says it its way |
 
 mod axis_unit;
 mod boot;
 mod channel;
+mod command;
 mod config;
 mod failsafe;
 mod gateway;
@@ -34,18 +38,22 @@ pub mod map;
 mod model;
 mod persist;
 mod points;
+mod refused;
 mod registers;
 pub mod settings;
 mod sync;
 pub mod table;
+pub mod write;
 
 pub use boot::{Boot, ConfigSource, ResetCause};
+pub use command::{CommandState, Reason};
 pub use config::{
     AxisConfig, GatewayConfig, Parity, PlcLine, WatchdogAction, DEFAULT_GATEWAY_UNIT,
     DEFAULT_WATCHDOG_MS, IDENTITY,
 };
 pub use failsafe::{CAUSE_STOP_INPUT, CAUSE_WATCHDOG};
-pub use gateway::{CommandState, Gateway, Reason};
+pub use gateway::Gateway;
 pub use model::{diagnostic, Registers};
 pub use persist::Store;
 pub use points::CACHED_ROWS;
+pub use refused::Refused;

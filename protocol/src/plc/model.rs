@@ -5,10 +5,12 @@
 //! (UPTIME, the fail-safe) and the PLC link's counters (PLCLINK), so that the gateway itself
 //! never needs to be told either out of band.
 
-use super::axis_unit::{coils_exist, nth, readable};
+use super::axis_unit::readable;
 use super::gateway::Gateway;
-use super::map::{COIL_STOP, COIL_STP, DRG1, DRG1_EMG, DRG1_STP, DRG1_SUPPORTED, POSR};
+use super::map::{DRG1, POSR};
+use super::refused::Refused;
 use super::table;
+use super::write::{nth, AxisWrite};
 use crate::engine::JobKind;
 use crate::modbus::{
     BitTable, Bits, BitsMut, DataModel, Exception, Identity, RegisterTable, SlaveCounters,
@@ -49,6 +51,43 @@ pub mod diagnostic {
     pub const ESTABLISHING: u16 = 1 << 4;
     /// The stop input is active now.
     pub const STOPPED: u16 = 1 << 5;
+}
+
+/// The one place a [`Refused`] becomes what a Modbus master sees: 02 for an address that is
+/// not there, 03 for a value it cannot take, 04 for "not now" (ask again). (A write whose
+/// command STP or the stop input holds is not refused: `Gateway::command_written`.)
+fn exception(refused: Refused) -> Exception {
+    match refused {
+        Refused::NoSuchAddress => Exception::IllegalDataAddress,
+        Refused::OutOfRange => Exception::IllegalDataValue,
+        Refused::Offline
+        | Refused::QueueFull
+        | Refused::Busy
+        | Refused::NotReady
+        | Refused::Stopped => Exception::ServerDeviceFailure,
+    }
+}
+
+/// A broadcast write (unit 0), parsed once and checked before any effect: every axis on the
+/// bus that answers takes it (POSR, which only stores, every axis); one that does not only
+/// gets the stop, if the write stops (a stop can only help).
+fn broadcast(
+    gateway: &mut Gateway,
+    write: Result<AxisWrite<'_>, Refused>,
+) -> Result<(), Exception> {
+    let write = write.map_err(exception)?;
+    let to_all = matches!(write, AxisWrite::Position(_));
+    for axis in gateway.config.bus.axes.iter() {
+        if to_all || gateway.engine.online(axis) {
+            gateway.axis_write(axis, &write)
+        } else if write.stops() {
+            gateway.command(axis, JobKind::Stop)
+        } else {
+            Ok(())
+        }
+        .map_err(exception)?;
+    }
+    Ok(())
 }
 
 impl Registers<'_> {
@@ -114,7 +153,7 @@ impl DataModel for Registers<'_> {
         }
         for i in 0..out.len() {
             let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
-            out.set(i, gateway.axis_coil(axis, a)?);
+            out.set(i, gateway.axis_coil(axis, a).map_err(exception)?);
         }
         Ok(())
     }
@@ -150,9 +189,10 @@ impl DataModel for Registers<'_> {
         for (i, slot) in out.iter_mut().enumerate() {
             let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
             *slot = match axis {
-                Some(axis) => gateway.axis_read(axis, a)?,
-                None => gateway.gateway_read(a, &self.link)?,
-            };
+                Some(axis) => gateway.axis_read(axis, a),
+                None => gateway.gateway_read(a, &self.link),
+            }
+            .map_err(exception)?;
         }
         Ok(())
     }
@@ -160,55 +200,31 @@ impl DataModel for Registers<'_> {
     fn write_bits(&mut self, unit: u8, address: u16, values: Bits<'_>) -> Result<(), Exception> {
         let gateway = &mut *self.gateway;
         if unit == BROADCAST {
-            // Every axis that answers; those that do not only get the stop, if the write
-            // stops (a stop can only help).
-            coils_exist(address, values.len())?;
-            let stops = values
-                .iter()
-                .enumerate()
-                .any(|(i, on)| on && matches!(nth(address, i), Some(COIL_STOP | COIL_STP)));
-            for axis in gateway.config.bus.axes.iter() {
-                if gateway.engine.online(axis) {
-                    gateway.axis_coils(axis, address, values)?;
-                } else if stops {
-                    gateway.command(axis, JobKind::Stop)?;
-                }
-            }
-            return Ok(());
+            return broadcast(gateway, AxisWrite::coils(address, values));
         }
         let axis = gateway
             .config
             .axis_of_unit(unit)
             .ok_or(Exception::IllegalDataAddress)?;
-        gateway.axis_coils(axis, address, values)
+        AxisWrite::coils(address, values)
+            .and_then(|write| gateway.axis_write(axis, &write))
+            .map_err(exception)
     }
 
     fn write_registers(&mut self, unit: u8, address: u16, values: &[u16]) -> Result<(), Exception> {
         let gateway = &mut *self.gateway;
         if unit == BROADCAST {
-            // Broadcast: DRG1 or POSR of every axis (checked by value first, so a bad value
-            // refuses before any effect). An axis that does not answer only gets the stop, if
-            // the write stops. Not a direct move: travel differs between axes.
-            let (DRG1 | POSR, &[value]) = (address, values) else {
+            // DRG1 or POSR only. Not a direct move: travel differs between axes.
+            let (DRG1 | POSR, [_]) = (address, values) else {
                 return Err(Exception::IllegalDataAddress);
             };
-            if (address == DRG1 && value & !DRG1_SUPPORTED != 0) || (address == POSR && value > 15)
-            {
-                return Err(Exception::IllegalDataValue);
-            }
-            let stops = address == DRG1 && value & (DRG1_STP | DRG1_EMG) != 0;
-            for axis in gateway.config.bus.axes.iter() {
-                if address == POSR || gateway.engine.online(axis) {
-                    gateway.axis_write(axis, address, values)?;
-                } else if stops {
-                    gateway.command(axis, JobKind::Stop)?;
-                }
-            }
-            return Ok(());
+            return broadcast(gateway, AxisWrite::registers(address, values));
         }
         match gateway.config.axis_of_unit(unit) {
-            Some(axis) => gateway.axis_write(axis, address, values),
+            Some(axis) => AxisWrite::registers(address, values)
+                .and_then(|write| gateway.axis_write(axis, &write)),
             None => gateway.gateway_write(address, values),
         }
+        .map_err(exception)
     }
 }

@@ -15,10 +15,10 @@
 //! A controller that comes (back) online may have been replaced or edited: its rows are
 //! forgotten.
 
+use super::refused::Refused;
 use crate::axes::AxisMap;
 use crate::engine::{Engine, Job, JobError, JobId, JobKind, JobOutput};
 use crate::jobs::{PointData, PointReadback};
-use crate::modbus::Exception;
 use crate::{Axis, PositionNo};
 
 /// Rows kept, for all axes together.
@@ -156,16 +156,16 @@ impl PointCache {
         point: PositionNo,
         data: PointData,
         engine: &mut Engine,
-    ) -> Result<(), Exception> {
+    ) -> Result<(), Refused> {
         if !engine.online(axis) {
-            return Err(Exception::ServerDeviceFailure);
+            return Err(Refused::Offline);
         }
         let id = engine
             .submit(Job {
                 axis,
                 kind: JobKind::StorePoint { point, data },
             })
-            .map_err(|_| Exception::ServerDeviceFailure)?;
+            .map_err(|_| Refused::QueueFull)?;
         self.forget(axis, point);
         self.writes[axis] = Some((id, point));
         Ok(())

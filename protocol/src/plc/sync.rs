@@ -11,10 +11,10 @@
 //! the commands are buffered) cancels what was buffered by buffering an `n` (§4-4-10), so that
 //! a later `t` for other axes cannot start a stale move.
 
-use super::gateway::Reason;
+use super::command::Reason;
+use super::refused::Refused;
 use crate::axes::{AxisMap, AxisSet};
 use crate::engine::{Engine, Job, JobError, JobId, JobKind, JobOutput, QUEUE_LEN};
-use crate::modbus::Exception;
 use crate::{Axis, Buffered, Command, PositionNo};
 
 /// SYNCSTAT.
@@ -96,15 +96,15 @@ impl SyncStart {
         mask: AxisSet,
         blocked: AxisSet,
         engine: &Engine,
-    ) -> Result<(), Exception> {
+    ) -> Result<(), Refused> {
         if mask.is_empty() || mask.0 & blocked.0 != 0 {
-            return Err(Exception::IllegalDataValue);
+            return Err(Refused::OutOfRange);
         }
         let leftover = self.jobs.values().any(Option::is_some) || self.start.is_some();
         let room = QUEUE_LEN.saturating_sub(engine.queued());
         let offline = mask.iter().any(|a| !engine.online(a));
         if self.status == SyncStatus::Running || leftover || mask.len() > room || offline {
-            return Err(Exception::ServerDeviceFailure);
+            return Err(Refused::Busy);
         }
         Ok(())
     }
@@ -115,7 +115,7 @@ impl SyncStart {
         blocked: AxisSet,
         posr: impl Fn(Axis) -> PositionNo,
         engine: &mut Engine,
-    ) -> Result<(), Exception> {
+    ) -> Result<(), Refused> {
         let mask = self.mask;
         self.check(mask, blocked, engine)?;
         self.status = SyncStatus::Running;
@@ -138,7 +138,7 @@ impl SyncStart {
                 }
                 Err(_) => {
                     self.fail(engine);
-                    return Err(Exception::ServerDeviceFailure);
+                    return Err(Refused::QueueFull);
                 }
             }
         }

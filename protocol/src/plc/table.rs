@@ -9,10 +9,10 @@
 //! not exposed here (the command channel writes any field).
 
 use super::config::AxisConfig;
+use super::refused::Refused;
 use super::registers::{join, split};
 use crate::jobs::{PointData, PointReadback};
 use crate::memory::PointField;
-use crate::modbus::Exception;
 use crate::units::{Accel, Length, Speed};
 use crate::{Acceleration, Pulses, Velocity};
 
@@ -52,9 +52,9 @@ pub(crate) fn registers(readback: &PointReadback, config: &AxisConfig) -> [u16; 
 }
 
 /// A whole row written by the PLC, checked, as the point to store.
-pub(crate) fn point(values: &[u16], config: &AxisConfig) -> Result<PointData, Exception> {
+pub(crate) fn point(values: &[u16], config: &AxisConfig) -> Result<PointData, Refused> {
     let reg = |i: usize| values.get(i).copied().unwrap_or(0);
-    let bad = Exception::IllegalDataValue;
+    let bad = Refused::OutOfRange;
     let pcmd = join(reg(0), reg(1)) as i32;
     if pcmd < 0 || pcmd > config.stroke.0 {
         return Err(bad);

@@ -7,6 +7,9 @@ use protocol::HomeDirection;
 
 use crate::{axis, base, p, report, Rig, DONE_OUT, MS, READY_STATUS};
 
+/// The home direction of the axes these samples stand for.
+const MOTOR_END: HomeDirection = HomeDirection::MotorEnd;
+
 // ---------------------------------------------------------------- debounce
 
 #[test]
@@ -124,13 +127,13 @@ fn inputs_on_at_start_up_must_go_off_before_their_edge_counts() {
     let ready = axis(report(READY_STATUS, 0, DONE_OUT), 0);
     let held = base() | In::CSTR | In::HOME;
     for t in 0..100 {
-        let (_, job) = pio.sample(Instant(t * MS), held, &ready, true);
+        let (_, job) = pio.sample(Instant(t * MS), held, &ready, true, MOTOR_END);
         assert_eq!(job, None, "t={t}");
     }
     let mut jobs = vec![];
     for t in 100..140 {
         let inputs = if t < 110 { base() } else { base() | In::CSTR };
-        if let (_, Some(job)) = pio.sample(Instant(t * MS), inputs, &ready, true) {
+        if let (_, Some(job)) = pio.sample(Instant(t * MS), inputs, &ready, true, MOTOR_END) {
             jobs.push((t, job));
         }
     }
@@ -161,10 +164,8 @@ fn home_edge_homes_in_the_configured_direction() {
         vec![(6, JobKind::Home(HomeDirection::MotorEnd))]
     );
 
-    let mut rig = Rig::new(Config {
-        home_direction: HomeDirection::NonMotorEnd,
-        ..Config::default()
-    });
+    let mut rig = Rig::new(Config::default());
+    rig.home = HomeDirection::NonMotorEnd;
     rig.set(In::HOME, true);
     assert_eq!(
         rig.run(50),
@@ -190,7 +191,7 @@ fn son_is_reapplied_while_the_reported_servo_disagrees() {
     let off = axis(report(0x01, 0, DONE_OUT), 0);
     let mut jobs = vec![];
     for t in 0..2500 {
-        if let (_, Some(job)) = pio.sample(Instant(t * MS), base(), &off, true) {
+        if let (_, Some(job)) = pio.sample(Instant(t * MS), base(), &off, true, MOTOR_END) {
             jobs.push((t, job));
         }
     }

@@ -11,7 +11,9 @@ mod properties;
 use protocol::engine::{AxisState, Counters, JobKind, Link};
 use protocol::pio::{Config, Pio, PioInputs as In, PioOutputs as Out};
 use protocol::time::Instant;
-use protocol::{AlarmCode, Inputs, Outputs, PositionNo, Status, StatusReport, RTIM_AFTER_BREAK};
+use protocol::{
+    AlarmCode, HomeDirection, Inputs, Outputs, PositionNo, Status, StatusReport, RTIM_AFTER_BREAK,
+};
 
 const MS: u64 = 1000;
 
@@ -58,6 +60,8 @@ struct Rig {
     start: u64,
     axis: AxisState,
     link_ok: bool,
+    /// The axis' home direction (AXISCFG).
+    home: HomeDirection,
     inputs: In,
     out: Out,
 }
@@ -74,6 +78,7 @@ impl Rig {
             start: 0,
             axis,
             link_ok: true,
+            home: HomeDirection::MotorEnd,
             inputs: base(),
             out: Out::SAFE,
         };
@@ -90,9 +95,13 @@ impl Rig {
 
     /// One sample at the current time, then 1 ms passes.
     fn tick(&mut self) -> Option<JobKind> {
-        let (out, job) = self
-            .pio
-            .sample(Instant(self.now), self.inputs, &self.axis, self.link_ok);
+        let (out, job) = self.pio.sample(
+            Instant(self.now),
+            self.inputs,
+            &self.axis,
+            self.link_ok,
+            self.home,
+        );
         self.out = out;
         self.now += MS;
         job

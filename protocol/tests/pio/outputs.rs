@@ -70,7 +70,7 @@ fn outputs_are_safe_while_the_link_is_down_or_before_a_status() {
         report_at: None,
         ..axis(report(0, 0, 0), 0)
     };
-    let (out, _) = pio.sample(Instant(0), base(), &unknown, true);
+    let (out, _) = pio.sample(Instant(0), base(), &unknown, true, HomeDirection::MotorEnd);
     assert_eq!(out.bits(), 0);
 }
 
