@@ -92,9 +92,8 @@ pub async fn run(
     let mut bus_buf = [0u8; 32];
     let mut plc_buf = [0u8; 32];
     // The UARTs start at the node's settings.
-    let baud = node.gateway().engine().line_baud();
-    board.bus.set_baud(baud.bits_per_second()).await;
-    let plc = node.gateway().config().plc;
+    board.bus.set_baud(node.bus_baud().bits_per_second()).await;
+    let plc = node.plc_line();
     board.plc.set_line(plc.baud, plc.parity).await;
     // The harness waits for this line: both UARTs receive at their settings from now on.
     info!("ready");
@@ -169,7 +168,7 @@ pub async fn run(
                 Action::Line(LineAction::BreakStart) => {
                     plc.settle_then(pin!(bus.break_start())).await
                 }
-                Action::Line(LineAction::BreakEnd) => bus.break_end().await,
+                Action::Line(LineAction::BreakEnd) => bus.break_end(),
                 Action::Line(LineAction::CommChange) => {
                     plc.settle_then(pin!(bus.send(&protocol::frame::COMM_CHANGE)))
                         .await
@@ -197,10 +196,9 @@ pub async fn run(
         }
 
         // The I/O task shows them when it next wakes (1 ms with a PIO axis, else up to 20 ms:
-        // the outputs are all OFF then). Every sample while a PIO axis is configured (its logic
-        // debounces and times by samples), only changes otherwise.
-        let pio = node.gateway().config().pio_axis.is_some();
-        io::show_outputs(node.outputs(), pio);
+        // the outputs are all OFF then). Every sample when the node wants them periodically
+        // (a PIO axis: its logic debounces and times by samples), only changes otherwise.
+        io::show_outputs(node.outputs(), node.sample_period().is_some());
         if clock >= indicators_at {
             io::show_indicators(node.indicators());
             indicators_at = clock + INDICATORS_PERIOD;

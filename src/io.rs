@@ -25,8 +25,9 @@ use crate::discrete::{Inputs, Leds, Outputs};
 use protocol::node::Indicators;
 use protocol::pio::{PioInputs, PioOutputs};
 
-/// The inputs are sampled this often (the node debounces the PIO inputs).
-const SAMPLE_PERIOD: Duration = Duration::from_millis(1);
+/// The inputs are sampled this often when the node wants every sample (the node debounces the
+/// PIO inputs: `protocol::node::Node::sample_period`).
+const SAMPLE_PERIOD: Duration = Duration::from_micros(protocol::pio::SAMPLE_PERIOD.0);
 
 /// The input pins, as the node takes them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -16,8 +16,7 @@ use embassy_futures::select::select;
 use embassy_stm32::gpio::Output;
 use embassy_stm32::usart::BufferedUart;
 #[cfg(feature = "emulator")]
-use embassy_time::Instant;
-use embassy_time::{Duration, Timer};
+use embassy_time::{Duration, Instant, Timer};
 use embedded_io_async::{Read, ReadReady, Write};
 use protocol::plc::Parity;
 
@@ -29,8 +28,6 @@ pub struct Rs485 {
     uart: BufferedUart<'static>,
     /// The UART's registers, for the transmission-complete check the driver's own can miss.
     regs: UartRegs,
-    /// Size of the TX ring: a write never exceeds it (the driver refuses longer writes).
-    tx_capacity: usize,
     /// How this line holds a break, if it is the bus.
     line_break: Option<LineBreak>,
     in_break: bool,
@@ -56,7 +53,6 @@ impl Rs485 {
     pub fn new(
         uart: BufferedUart<'static>,
         regs: UartRegs,
-        tx_capacity: usize,
         (baud, parity): (u32, Parity),
         line_break: Option<LineBreak>,
         de: Option<Output<'static>>,
@@ -64,7 +60,6 @@ impl Rs485 {
         Rs485 {
             uart,
             regs,
-            tx_capacity,
             line_break,
             in_break: false,
             de,
@@ -87,16 +82,12 @@ impl Rs485 {
         self
     }
 
-    /// Waits for received bytes; how many were copied (0 after a receive error, which is logged:
-    /// the protocol sees the gap or the damaged frame and recovers by itself).
+    /// Waits for received bytes; how many were copied. Framing, parity, noise and overrun
+    /// errors do not come back here (embassy-stm32 0.6.0 logs them in its interrupt, at `warn`,
+    /// and keeps the byte or drops it): the protocol sees the damaged frame or the gap and
+    /// recovers by itself.
     pub async fn read(&mut self, buf: &mut [u8]) -> usize {
-        match self.uart.read(buf).await {
-            Ok(n) => n,
-            Err(_) => {
-                warn!("uart: receive error");
-                0
-            }
-        }
+        self.uart.read(buf).await.unwrap_or(0)
     }
 
     /// The received bytes already buffered, without waiting (0 when none, and while a send on
@@ -120,14 +111,22 @@ impl Rs485 {
     }
 
     /// Drives the line and hands `bytes` to the UART, which sends them while the caller goes on;
-    /// [`Rs485::settle`] waits for the end. A send still in progress is settled first.
+    /// [`Rs485::settle`] waits for the end. Only on a settled line: a frame handed over while the
+    /// last one is still on the wire is dropped (logged), not waited for.
     pub async fn start_send(&mut self, bytes: &[u8]) {
-        self.settle().await;
+        if self.sending {
+            // Cannot happen: the bus settles every frame, and nothing is read from the PLC line
+            // (so no request comes to be answered) until its reply has settled. Waiting here
+            // could hold the gateway task for a whole reply (2.3 s at 1.2 kbit/s); a master
+            // whose reply is dropped asks again.
+            warn!("uart: frame dropped, the line is still sending");
+            return;
+        }
         if self.in_break {
             // The node never sends during a break; if it did, the frame would be lost on a line
             // held low, so end the break first.
             warn!("uart: send during a break, break ended");
-            self.break_end().await;
+            self.break_end();
         }
         if let Some(de) = self.de.as_mut() {
             de.set_high();
@@ -156,14 +155,11 @@ impl Rs485 {
         // transmission-complete interrupt when the slice it takes from the TX ring has one byte
         // left, which is also the byte before the ring wraps; served late, after that byte has
         // left, it takes TC for the end of the whole transmission, and then goes on with the
-        // bytes after the wrap. Its interrupt enables say whether it has (`UartRegs`): a
-        // character time per look, at most a ring's worth.
-        let char_time = self.char_time();
-        for _ in 0..self.tx_capacity {
-            if self.regs.transmission_complete() {
-                break;
-            }
-            Timer::after(char_time).await;
+        // bytes after the wrap. Its interrupt enables say whether it has (`UartRegs`); until
+        // they do (rarely, and never longer than the rest of the frame), the other tasks run
+        // between looks.
+        while !self.regs.transmission_complete() {
+            embassy_futures::yield_now().await;
         }
         #[cfg(feature = "emulator")]
         if let Some(until) = self.wire_until {
@@ -210,7 +206,8 @@ impl Rs485 {
 
     /// The time one character takes: a start bit, 8 data bits, the parity bit if any, a stop
     /// bit; rounded up to the microsecond.
-    pub fn char_time(&self) -> Duration {
+    #[cfg(feature = "emulator")]
+    fn char_time(&self) -> Duration {
         let bits: u64 = if matches!(self.parity, Parity::None) {
             10
         } else {
@@ -247,7 +244,7 @@ impl Rs485 {
     }
 
     /// Ends the break: the line idles high again and the driver is released.
-    pub async fn break_end(&mut self) {
+    pub fn break_end(&mut self) {
         if let Some(line_break) = &self.line_break {
             line_break.release();
         }

@@ -36,8 +36,7 @@ use embassy_stm32::{bind_interrupts, interrupt, Peripherals};
 
 use super::{
     driver_enable, indicator_on_fault, input, led, line_config, output, settings_flash, Board,
-    UartRegs, Watchdog, BUS_RX, BUS_TX, BUS_TX_CAPACITY, INPUT_ON, OUTPUT_ON, PLC_RX, PLC_TX,
-    PLC_TX_CAPACITY,
+    UartRegs, Watchdog, BUS_RX, BUS_TX, INPUT_ON, OUTPUT_ON, PLC_RX, PLC_TX,
 };
 use crate::discrete::{Inputs, Leds, Outputs};
 use crate::io::Pins;
@@ -184,7 +183,6 @@ pub fn board(
         bus: Rs485::new(
             bus,
             UartRegs(embassy_stm32::pac::USART2),
-            BUS_TX_CAPACITY,
             (super::BUS_INITIAL_BAUD, protocol::plc::Parity::None),
             Some(line_break),
             Some(bus_de),
@@ -192,7 +190,6 @@ pub fn board(
         plc: Rs485::new(
             plc,
             UartRegs(embassy_stm32::pac::USART1),
-            PLC_TX_CAPACITY,
             (plc_line.baud, plc_line.parity),
             None,
             Some(plc_de),

@@ -60,13 +60,17 @@ pub const WATCHDOG_SHORTEST_US: u32 = WATCHDOG_TIMEOUT_US / 60 * 40;
 // UART ring buffers, in .bss. Each holds at least what the task writes or may leave unread at
 // once: a 16-byte bus frame (the task takes a bus frame once it is whole: four fit), a Modbus RTU
 // ADU (at most 256 bytes).
-pub(crate) static BUS_TX: ConstStaticCell<[u8; 32]> = ConstStaticCell::new([0; 32]);
+pub(crate) static BUS_TX: ConstStaticCell<[u8; BUS_TX_LEN]> = ConstStaticCell::new([0; BUS_TX_LEN]);
 pub(crate) static BUS_RX: ConstStaticCell<[u8; 64]> = ConstStaticCell::new([0; 64]);
-pub(crate) static PLC_TX: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
+pub(crate) static PLC_TX: ConstStaticCell<[u8; PLC_TX_LEN]> = ConstStaticCell::new([0; PLC_TX_LEN]);
 pub(crate) static PLC_RX: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
-/// The TX rings' sizes: a write never exceeds them (the driver refuses longer writes).
-pub(crate) const BUS_TX_CAPACITY: usize = 32;
-pub(crate) const PLC_TX_CAPACITY: usize = 256;
+const BUS_TX_LEN: usize = 32;
+const PLC_TX_LEN: usize = 256;
+/// A frame is written whole into an empty TX ring (`Rs485::start_send`; the driver refuses a
+/// longer one): the longest of each line fits.
+const _: () = assert!(
+    protocol::frame::FRAME_LEN <= BUS_TX_LEN && protocol::modbus::MAX_ADU_LEN <= PLC_TX_LEN
+);
 
 /// Everything the gateway task drives.
 pub struct Board {
