@@ -13,7 +13,7 @@ the UART's timing and the IWDG itself, is for the board's bring-up checklist.
 import time
 
 from emu import STOP_INPUT
-from plc import GATEWAY_UNIT, G_VERSION, ModbusError, ILLEGAL_DATA_VALUE, unit, wait_for
+from plc import GATEWAY_UNIT, G_FAILSAFE, G_VERSION, G_WATCHDOG, ModbusError, ILLEGAL_DATA_VALUE, unit, wait_for
 
 from test_modbus import online
 
@@ -60,6 +60,8 @@ def test_the_plc_line_works_at_1200_bit_s(emu):
 def test_a_long_reply_at_1200_bit_s_feeds_the_watchdog_and_a_stop_is_not_delayed(emu):
     plc = slow_plc_line(emu)
     assert plc.read(GATEWAY_UNIT, PLCBAUD) == [12]
+    # The PLC watchdog shorter than the reply: the PLC's silence counts from the reply's end.
+    plc.write(GATEWAY_UNIT, G_WATCHDOG, 1500)
     before = plc.read(GATEWAY_UNIT, RESETCAUSE)[0]
     uptime = plc.read(GATEWAY_UNIT, UPTIME, 2)
     commands = len(emu.bus_commands(0))
@@ -77,7 +79,11 @@ def test_a_long_reply_at_1200_bit_s_feeds_the_watchdog_and_a_stop_is_not_delayed
              "the stop on the bus while the reply is still on the wire")
     assert time.monotonic() - sent < 2.34, "checked within the reply's wire time"
     print(f"stop on the bus {time.monotonic() - opened:.3f} s after the input opened")
-    # Past the reply's wire time and twice the watchdog's: no reset.
+    # Past the reply's wire time (and the watchdog model's, twice): no reset. The PLC asks
+    # again as soon as the reply has ended: its watchdog has not tripped (it would have, 1.5 s
+    # after the request, if the silence counted from the request).
+    time.sleep(max(0.0, sent + 2.6 - time.monotonic()))
+    assert plc.read(GATEWAY_UNIT, G_FAILSAFE)[0] & 1 == 0, "the PLC watchdog did not trip"
     time.sleep(max(0.0, sent + 3.0 - time.monotonic()))
     assert not any("watchdog" in line for line in emu.log()), "the watchdog did not fire"
     assert sum("starting" in line for line in emu.log()) == 1, "the firmware did not restart"
