@@ -80,7 +80,7 @@ impl Gateway {
                 if let Some((axis, offset)) = per_axis(a, G_DIAG, G_DIAG_LEN) {
                     return Ok(self.diagnostics(axis, offset));
                 }
-                if let Some(offset) = a.checked_sub(G_PLC).filter(|&o| o < 14) {
+                if let Some(offset) = a.checked_sub(G_PLC).filter(|&o| o < G_PLC_LEN) {
                     let exceptions = [
                         Exception::IllegalFunction,
                         Exception::IllegalDataAddress,
@@ -100,7 +100,7 @@ impl Gateway {
                     ];
                     return Ok(counter_register(&values, offset));
                 }
-                if let Some(offset) = a.checked_sub(G_BUS).filter(|&o| o < 8) {
+                if let Some(offset) = a.checked_sub(G_BUS).filter(|&o| o < G_BUS_LEN) {
                     let c = self.engine.bus_counters();
                     let values = [c.unsolicited, c.events_lost, c.queue_full, c.establishments];
                     return Ok(counter_register(&values, offset));

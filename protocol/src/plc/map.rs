@@ -196,10 +196,17 @@ pub const G_DIAG: u16 = 0x0400;
 pub const G_DIAG_LEN: u16 = 16;
 /// Bus counters (4 x u32).
 pub const G_BUS: u16 = 0x0500;
+/// Registers of the bus counters.
+pub const G_BUS_LEN: u16 = 8;
 /// PLC-link (Modbus) counters (7 x u32).
 pub const G_PLC: u16 = 0x0510;
+/// Registers of the PLC-link counters.
+pub const G_PLC_LEN: u16 = 14;
 
 use Support::{Full, Gateway, Partial};
+
+/// Axes, for the per-axis blocks' sizes.
+const AXES: u16 = crate::axes::AXES as u16;
 use Table::{Coil, Holding, Status};
 
 // One row of the table: positional like the README columns, so the table reads as a table.
@@ -316,7 +323,7 @@ pub const MAP: &[Entry] = &[
       "Position number CSTR moves to", Full),
     e(Unit::Axis, Holding, DIRECT, 9, "PCMD INP VCMD ACMD PPOW CTLF", "0.01 mm, 0.01 mm, 0.01 mm/s, 0.01 G, %, bits", "PCMD 0..stroke", true,
       "Direct numeric move, FC10 of 7 to 9 registers: writing it starts the move (CTLF b3 = incremental)", Partial("INP validated but the RC uses its execution-area band; PPOW and CTLF push bits refused (exception 03)")),
-    e(Unit::Axis, Holding, 0x1000, 256, "POSITION TABLE", "0.01 mm, 0.01 mm/s, 0.01 G", "rows 0-15", true,
+    e(Unit::Axis, Holding, super::table::BASE, super::table::ROW_LEN * super::table::ROWS, "POSITION TABLE", "0.01 mm, 0.01 mm/s, 0.01 G", "rows 0-15", true,
       "Row n at 0x1000+16n: PCMD(2) INP(2) VCMD(2) ZNMP(2) ZNLP(2) ACMD DCMD PPOW LPOW CTLF -; a whole row per write (FC10 of 15 or 16 registers), compared with the controller's row and only then stored, with read-back verify (the row reads 04 until stored)", Partial("a row not cached (the gateway keeps the 18 rows used last) answers 04 while it is fetched (about 70 ms); DCMD = ACMD; zones, PPOW, LPOW, CTLF read 0 and must be written 0")),
     e(Unit::Axis, Coil, COIL_SON, 1, "SON", "", "", true, "Servo on (level; same as DRG1 b12)", Full),
     e(Unit::Axis, Coil, COIL_ALRS, 1, "ALRS", "", "", true, "Alarm reset on the rising edge (servo turned off first, as the RC requires)", Full),
@@ -348,12 +355,12 @@ pub const MAP: &[Entry] = &[
     e(Unit::Gateway, Holding, G_SYNC_MASK, 1, "SYNCMASK", "bits", "", true, "Axes of the synchronized start (bit n = axis n)", Gateway),
     e(Unit::Gateway, Holding, G_SYNC_START, 1, "SYNCSTART", "", "1", true, "Write 1: every axis of SYNCMASK moves to its POSR at the same instant (h, then one t)", Gateway),
     e(Unit::Gateway, Status, G_SYNC_STATUS, 1, "SYNCSTAT", "", "0-3", false, "0 idle, 1 running, 2 done (every axis started; each axis' CMST follows its move to the end), 3 failed", Gateway),
-    e(Unit::Gateway, Holding, G_AXIS_CONFIG, 128, "AXISCFG", "", "", true, "Per axis n at 0x0100+8n: enabled (taken on APPLY or at the next start), lead (0.01 mm), home (7 motor/8 far end), pulses/rev, stroke (2, 0.01 mm), complement (1/2)", Gateway),
+    e(Unit::Gateway, Holding, G_AXIS_CONFIG, G_AXIS_CONFIG_LEN * AXES, "AXISCFG", "", "", true, "Per axis n at 0x0100+8n: enabled (taken on APPLY or at the next start), lead (0.01 mm), home (7 motor/8 far end), pulses/rev, stroke (2, 0.01 mm), complement (1/2)", Gateway),
     e(Unit::Gateway, Holding, G_REQUEST, G_REQUEST_LEN, "REQ", "", "", true, "Command channel request: code (1 read field, 2 write field), axis, point, field (offset from 0x400), value high, value low", Gateway),
     e(Unit::Gateway, Status, G_RESPONSE, G_RESPONSE_LEN, "RESP", "", "", false, "Command channel response: code (|0x8000 on error), error (as CMER), value high, value low, V5 write count (0xFFFF: value already stored, nothing written)", Gateway),
-    e(Unit::Gateway, Status, G_DIAG, 256, "DIAG", "count", "", false, "Per axis n at 0x0400+16n: frames sent, replies, time-outs, BCC errors, bad replies, retries, rejections (u32 each), link, last error", Gateway),
-    e(Unit::Gateway, Status, G_BUS, 8, "BUS", "count", "", false, "Unsolicited frames, events lost, queue full, establishments (u32 each)", Gateway),
-    e(Unit::Gateway, Status, G_PLC, 14, "PLCLINK", "count", "", false, "Modbus frames, CRC errors, exceptions, replies, other units, broadcasts, malformed (u32 each)", Gateway),
+    e(Unit::Gateway, Status, G_DIAG, G_DIAG_LEN * AXES, "DIAG", "count", "", false, "Per axis n at 0x0400+16n: frames sent, replies, time-outs, BCC errors, bad replies, retries, rejections (u32 each), link, last error", Gateway),
+    e(Unit::Gateway, Status, G_BUS, G_BUS_LEN, "BUS", "count", "", false, "Unsolicited frames, events lost, queue full, establishments (u32 each)", Gateway),
+    e(Unit::Gateway, Status, G_PLC, G_PLC_LEN, "PLCLINK", "count", "", false, "Modbus frames, CRC errors, exceptions, replies, other units, broadcasts, malformed (u32 each)", Gateway),
 ];
 
 #[cfg(test)]
