@@ -241,7 +241,7 @@ impl Node {
             // A refusal is shown in CMST (or, for an axis that went offline between the sample
             // and now, not taken at all), and on the outputs: the PIO stops waiting for it.
             if self.gateway.command(axis, kind).is_err() {
-                self.pio.refused();
+                self.pio.refused(&kind);
             }
             self.dirty = true;
         }

@@ -417,13 +417,16 @@ impl Pio {
         self.outputs
     }
 
-    /// The gateway refused the job the last [`sample`](Pio::sample) returned (the stop input
-    /// holds the axis, the queue is full: CMST shows why): nothing will run, so the outputs
-    /// follow the status again from the next sample rather than wait, PEND off, for a move or
-    /// home that is not coming. A PLC that strobed a point then sees PEND with the point the
-    /// axis is at.
-    pub fn refused(&mut self) {
-        self.waiting = None;
+    /// The gateway refused `job`, which the last [`sample`](Pio::sample) returned (the stop
+    /// input holds the axis, the queue is full: CMST shows why). For a move or a home nothing
+    /// will run, so the outputs follow the status again from the next sample rather than wait,
+    /// PEND off, for a move that is not coming: a PLC that strobed a point then sees PEND with
+    /// the point the axis is at. Any other refused job leaves a wait for an accepted move as it
+    /// is.
+    pub fn refused(&mut self, job: &JobKind) {
+        if matches!(job, JobKind::Home(_) | JobKind::MoveToPoint(_)) {
+            self.waiting = None;
+        }
     }
 
     /// Whether a CSTR strobe waits for PC1-PC8 to settle, or a move or home waits to be returned.

@@ -15,7 +15,7 @@
 //!
 //! | Module | What it holds |
 //! |---|---|
-//! | [`write`] | What a PLC's write means: typed writes, each register's range and conversion once |
+//! | [`write`](mod@write) | What a PLC's write means: typed writes, each register's range and conversion once |
 //! | `command` | What the PLC sees of a command: [`CommandState`], [`Reason`], an axis' PLC-side state |
 //! | `gateway` | [`Gateway`]: commands and their fate, events, the held SON |
 //! | `model` | [`Registers`]: which unit, which addresses exist |

@@ -60,6 +60,8 @@ fn exception(refused: Refused) -> Exception {
     match refused {
         Refused::NoSuchAddress => Exception::IllegalDataAddress,
         Refused::OutOfRange => Exception::IllegalDataValue,
+        // (`Stopped` does not reach a Modbus answer: every write path takes a held command as
+        // taken, `Gateway::command_written`; were it to, "not now" is what it means.)
         Refused::Offline
         | Refused::QueueFull
         | Refused::Busy
@@ -182,7 +184,7 @@ impl DataModel for Registers<'_> {
             }
             if touches_table && !gateway.table_rows_ready(axis, address, out.len()) {
                 // Not read from the controller yet: it is being fetched; ask again shortly.
-                return Err(Exception::ServerDeviceFailure);
+                return Err(exception(Refused::NotReady));
             }
         }
         // One loop for both kinds of unit.

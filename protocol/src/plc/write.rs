@@ -1,7 +1,7 @@
 //! What a PLC's write means, before anything happens: the register map turns an address and
 //! its values into a typed write, with each register's range and conversion written here once.
 //! The gateway then carries out a checked write without checking it again
-//! ([`axis_unit`](super::axis_unit), [`gateway_unit`](super::gateway_unit)); the few rules that
+//! (`axis_unit`, `gateway_unit`); the few rules that
 //! depend on the gateway's state (an APPLY only while the bus is idle, a unit id not an axis',
 //! a mask of axes on the bus) are its own `admit` step.
 //!

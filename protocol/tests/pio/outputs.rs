@@ -163,6 +163,26 @@ fn a_rejected_move_releases_the_outputs() {
 }
 
 #[test]
+fn a_move_the_gateway_refuses_releases_the_outputs_and_nothing_else_does() {
+    let mut rig = Rig::new(Config::default());
+    rig.select(5);
+    rig.set(In::CSTR, true);
+    rig.run(20);
+    rig.set(In::CSTR, false);
+    rig.run(10);
+    assert!(!rig.out.pend(), "waiting for the move");
+    // Another job refused (a servo job, the queue full): the accepted move is still awaited.
+    rig.pio.refused(&JobKind::Servo(true));
+    rig.run(1);
+    assert!(!rig.out.pend(), "still waiting: the move was taken");
+    // The move itself refused (the stop input holds the axis): nothing is coming.
+    rig.pio.refused(&JobKind::MoveToPoint(p(5)));
+    rig.run(1);
+    assert!(rig.out.pend());
+    assert_eq!(rig.out.pm(), 3, "the point the axis is at");
+}
+
+#[test]
 fn hend_is_off_from_home_until_homing_completes() {
     let mut rig = Rig::new(Config::default());
     rig.set(In::HOME, true);
