@@ -1,0 +1,126 @@
+//! The whole gateway (`Node`): bytes from the RS485 bus and from the PLC line, input samples,
+//! the stop input and time steps, interleaved as the input says (issue 24).
+//!
+//! Input: a set-up byte (bits 0-3: the axes on the bus, at least axis 0; bit 4: the §6-1
+//! establishment at start; bit 5: a PIO axis), then operations. An operation byte's low three
+//! bits choose it, its high five bits give a length `n`:
+//! 0 `n` bytes from the bus; 1 `n` bytes from the PLC; 2 an input sample (two bytes);
+//! 3 the stop input active (bit 3 set) or released; 4 time passes (two bytes, x 50 µs).
+//! After each operation the node is polled until it has nothing to do now.
+//!
+//! Checks, besides "nothing panics":
+//! - every frame for the bus is a valid frame (BCC) of a command to an axis on the bus;
+//! - once the stop input goes active, nothing that moves an axis goes out until every axis on
+//!   the bus has had its stop (`d`);
+//! - a reply for the PLC only follows bytes from the PLC (none unasked), and is a whole Modbus
+//!   frame with a valid CRC.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use protocol::command::{Command, Request};
+use protocol::frame::Frame;
+use protocol::modbus::crc;
+use protocol::node::{Action, Node};
+use protocol::pio::PioInputs;
+use protocol::plc::{GatewayConfig, Store};
+use protocol::time::Instant;
+use protocol::{Axis, AxisSet};
+
+/// The first `n` bytes of `rest` (fewer at its end), taken off it.
+fn take<'a>(rest: &mut &'a [u8], n: usize) -> &'a [u8] {
+    let (head, tail) = rest.split_at(n.min(rest.len()));
+    *rest = tail;
+    head
+}
+
+fuzz_target!(|data: &[u8]| {
+    let Some((&setup, mut rest)) = data.split_first() else {
+        return;
+    };
+    let mut config = GatewayConfig::new(AxisSet(u16::from(setup & 0x0F) | 1));
+    config.bus.establish = setup & 0x10 != 0;
+    config.pio_axis = if setup & 0x20 != 0 { Axis::new(0) } else { None };
+    let mut node = Node::new(config);
+    let mut now = 0u64;
+    let mut stop_active = false;
+    // The axes still owed their stop since the stop input went active.
+    let mut owed = AxisSet::EMPTY;
+    // PLC bytes received since the last reply.
+    let mut asked = false;
+
+    while let Some((&op, after)) = rest.split_first() {
+        rest = after;
+        let n = usize::from(op >> 3);
+        match op & 0x07 {
+            0 => node.bus_received(Instant(now), take(&mut rest, n)),
+            1 => {
+                let bytes = take(&mut rest, n);
+                asked |= !bytes.is_empty();
+                node.plc_received(Instant(now), bytes);
+            }
+            2 => {
+                let b = take(&mut rest, 2);
+                let bits = u16::from(b.first().copied().unwrap_or(0))
+                    | u16::from(b.get(1).copied().unwrap_or(0)) << 8;
+                node.sample_inputs(Instant(now), PioInputs::from_bits(bits));
+            }
+            3 => {
+                let active = op & 0x08 != 0;
+                if active && !stop_active {
+                    owed = node.gateway().config().bus.axes;
+                }
+                stop_active = active;
+                node.set_stop_input(Instant(now), active);
+            }
+            _ => {
+                let b = take(&mut rest, 2);
+                let step = u64::from(b.first().copied().unwrap_or(0))
+                    | u64::from(b.get(1).copied().unwrap_or(0)) << 8;
+                now += step * 50;
+            }
+        }
+        for _ in 0..256 {
+            let bus_axes = node.gateway().config().bus.axes;
+            let Some(action) = node.poll(Instant(now)) else {
+                break;
+            };
+            match action {
+                Action::Bus(bytes) => {
+                    let frame = Frame::new_checked(&bytes).expect("a valid frame");
+                    let request = Request::parse(&frame).expect("a command frame");
+                    assert!(
+                        bus_axes.contains(request.axis),
+                        "a frame to axis {:?}, not on the bus {:?}",
+                        request.axis,
+                        bus_axes
+                    );
+                    if owed != AxisSet::EMPTY {
+                        // Nothing that moves an axis until every axis has had its stop. (Not
+                        // "nothing but stops": a stop that got no answer is resent before the
+                        // next axis' first one, and an establishment or a rejoin that is under
+                        // way sends its frames first; this target found both.)
+                        assert!(
+                            !request.command.moves(),
+                            "{:?} before the stops still owed to {:?}",
+                            request,
+                            owed
+                        );
+                        if request.command == Command::CancelMotion {
+                            owed = owed.without(request.axis);
+                        }
+                    }
+                }
+                Action::Reply(reply) => {
+                    assert!(asked, "a reply nobody asked for");
+                    assert!(reply.len() >= 4 && reply.len() <= 256, "reply length");
+                    assert!(crc::is_valid(reply), "reply CRC");
+                    asked = false;
+                }
+                Action::Store(Store::Save(_)) => node.stored(Ok(1)),
+                // The board restarts.
+                Action::Store(Store::FactoryReset | Store::Restart) => return,
+                Action::Line(_) | Action::PlcLine(_) => {}
+            }
+        }
+    }
+});
