@@ -1,0 +1,379 @@
+//! Every command and path that README.md and docs/*.md show exists: each `scripts/...` path (a
+//! `.sh` one executable), each `cargo <alias>`, each `--bin NAME`, each relative link and its
+//! anchor, and each long flag shown for one of the host binaries (or a script) in a code block.
+//! Not a shell parser: it looks for these patterns in the text, which is all the documents use.
+
+use std::collections::BTreeSet;
+use std::fs;
+use std::path::{Path, PathBuf};
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// README.md and every docs/*.md, with their paths relative to the repository.
+fn documents() -> Vec<(PathBuf, String)> {
+    let root = repo();
+    let mut docs = vec![PathBuf::from("README.md")];
+    let mut extra: Vec<PathBuf> = fs::read_dir(root.join("docs"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "md"))
+        .map(|p| p.strip_prefix(&root).unwrap().to_path_buf())
+        .collect();
+    extra.sort();
+    docs.extend(extra);
+    docs.into_iter()
+        .map(|p| {
+            let text = fs::read_to_string(root.join(&p)).unwrap();
+            (p, text)
+        })
+        .collect()
+}
+
+fn is_word(c: char) -> bool {
+    c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | '/')
+}
+
+/// Every `prefix` followed by a word (letters, digits, `_-./`), the word without trailing dots.
+fn words_after<'a>(text: &'a str, prefix: &str) -> Vec<&'a str> {
+    text.match_indices(prefix)
+        .filter(|(i, _)| {
+            // Not in the middle of another word (`tests/scripts/...` would not be ours).
+            text[..*i]
+                .chars()
+                .next_back()
+                .is_none_or(|c| !is_word(c) || c == '/' && prefix.starts_with('/'))
+        })
+        .map(|(i, _)| {
+            let rest = &text[i + prefix.len()..];
+            let end = rest.find(|c: char| !is_word(c)).unwrap_or(rest.len());
+            rest[..end].trim_end_matches(['.', '/'])
+        })
+        .filter(|w| !w.is_empty())
+        .collect()
+}
+
+/// The code blocks (between ``` fences) of a document, as lines.
+fn code_blocks(text: &str) -> Vec<Vec<&str>> {
+    let mut blocks = Vec::new();
+    let mut current: Option<Vec<&str>> = None;
+    for line in text.lines() {
+        if line.trim_start().starts_with("```") {
+            match current.take() {
+                Some(block) => blocks.push(block),
+                None => current = Some(Vec::new()),
+            }
+        } else if let Some(block) = current.as_mut() {
+            block.push(line);
+        }
+    }
+    blocks
+}
+
+/// The text outside code blocks.
+fn prose(text: &str) -> String {
+    let mut out = String::new();
+    let mut fenced = false;
+    for line in text.lines() {
+        if line.trim_start().starts_with("```") {
+            fenced = !fenced;
+        } else if !fenced {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    out
+}
+
+#[test]
+fn every_script_shown_exists_and_is_executable() {
+    use std::os::unix::fs::PermissionsExt;
+    let mut problems = Vec::new();
+    let mut seen = 0;
+    for (doc, text) in documents() {
+        for path in words_after(&text, "scripts/") {
+            seen += 1;
+            let file = repo().join("scripts").join(path);
+            match fs::metadata(&file) {
+                Err(_) => {
+                    problems.push(format!("{}: scripts/{path} does not exist", doc.display()))
+                }
+                Ok(m) if path.ends_with(".sh") && m.permissions().mode() & 0o111 == 0 => problems
+                    .push(format!(
+                        "{}: scripts/{path} is not executable",
+                        doc.display()
+                    )),
+                Ok(_) => {}
+            }
+        }
+    }
+    assert!(
+        seen > 10,
+        "found only {seen} script paths: the scan is broken"
+    );
+    assert!(problems.is_empty(), "{problems:#?}");
+}
+
+/// The aliases of `.cargo/config.toml`'s `[alias]` table.
+fn cargo_aliases() -> BTreeSet<String> {
+    let config = fs::read_to_string(repo().join(".cargo/config.toml")).unwrap();
+    let table: toml::Table = config.parse().unwrap();
+    table["alias"].as_table().unwrap().keys().cloned().collect()
+}
+
+/// Cargo's own commands (and `+toolchain`), which need no alias.
+const CARGO_COMMANDS: &[&str] = &[
+    "build", "run", "test", "check", "clippy", "fmt", "doc", "install", "rustc", "bench", "fuzz",
+    "tree", "update", "metadata", "clean",
+];
+
+#[test]
+fn every_cargo_alias_shown_is_defined() {
+    let aliases = cargo_aliases();
+    for needed in ["fw", "fw-run", "fw-f103", "fw-run-f103"] {
+        assert!(aliases.contains(needed), "alias {needed} missing");
+    }
+    let mut problems = Vec::new();
+    let mut used = BTreeSet::new();
+    for (doc, text) in documents() {
+        for word in words_after(&text, "cargo ") {
+            if word.starts_with('+') || CARGO_COMMANDS.contains(&word) {
+                continue;
+            }
+            used.insert(word.to_string());
+            if !aliases.contains(word) {
+                problems.push(format!("{}: `cargo {word}` is not an alias", doc.display()));
+            }
+        }
+    }
+    assert!(
+        used.contains("fw-run"),
+        "no alias found: the scan is broken"
+    );
+    assert!(problems.is_empty(), "{problems:#?}");
+}
+
+/// The host crate's binaries, from tests/Cargo.toml, each checked to have its source.
+fn binaries() -> BTreeSet<String> {
+    let manifest = fs::read_to_string(repo().join("tests/Cargo.toml")).unwrap();
+    let table: toml::Table = manifest.parse().unwrap();
+    table["bin"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|bin| {
+            let path = bin["path"].as_str().unwrap();
+            assert!(repo().join("tests").join(path).is_file(), "{path} missing");
+            bin["name"].as_str().unwrap().to_string()
+        })
+        .collect()
+}
+
+#[test]
+fn every_binary_shown_exists() {
+    let bins = binaries();
+    let mut problems = Vec::new();
+    let mut seen = 0;
+    for (doc, text) in documents() {
+        for name in words_after(&text, "--bin ") {
+            seen += 1;
+            if !bins.contains(name) {
+                problems.push(format!("{}: --bin {name} is not a binary", doc.display()));
+            }
+        }
+    }
+    assert!(seen >= 3, "found only {seen} --bin: the scan is broken");
+    assert!(problems.is_empty(), "{problems:#?}");
+}
+
+/// A heading's anchor as GitHub makes it.
+fn slug(heading: &str) -> String {
+    heading
+        .trim()
+        .to_lowercase()
+        .chars()
+        .filter_map(|c| match c {
+            ' ' => Some('-'),
+            c if c.is_alphanumeric() || c == '-' || c == '_' => Some(c),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The anchors of a document: its headings' and explicit `<a id="...">`.
+fn anchors(text: &str) -> BTreeSet<String> {
+    let mut out: BTreeSet<String> = prose(text)
+        .lines()
+        .filter(|l| l.starts_with('#'))
+        .map(|l| slug(l.trim_start_matches('#')))
+        .collect();
+    out.extend(
+        words_after(text, "<a id=\"")
+            .into_iter()
+            .map(str::to_string),
+    );
+    out
+}
+
+#[test]
+fn every_relative_link_points_at_a_file_and_anchor() {
+    let root = repo();
+    let mut problems = Vec::new();
+    let mut seen = 0;
+    for (doc, text) in documents() {
+        let prose = prose(&text);
+        for (i, _) in prose.match_indices("](") {
+            let rest = &prose[i + 2..];
+            let target = &rest[..rest.find(')').unwrap_or(rest.len())];
+            if target.contains("://") || target.starts_with("mailto:") {
+                continue;
+            }
+            seen += 1;
+            let (path, anchor) = target.split_once('#').unwrap_or((target, ""));
+            let file = if path.is_empty() {
+                root.join(&doc)
+            } else {
+                root.join(doc.parent().unwrap()).join(path)
+            };
+            if !file.exists() {
+                problems.push(format!("{}: link {target}: no such file", doc.display()));
+                continue;
+            }
+            if !anchor.is_empty() {
+                let linked = fs::read_to_string(&file).unwrap_or_default();
+                if !anchors(&linked).contains(anchor) {
+                    problems.push(format!("{}: link {target}: no such anchor", doc.display()));
+                }
+            }
+        }
+    }
+    assert!(seen > 10, "found only {seen} links: the scan is broken");
+    assert!(problems.is_empty(), "{problems:#?}");
+}
+
+/// Where each host binary's command line is defined (its flags are clap fields or `long`s).
+fn binary_sources(bin: &str) -> Vec<&'static str> {
+    match bin {
+        "rcframe" => vec!["src/bin/rcframe.rs", "src/rcframe"],
+        // Its actuator flags (--lead, --home, --twos, --ppr) are rcframe's `ScaleArgs`.
+        "rc-commission" => vec!["src/bin/rc-commission", "src/rcframe"],
+        "rc-sim" => vec!["src/bin/rc-sim.rs", "src/sim"],
+        "rc-gateway-host" => vec!["src/bin/rc-gateway-host.rs", "src/host"],
+        "bench" => vec!["src/bin/bench"],
+        "demo" => vec!["src/bin/demo.rs"],
+        "regmap" => vec!["src/bin/regmap.rs"],
+        other => panic!("binary {other}: add where its flags are defined"),
+    }
+}
+
+fn read_tree(path: &Path, out: &mut String) {
+    if path.is_dir() {
+        for entry in fs::read_dir(path).unwrap() {
+            read_tree(&entry.unwrap().path(), out);
+        }
+    } else if path.extension().is_some_and(|x| x == "rs" || x == "sh") {
+        out.push_str(&fs::read_to_string(path).unwrap());
+    }
+}
+
+/// Whether `source` defines the long flag `flag` (without its dashes): as the literal
+/// `"flag"` (a `long = "..."`), or as a whole identifier `flag` with `_` for `-` (a clap field).
+fn defines(source: &str, flag: &str) -> bool {
+    if source.contains(&format!("\"{flag}\"")) || source.contains(&format!("\"--{flag}")) {
+        return true;
+    }
+    let ident = flag.replace('-', "_");
+    source.match_indices(&ident).any(|(i, _)| {
+        let before = source[..i].chars().next_back();
+        let after = source[i + ident.len()..].chars().next();
+        let boundary = |c: Option<char>| c.is_none_or(|c| !(c.is_alphanumeric() || c == '_'));
+        boundary(before) && boundary(after)
+    })
+}
+
+/// The long flags of a command line's part that belongs to the program (after cargo's ` -- `).
+fn flags(line: &str) -> Vec<&str> {
+    let line = line.split(" #").next().unwrap_or(line);
+    let part = match line.find("cargo ") {
+        Some(_) => match line.split_once(" -- ") {
+            Some((_, program)) => program,
+            None => return Vec::new(),
+        },
+        None => line,
+    };
+    part.split(|c: char| c.is_whitespace() || c == '"')
+        .filter(|w| w.starts_with("--") && w.len() > 2)
+        .map(|w| {
+            w.trim_start_matches('-')
+                .split('=')
+                .next()
+                .unwrap()
+                .trim_end_matches(|c: char| !c.is_ascii_alphanumeric())
+        })
+        .filter(|w| !w.is_empty())
+        .collect()
+}
+
+#[test]
+fn every_flag_shown_in_a_code_block_is_defined() {
+    let bins = binaries();
+    let root = repo();
+    let mut problems = Vec::new();
+    let mut checked = 0;
+    for (doc, text) in documents() {
+        for block in code_blocks(&text) {
+            // The binary a block is about: the one it names (a `P=...` line of flags belongs to
+            // the block's binary).
+            let named: BTreeSet<&str> = bins
+                .iter()
+                .map(String::as_str)
+                .filter(|b| block.iter().any(|l| l.contains(&format!("{b} "))))
+                .collect();
+            for line in &block {
+                let script = line
+                    .split_whitespace()
+                    .next()
+                    .filter(|w| w.starts_with("scripts/"));
+                let source = if let Some(script) = script {
+                    let mut s = String::new();
+                    read_tree(&root.join(script), &mut s);
+                    (script.to_string(), s)
+                } else {
+                    let on_line: Vec<&str> = named
+                        .iter()
+                        .copied()
+                        .filter(|b| line.contains(&format!("{b} ")))
+                        .collect();
+                    let bin = match (on_line.as_slice(), named.len()) {
+                        ([bin], _) => *bin,
+                        ([], 1) => *named.iter().next().unwrap(),
+                        _ => continue,
+                    };
+                    let mut s = String::new();
+                    for path in binary_sources(bin) {
+                        let path = root.join("tests").join(path);
+                        assert!(path.exists(), "{} missing", path.display());
+                        read_tree(&path, &mut s);
+                    }
+                    (bin.to_string(), s)
+                };
+                for flag in flags(line) {
+                    checked += 1;
+                    if !defines(&source.1, flag) {
+                        problems.push(format!(
+                            "{}: `--{flag}` is not a flag of {} ({line})",
+                            doc.display(),
+                            source.0
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    assert!(
+        checked > 20,
+        "checked only {checked} flags: the scan is broken"
+    );
+    assert!(problems.is_empty(), "{problems:#?}");
+}
