@@ -19,12 +19,18 @@ def test_boots_and_blinks_the_run_led(emu):
     wait_for(lambda: emu.odr(LED_RUN) == first, 3, "the run LED toggles back")
 
 
-def test_panic_leaves_outputs_safe_and_drivers_off(emu):
+def outputs_on(emu):
+    """The stop chain closed, *STP and SON on the wire-driven axis 0: until SV and LINK are ON
+    (outputs a fault must turn OFF)."""
     emu.set_pin(STOP_INPUT, True)
     emu.set_pin(INPUTS[STP_N], True)
     emu.set_pin(INPUTS[SON], True)
     wait_for(lambda: emu.plc.read(unit(0), LINK)[0] == LINK_ONLINE, 20, "axis 0 online")
     wait_for(lambda: emu.outputs() >> SV & 1 and emu.outputs() >> LINK_OUT & 1, 10, "SV and LINK on")
+
+
+def test_panic_leaves_outputs_safe_and_drivers_off(emu):
+    outputs_on(emu)
     emu.request_panic()
     emu.wait_log("panic at", 5)
     assert emu.outputs() == 0, f"every output OFF: {emu.outputs():#06x}"
@@ -44,11 +50,7 @@ def test_stack_overflow_faults_and_leaves_outputs_safe(emu):
     # could not stack its frame below RAM), and the handler, whose masks are statics the overflow
     # did not reach, forces the outputs safe. In the emulator build it then halts rather than
     # ending QEMU, so that the pins can be read.
-    emu.set_pin(STOP_INPUT, True)
-    emu.set_pin(INPUTS[STP_N], True)
-    emu.set_pin(INPUTS[SON], True)
-    wait_for(lambda: emu.plc.read(unit(0), LINK)[0] == LINK_ONLINE, 20, "axis 0 online")
-    wait_for(lambda: emu.outputs() >> SV & 1 and emu.outputs() >> LINK_OUT & 1, 10, "SV and LINK on")
+    outputs_on(emu)
     emu.request_stack_overflow()
     line = emu.wait_log("HardFault", 5)
     assert "stack overflow" in line, line

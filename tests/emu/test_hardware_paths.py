@@ -13,27 +13,15 @@ the UART's timing and the IWDG itself, is for the board's bring-up checklist.
 import time
 
 from emu import STOP_INPUT
-from plc import GATEWAY_UNIT, G_FAILSAFE, G_VERSION, G_WATCHDOG, ModbusError, ILLEGAL_DATA_VALUE, unit, wait_for
+from plc import GATEWAY_UNIT, G_FAILSAFE, G_VERSION, G_WATCHDOG, unit, wait_for
 
-from test_modbus import online
+from test_modbus import _apply, online
 
-APPLY, PLCBAUD, PLCPARITY, RESETCAUSE, UPTIME = 0x000A, 0x0010, 0x0011, 0x001A, 0x0002
+PLCBAUD, PLCPARITY, RESETCAUSE, UPTIME = 0x0010, 0x0011, 0x001A, 0x0002
 DIAG = 0x0400  # 256 counters: the longest read a PLC can ask for (125 registers)
 USART2 = 0x4000_4400  # the PLC line's UART
 CR1, BRR = 0x00, 0x0C
 HSI16 = 16_000_000
-
-
-def apply(plc):
-    def taken():
-        try:
-            plc.write(GATEWAY_UNIT, APPLY, 1)
-            return True
-        except ModbusError as refused:
-            assert refused.code == ILLEGAL_DATA_VALUE
-            return False
-
-    wait_for(taken, 10, "APPLY taken (refused with 03 while the bus is busy)")
 
 
 def slow_plc_line(emu):
@@ -41,7 +29,7 @@ def slow_plc_line(emu):
     plc = online(emu)
     plc.write(GATEWAY_UNIT, PLCBAUD, 12)
     plc.write(GATEWAY_UNIT, PLCPARITY, 2)
-    apply(plc)
+    wait_for(lambda: _apply(plc), 10, "APPLY taken (refused with 03 while the bus is busy)")
     return plc
 
 

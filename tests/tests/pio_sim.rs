@@ -115,8 +115,8 @@ fn son_home_strobe_a_position_and_read_pm() {
     assert_eq!(c.position(), i64::from(target.0), "point 5 is 30 mm");
 }
 
-#[test]
-fn stop_input_stops_at_once_and_blocks_the_next_strobe() {
+/// The rig with the servo on (SON) and the axis homed by a HOME pulse.
+fn homed() -> Rig {
     let mut r = rig();
     r.set(PioInputs::SON, true);
     r.run(100);
@@ -124,6 +124,12 @@ fn stop_input_stops_at_once_and_blocks_the_next_strobe() {
     r.run(20);
     r.set(PioInputs::HOME, false);
     r.until(5_000, |o| o.hend() && o.pend());
+    r
+}
+
+#[test]
+fn stop_input_stops_at_once_and_blocks_the_next_strobe() {
+    let mut r = homed();
     r.inputs = r.inputs.with_position(PositionNo::new(5).unwrap());
     r.run(10);
     r.set(PioInputs::CSTR, true);
@@ -173,13 +179,7 @@ fn alarm_shows_on_pm_and_res_clears_it() {
 /// where the axis is, and CMST says why (failed, reason 10).
 #[test]
 fn a_refused_strobe_shows_pend_at_the_point_the_axis_is_at() {
-    let mut r = rig();
-    r.set(PioInputs::SON, true);
-    r.run(100);
-    r.set(PioInputs::HOME, true);
-    r.run(20);
-    r.set(PioInputs::HOME, false);
-    r.until(5_000, |o| o.hend() && o.pend());
+    let mut r = homed();
     let at = r.h.bus.controller(axis0()).unwrap().position();
     // The stop input opens; *STP stays ON.
     let step = |r: &mut Rig, ms: u64| {

@@ -142,14 +142,21 @@ fn pm_is_shown_while_cstr_is_held_but_pend_only_after_it_falls() {
     assert!(rig.out.pend());
 }
 
-#[test]
-fn a_rejected_move_releases_the_outputs() {
+/// A rig whose CSTR strobe for point 5 has been taken and returned (PEND masked), the axis at
+/// point 3.
+fn strobed_to_point_5() -> Rig {
     let mut rig = Rig::new(Config::default());
     rig.select(5);
     rig.set(In::CSTR, true);
     rig.run(20);
     rig.set(In::CSTR, false);
     rig.run(10);
+    rig
+}
+
+#[test]
+fn a_rejected_move_releases_the_outputs() {
+    let mut rig = strobed_to_point_5();
     assert!(!rig.out.pend());
     // The Q3 was rejected (e.g. 0x70, RUN off): the status is unchanged, the count moves.
     rig.axis.counters.rejections += 1;
@@ -164,12 +171,7 @@ fn a_rejected_move_releases_the_outputs() {
 
 #[test]
 fn a_move_the_gateway_refuses_releases_the_outputs_and_nothing_else_does() {
-    let mut rig = Rig::new(Config::default());
-    rig.select(5);
-    rig.set(In::CSTR, true);
-    rig.run(20);
-    rig.set(In::CSTR, false);
-    rig.run(10);
+    let mut rig = strobed_to_point_5();
     assert!(!rig.out.pend(), "waiting for the move");
     // Another job refused (a servo job, the queue full): the accepted move is still awaited.
     rig.pio.refused(&JobKind::Servo(true));
