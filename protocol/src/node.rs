@@ -368,9 +368,11 @@ impl Node {
         }
     }
 
-    /// The gateway (for tests and tools: its engine, configuration and command states). The
-    /// firmware asks the node itself ([`bus_baud`](Node::bus_baud), [`plc_line`](Node::plc_line),
-    /// [`sample_period`](Node::sample_period)); `tests/tests/layering.rs` holds it to that.
+    /// The gateway (for tests and tools: its engine, configuration and command states; feature
+    /// `inspect`, a default one). The firmware builds without it: it asks the node itself
+    /// ([`bus_baud`](Node::bus_baud), [`plc_line`](Node::plc_line),
+    /// [`sample_period`](Node::sample_period)).
+    #[cfg(feature = "inspect")]
     pub fn gateway(&self) -> &Gateway {
         &self.gateway
     }
