@@ -29,18 +29,23 @@ def outputs_on(emu):
     wait_for(lambda: emu.outputs() >> SV & 1 and emu.outputs() >> LINK_OUT & 1, 10, "SV and LINK on")
 
 
-def test_panic_leaves_outputs_safe_and_drivers_off(emu):
-    outputs_on(emu)
-    emu.request_panic()
-    emu.wait_log("panic at", 5)
+def assert_safe_and_halted(emu):
+    """After a fault: every output OFF, the alarm LED on, both drivers released; halted: nothing
+    more goes out on the bus, no Modbus answer."""
     assert emu.outputs() == 0, f"every output OFF: {emu.outputs():#06x}"
     assert emu.odr(LED_ALARM) == 1
     for de in (BUS_DE, PLC_DE):
         assert (emu.mode(de), emu.odr(de)) == (MODE_OUTPUT, 0), f"DE {de} released"
-    # Halted: nothing more goes out on the bus, no Modbus answer.
     sent = len(emu.bus_commands())
     assert emu.plc.raw_exchange(bytes([1, 3, 0x90, 0x05, 0, 1, 0xB9, 0x0B]), wait=0.5) == b""
     assert len(emu.bus_commands()) == sent
+
+
+def test_panic_leaves_outputs_safe_and_drivers_off(emu):
+    outputs_on(emu)
+    emu.request_panic()
+    emu.wait_log("panic at", 5)
+    assert_safe_and_halted(emu)
     assert set(OUTPUTS) >= {SV, LINK_OUT}
 
 
@@ -60,14 +65,8 @@ def test_stack_overflow_faults_and_leaves_outputs_safe(emu):
     # The painted stack region used to within one recursion level (512 bytes) of its bottom.
     room = emu.symbols["_stack_start"] - bottom
     assert emu.stack_high_water_mark() > room - 1024, "the stack ran down to the bottom of RAM"
-    assert emu.outputs() == 0, f"every output OFF: {emu.outputs():#06x}"
-    assert emu.odr(LED_ALARM) == 1
-    for de in (BUS_DE, PLC_DE):
-        assert (emu.mode(de), emu.odr(de)) == (MODE_OUTPUT, 0), f"DE {de} released"
-    # Halted, not locked up or reset: QEMU runs on, nothing more goes out, no Modbus answer.
-    sent = len(emu.bus_commands())
-    assert emu.plc.raw_exchange(bytes([1, 3, 0x90, 0x05, 0, 1, 0xB9, 0x0B]), wait=0.5) == b""
-    assert len(emu.bus_commands()) == sent
+    assert_safe_and_halted(emu)
+    # Halted, not locked up or reset: QEMU runs on.
     emu._check_alive("halted after the HardFault")
 
 
