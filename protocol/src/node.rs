@@ -237,6 +237,10 @@ impl Node {
         let home = self.gateway.config().axes[axis].scale.home;
         let (outputs, job) = self.pio.sample(now, inputs, &state, link_ok, home);
         self.outputs = outputs;
+        if self.pio.take_acknowledge() {
+            self.gateway.acknowledge_by_wire();
+            self.dirty = true;
+        }
         if let Some(kind) = job {
             // A refusal is shown in CMST (or, for an axis that went offline between the sample
             // and now, not taken at all), and on the outputs: the PIO stops waiting for it.
@@ -332,12 +336,14 @@ impl Node {
 
     /// The PIO output pins (bit n = PCON pattern 0 port OUTn): all OFF while the PIO axis has
     /// not answered, or none is configured (at once when the PLC takes the discrete I/O off its
-    /// axis: with no PIO axis the firmware samples the inputs only when they change).
+    /// axis: with no PIO axis the firmware samples the inputs only when they change); *ALM OFF
+    /// with FAILSAFE on PM1-PM8 while the fail-safe is latched
+    /// ([`PioOutputs::with_failsafe`]).
     pub fn outputs(&self) -> PioOutputs {
         if self.gateway.config().pio_axis.is_none() {
             return PioOutputs::SAFE;
         }
-        self.outputs
+        self.outputs.with_failsafe(self.gateway.failsafe())
     }
 
     /// The rate the bus line is to run at: the UART starts at it (the node asks for every

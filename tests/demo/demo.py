@@ -211,7 +211,7 @@ class Demo:
         self.emu.set_pin(STOP_INPUT, True)  # the cabinet's stop chain closed
         self.pins.set(STP_N, True)  # *STP ON: the wired axis may move
         # The stop input was open at power-up: latched in FAILSAFE until acknowledged.
-        self.plc.write(GATEWAY_UNIT, G_FAILSAFE, 0)
+        self.plc.acknowledge()
         self.plc.write(GATEWAY_UNIT, G_WATCHDOG, 2000)
         self.say("   FAILSAFE acknowledged, PLC watchdog 2000 ms")
         for axis in self.axes[1:]:

@@ -36,7 +36,7 @@ def commissioned(emu, points):
     pins.set(STP_N, True)
     wait_for(lambda: plc.read(unit(0), LINK)[0] == LINK_ONLINE, 20, "axis 0 online")
     plc.write(GATEWAY_UNIT, G_WATCHDOG, 0)
-    plc.write(GATEWAY_UNIT, G_FAILSAFE, 0)  # acknowledge the stop input open at power-up
+    plc.acknowledge()  # the stop input open at power-up, now closed
     for n, (position, speed) in points.items():
         values = [position >> 16, position & 0xFFFF, 0, 10, 0, speed, 0, 0, 0, 0, 30, 30, 0, 0, 0]
         plc.write(unit(0), ROW + 16 * n, values)
@@ -144,3 +144,36 @@ def test_the_stop_input_stops_a_move_and_blocks_the_next(emu):
     time.sleep(0.5)
     assert all(c[2] == "CancelMotion" for c in emu.bus_changes(0)[settled:]), "no move while open"
     assert output(emu, MOVE) == 0
+
+
+def test_a_res_pulse_acknowledges_the_stop_input_once_it_is_closed(emu):
+    """A cabinet wired by 24 V only: the latched stop input shows on *ALM (OFF) and PM1-PM8
+    (FAILSAFE = 2) and the alarm LED; RES acknowledges it, as a safety relay's reset, only once
+    the stop chain is closed again; until then a CSTR moves nothing. Nothing here is Modbus but
+    the checks of FAILSAFE."""
+    pins = moving_slowly_to_point_3(emu)
+    emu.set_pin(STOP_INPUT, False)  # the stop chain opens
+    wait_output(emu, MOVE, 0, 10, "stopped")
+    wait_output(emu, ALM_N, 0, 5, "*ALM OFF: latched")
+    assert emu.outputs() & 0xF == 2, "PM1-PM8 = FAILSAFE 2: the stop input"
+    wait_for(lambda: emu.odr(LED_ALARM) == 1, 5, "alarm LED on")
+    pins.pulse(RES)
+    time.sleep(0.2)
+    assert emu.plc.read(GATEWAY_UNIT, G_FAILSAFE)[0] == 2, "RES refused while the chain is open"
+    assert output(emu, ALM_N) == 0
+
+    emu.set_pin(STOP_INPUT, True)  # closed again: still latched, nothing starts
+    time.sleep(0.2)
+    settled = len(emu.bus_changes(0))
+    pins.pulse(CSTR)
+    time.sleep(0.5)
+    assert not [c for c in emu.bus_changes(0)[settled:] if c[2] == "MoveToPoint"], "held by the latch"
+    assert output(emu, ALM_N) == 0 and emu.outputs() & 0xF == 2, "still latched"
+
+    pins.pulse(RES)
+    wait_output(emu, ALM_N, 1, 5, "*ALM ON: acknowledged")
+    wait_for(lambda: emu.odr(LED_ALARM) == 0, 5, "alarm LED off")
+    assert emu.plc.read(GATEWAY_UNIT, G_FAILSAFE)[0] == 0
+    assert "Reset" not in [c[2] for c in emu.bus_changes(0)[settled:]], "no alarm reset ran"
+    pins.pulse(CSTR)
+    wait_output(emu, MOVE, 1, 10, "moves again")

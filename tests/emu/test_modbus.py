@@ -71,7 +71,7 @@ def online(emu, axis=0, timeout=20):
     emu.set_pin(STOP_INPUT, True)
     # The stop input was open at power-up: latched in FAILSAFE (bit 1) until acknowledged.
     wait_for(lambda: emu.plc.read(GATEWAY_UNIT, G_FAILSAFE)[0] & 2, 5, "the stop latched")
-    emu.plc.write(GATEWAY_UNIT, G_FAILSAFE, 0)
+    emu.plc.acknowledge()
     assert emu.plc.read(GATEWAY_UNIT, G_FAILSAFE)[0] == 0
     wait_for(lambda: established(emu.bus_events()), timeout, "bus established")
     wait_for(lambda: emu.plc.read(unit(axis), LINK)[0] == LINK_ONLINE, timeout, f"axis {axis} online")

@@ -123,6 +123,22 @@ class PlcMaster:
         else:
             self._call("write_registers", address, list(values), unit=unit)
 
+    def acknowledge(self, timeout=5):
+        """Acknowledges FAILSAFE once its cause is gone. The gateway refuses (03) while the stop
+        input is still active, so a caller that has just closed it waits until the gateway has
+        seen it closed."""
+
+        def taken():
+            try:
+                self.write(GATEWAY_UNIT, G_FAILSAFE, 0)
+                return True
+            except ModbusError as refused:
+                if refused.code != ILLEGAL_DATA_VALUE:
+                    raise
+                return False
+
+        wait_for(taken, timeout, "FAILSAFE acknowledged (its cause gone)")
+
     def coil(self, unit, address, on):
         self._call("write_coil", address, bool(on), unit=unit)
 

@@ -208,5 +208,65 @@ fn a_refused_strobe_shows_pend_at_the_point_the_axis_is_at() {
         "CMST: failed, STP/EMG or the stop input"
     );
     assert!(r.outputs.pend(), "PEND back on: {:?}", r.outputs);
-    assert_eq!(r.outputs.pm(), 0, "at home, not at point 5");
+    // The latched stop input is what *ALM and PM show (FAILSAFE = 2), not point 5.
+    assert!(!r.outputs.alm_n(), "*ALM OFF: the fail-safe is latched");
+    assert_eq!(r.outputs.pm(), 2, "PM = FAILSAFE: the stop input");
+}
+
+/// A machine wired by 24 V only acknowledges the fail-safe with a RES pulse, as a safety
+/// relay's reset: refused while the stop input is still open, taken once it is closed; until
+/// then no strobe moves the axis, even with the stop input closed again.
+#[test]
+fn a_res_pulse_acknowledges_the_fail_safe_once_the_stop_input_is_closed() {
+    let mut r = homed();
+    let at = r.h.bus.controller(axis0()).unwrap().position();
+    let pulse = |r: &mut Rig, input: PioInputs, stop: bool| {
+        for on in [true, false] {
+            r.set(input, on);
+            for _ in 0..30 {
+                r.h.inputs = Some(r.inputs);
+                r.h.node.set_stop_input(Instant(r.h.now), stop);
+                r.h.run_for(MS);
+                r.outputs = r.h.outputs;
+            }
+        }
+    };
+    // The stop input opens (*STP stays ON) and latches FAILSAFE bit 1.
+    pulse(&mut r, PioInputs::RES, true);
+    assert_eq!(
+        r.h.node.gateway().failsafe(),
+        2,
+        "RES refused: the stop input is open"
+    );
+    assert!(!r.outputs.alm_n() && r.outputs.pm() == 2, "{:?}", r.outputs);
+    // Closed again: still latched, and a strobe does not move the axis (CMST: reason 12).
+    r.inputs = r.inputs.with_position(PositionNo::new(5).unwrap());
+    pulse(&mut r, PioInputs::CSTR, false);
+    r.run(200);
+    assert_eq!(
+        r.h.node.gateway().failsafe(),
+        2,
+        "latched until acknowledged"
+    );
+    assert!(!r.outputs.alm_n(), "*ALM OFF while latched");
+    assert_eq!(
+        r.h.bus.controller(axis0()).unwrap().position(),
+        at,
+        "nothing moved"
+    );
+    assert_eq!(
+        r.h.node.gateway().command_state(axis0()),
+        (protocol::plc::CommandState::Failed, 12 << 8),
+        "CMST: failed, the fail-safe is latched"
+    );
+    // RES now acknowledges: *ALM back ON, PM the point the axis is at, and a strobe moves.
+    pulse(&mut r, PioInputs::RES, false);
+    assert_eq!(r.h.node.gateway().failsafe(), 0, "acknowledged by wire");
+    assert!(r.outputs.alm_n() && r.outputs.pm() == 0, "{:?}", r.outputs);
+    assert!(
+        r.h.bus.controller(axis0()).unwrap().servo(),
+        "no alarm reset ran"
+    );
+    pulse(&mut r, PioInputs::CSTR, false);
+    r.until(5_000, |o| o.pend() && o.pm() == 5);
 }

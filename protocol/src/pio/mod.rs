@@ -32,16 +32,16 @@
 //! | HOME | IN11 | rising edge | Home (`o`, in the axis' direction, AXISCFG) | IN11 HOME |
 //! | *STP | IN12 | negative: OFF = stop | OFF: cancel the motion (`d`) at once; while OFF, CSTR and HOME are ignored. ON again does not resume | IN12 *STP (pause) |
 //! | CSTR | IN13 | rising edge | Start: latch PC1-PC8, move to that point (Q3) | IN13 CSTR |
-//! | RES | IN14 | rising edge | Alarm reset (servo off, `r03`), only while an alarm is active | IN14 RES |
+//! | RES | IN14 | rising edge | Alarm reset (servo off, `r03`) while an alarm is active; else acknowledges FAILSAFE once its cause is gone | IN14 RES |
 //! | SON | IN15 | level | Servo on while ON, off while OFF | IN15 SON |
-//! | PM1-PM8 | OUT0-OUT3 | ON = 1 | Completed position number; the abbreviated alarm code while *ALM is OFF | OUT0-OUT3 PM1-PM8 |
+//! | PM1-PM8 | OUT0-OUT3 | ON = 1 | Completed position number; the abbreviated alarm code while *ALM is OFF (the gateway's FAILSAFE, 1-3, when that is why) | OUT0-OUT3 PM1-PM8 |
 //! | MOVE | OUT6 | ON = moving | Servo on, positioning not complete, no alarm | OUT6 MOVE |
 //! | ZONE1 | OUT7 | ON = inside | The controller's ZONE (between ZONL and ZONM, homed) | OUT7 ZONE1 |
 //! | HEND | OUT10 | ON = homed | ZFIN | OUT10 HEND |
 //! | PEND | OUT11 | ON = complete | PFIN, OFF from a start until the move is complete and while CSTR is ON | OUT11 PEND |
 //! | SV | OUT12 | ON = servo on | Status servo bit | OUT12 SV |
 //! | LINK | OUT13 | ON = link OK | The gateway hears the axis (the RC has no emergency-stop signal; same polarity as *EMGS: ON = able to run) | OUT13 *EMGS |
-//! | *ALM | OUT14 | negative: OFF = alarm | OFF while the controller is in alarm, or the link is down | OUT14 *ALM |
+//! | *ALM | OUT14 | negative: OFF = alarm | OFF while the controller is in alarm, the link is down, or the gateway's fail-safe is latched | OUT14 *ALM |
 //!
 //! # Inputs
 //!
@@ -72,10 +72,12 @@
 //! (a command from elsewhere, a stop lost while the link was down) the stop is repeated every
 //! [`STOP_REPEAT`]. The stop is returned even while the link is down (it can only help).
 //!
-//! **RES** acts on its rising edge, only while the axis reports an alarm (*ALM OFF). The Robo
-//! Cylinder resets an alarm only with the servo off ([`JobKind::AlarmReset`] turns it off first),
-//! so an unconditional reset would drop the servo of a healthy axis whenever a PLC program pulses
-//! RES without an alarm (at start-up, say).
+//! **RES** acts on its rising edge. While the axis reports an alarm it resets the alarm. The
+//! Robo Cylinder resets an alarm only with the servo off ([`JobKind::AlarmReset`] turns it off
+//! first), so an unconditional reset would drop the servo of a healthy axis whenever a PLC
+//! program pulses RES without an alarm (at start-up, say). Without an alarm, the edge is the
+//! gateway's fail-safe acknowledgement by wire ([`Pio::take_acknowledge`]): the gateway clears
+//! FAILSAFE if its cause is gone, as a safety relay's reset.
 //!
 //! **SON** is a level: [`JobKind::Servo`]`(SON)` when SON changes, and again whenever the axis'
 //! reported servo state differs from SON and no servo job was returned for
@@ -244,6 +246,21 @@ impl PioOutputs {
         !self.alm_n()
     }
 
+    /// The outputs with the gateway's latched fail-safe (`failsafe`, the FAILSAFE register)
+    /// shown, so that a machine wired by 24 V only sees what its RES pulse is to acknowledge:
+    /// *ALM OFF and PM1-PM8 = FAILSAFE (PM1 the PLC watchdog, PM2 the stop input). These codes
+    /// (1-3) are none of the controller's abbreviated alarm codes (complete edition §8-1-1: 6
+    /// and up), and the axis' own alarm, or a link down, is shown first.
+    #[must_use]
+    pub const fn with_failsafe(self, failsafe: u16) -> PioOutputs {
+        if failsafe == 0 || self.alarm() {
+            return self;
+        }
+        // FAILSAFE's two causes are bits 0 and 1: the cast keeps them.
+        self.with(PioOutputs::ALM_N, false)
+            .with_pm((failsafe & 0x3) as u8)
+    }
+
     /// The value with PM8..PM1 set to `pm` (its low 4 bits).
     #[must_use]
     pub const fn with_pm(self, pm: u8) -> PioOutputs {
@@ -370,6 +387,8 @@ pub struct Pio {
     last_servo: Option<Instant>,
     waiting: Option<Await>,
     outputs: PioOutputs,
+    /// A RES edge while the axis showed no alarm, not taken yet.
+    acknowledge: bool,
 }
 
 impl Pio {
@@ -399,6 +418,7 @@ impl Pio {
             last_servo: None,
             waiting: None,
             outputs: PioOutputs::SAFE,
+            acknowledge: false,
         }
     }
 
@@ -427,6 +447,12 @@ impl Pio {
         if matches!(job, JobKind::Home(_) | JobKind::MoveToPoint(_)) {
             self.waiting = None;
         }
+    }
+
+    /// Whether RES rose while the axis showed no alarm since the last call: the gateway's
+    /// fail-safe acknowledgement by wire (see RES in the [module documentation](self)).
+    pub fn take_acknowledge(&mut self) -> bool {
+        core::mem::take(&mut self.acknowledge)
     }
 
     /// Whether a CSTR strobe waits for PC1-PC8 to settle, or a move or home waits to be returned.
@@ -487,10 +513,12 @@ impl Pio {
             if self.inputs.known(PioInputs::SON) && (son_changed || disagrees) {
                 self.pending_servo = Some(son);
             }
-            if self.inputs.rose(PioInputs::RES, changed, known_before)
-                && report.outputs.alarm_active()
-            {
-                self.pending_reset = true;
+            if self.inputs.rose(PioInputs::RES, changed, known_before) {
+                if report.outputs.alarm_active() {
+                    self.pending_reset = true;
+                } else {
+                    self.acknowledge = true;
+                }
             }
             if may_run && self.inputs.rose(PioInputs::CSTR, changed, known_before) {
                 self.strobe = true;

@@ -51,6 +51,8 @@ pub enum Reason {
     Paused = 10,
     /// The axis went offline before the command could run; it will not run late.
     Offline = 11,
+    /// Refused: FAILSAFE is latched; no motion starts until it is acknowledged.
+    Failsafe = 12,
 }
 
 impl Reason {

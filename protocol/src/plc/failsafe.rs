@@ -1,10 +1,18 @@
 //! The fail-safe: what stops every axis when the PLC goes away or the stop input drops.
 //!
-//! Two causes, latched in FAILSAFE until the PLC writes 0:
+//! Two causes, latched in FAILSAFE until acknowledged:
 //! - the **PLC watchdog**: no valid Modbus request to the gateway or any of its axes for longer
 //!   than WATCHDOG (1 s by default; 0 turns it off). It re-arms with the next request;
 //! - the **stop input** (a 24 V safety input, active when OFF): its activation trips at once,
 //!   and no motion may start while it stays active.
+//!
+//! The latch is acknowledged as a safety relay's manual reset is (IEC 60204-1 practice): only
+//! once its cause is gone, and until then no motion starts. A PLC acknowledges by writing 0 to
+//! FAILSAFE, a machine wired by 24 V only by a RES pulse on the discrete inputs; either is
+//! refused while the stop input is still active, and a RES pulse while the PLC watchdog's
+//! silence lasts (a Modbus write ends that cause by being a request). A latched watchdog cause
+//! holds motion only when the watchdog's action stops the axes: with "latch only" the PLC
+//! chose to keep them running.
 //!
 //! This type only decides; the gateway carries out the stops (before anything else on the bus).
 
@@ -101,9 +109,27 @@ impl FailSafe {
         self.count = self.count.wrapping_add(1);
     }
 
-    /// The PLC cleared FAILSAFE.
-    pub(super) fn clear(&mut self) {
-        self.latched = 0;
+    /// Whether the latch may be acknowledged now: no cause present. `by_request`: by a Modbus
+    /// write, which ends the watchdog's cause by being a request; else by the discrete inputs.
+    pub(super) fn may_acknowledge(&self, by_request: bool) -> bool {
+        !self.stop_input && (by_request || !self.tripped)
+    }
+
+    /// Acknowledge the latch ([`may_acknowledge`](Self::may_acknowledge)); nothing changes if
+    /// a cause is still present.
+    pub(super) fn acknowledge(&mut self, by_request: bool) {
+        if self.may_acknowledge(by_request) {
+            self.latched = 0;
+        }
+    }
+
+    /// Whether the latch holds motion (see the module documentation).
+    pub(super) fn holds_motion(&self, action: WatchdogAction) -> bool {
+        let holding = match action {
+            WatchdogAction::StopAll => CAUSE_WATCHDOG | CAUSE_STOP_INPUT,
+            WatchdogAction::LatchOnly => CAUSE_STOP_INPUT,
+        };
+        self.stop_input || self.latched & holding != 0
     }
 
     /// The stop input is active: no motion may start.
@@ -125,5 +151,56 @@ impl FailSafe {
     /// FSCOUNT.
     pub(super) fn count(&self) -> u16 {
         self.count
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const LIMIT: Duration = Duration::from_millis(1000);
+
+    fn tripped() -> FailSafe {
+        let mut f = FailSafe::new();
+        f.activity(Instant::ZERO);
+        let trip = f.check(Instant(2_000_000), LIMIT, WatchdogAction::StopAll);
+        assert_eq!(trip, Some(Trip::StopAll));
+        f
+    }
+
+    #[test]
+    fn the_stop_input_cause_is_acknowledged_only_once_it_is_gone() {
+        let mut f = FailSafe::new();
+        assert!(f.set_stop_input(true));
+        for by_request in [true, false] {
+            f.acknowledge(by_request);
+            assert_eq!(f.latched(), CAUSE_STOP_INPUT, "refused while active");
+        }
+        f.set_stop_input(false);
+        assert!(f.holds_motion(WatchdogAction::LatchOnly), "latched: held");
+        f.acknowledge(false);
+        assert_eq!(f.latched(), 0);
+        assert!(!f.holds_motion(WatchdogAction::StopAll));
+    }
+
+    #[test]
+    fn the_watchdog_cause_ends_with_a_request_not_with_a_res_pulse() {
+        let mut f = tripped();
+        f.acknowledge(false);
+        assert_eq!(f.latched(), CAUSE_WATCHDOG, "the PLC is still silent");
+        f.acknowledge(true);
+        assert_eq!(f.latched(), 0, "a Modbus write is a request");
+        // Once the PLC has talked again, a RES pulse acknowledges too.
+        let mut f = tripped();
+        f.activity(Instant(2_100_000));
+        f.acknowledge(false);
+        assert_eq!(f.latched(), 0);
+    }
+
+    #[test]
+    fn a_watchdog_latch_holds_motion_only_when_its_action_stops_the_axes() {
+        let f = tripped();
+        assert!(f.holds_motion(WatchdogAction::StopAll));
+        assert!(!f.holds_motion(WatchdogAction::LatchOnly));
     }
 }

@@ -231,9 +231,10 @@ impl Gateway {
         }
     }
 
-    /// The axes on which no motion may start: STP or EMG held, or the stop input active.
+    /// The axes on which no motion may start: STP or EMG held, the stop input active, or the
+    /// fail-safe latched and not acknowledged.
     pub(super) fn blocked(&self) -> AxisSet {
-        if self.failsafe.stop_input() {
+        if self.failsafe_holds() {
             return AxisSet::ALL;
         }
         self.axes
@@ -241,6 +242,18 @@ impl Gateway {
             .filter(|(_, plc)| plc.paused())
             .map(|(axis, _)| axis)
             .collect()
+    }
+
+    /// The fail-safe holds every axis: the stop input is active, or a latched cause that holds
+    /// motion is not acknowledged yet ([`failsafe`](super::failsafe)).
+    fn failsafe_holds(&self) -> bool {
+        self.failsafe.holds_motion(self.config.watchdog_action)
+    }
+
+    /// A RES pulse on the discrete inputs while the PIO axis shows no alarm: the fail-safe's
+    /// acknowledgement by wire, refused (nothing changes) while a cause is present.
+    pub fn acknowledge_by_wire(&mut self) {
+        self.failsafe.acknowledge(false);
     }
 
     /// Submit a command for the PLC (a register write, or the PIO logic's strobe) and record its
@@ -257,7 +270,12 @@ impl Gateway {
         let motion = Motion::of(&kind);
         let blocked = motion != Motion::None && self.blocked().contains(axis);
         let result = if blocked {
-            Err(Reason::Paused)
+            // The fail-safe's own reason, so that the PLC knows an acknowledgement is due.
+            Err(if self.failsafe_holds() && !self.failsafe.stop_input() {
+                Reason::Failsafe
+            } else {
+                Reason::Paused
+            })
         } else {
             self.engine.submit(Job { axis, kind }).map_err(|e| match e {
                 SubmitError::QueueFull | SubmitError::AxisDisabled => Reason::QueueFull,

@@ -162,12 +162,15 @@ impl Gateway {
     }
 
     /// The rules of a parsed write that depend on the gateway's state, checked before any
-    /// register of the write is carried out: APPLY only while nothing moves, runs or waits; a
-    /// unit id that is not an axis' (enabled, or to be on APPLY); an axis enabled whose unit is
+    /// register of the write is carried out: APPLY only while nothing moves, runs or waits;
+    /// FAILSAFE's acknowledgement only once its cause is gone (the stop input inactive); a unit
+    /// id that is not an axis' (enabled, or to be on APPLY); an axis enabled whose unit is
     /// not the gateway's; a synchronized-start mask of axes on the bus.
     fn admit(&self, write: GatewayWrite) -> Result<(), Refused> {
         let admitted = match write {
             GatewayWrite::Apply => self.bus_idle(),
+            // As a safety relay's reset: only once the cause is gone (`failsafe`).
+            GatewayWrite::AckFailsafe => self.failsafe.may_acknowledge(true),
             GatewayWrite::UnitId(unit) => {
                 let axes = AxisSet(self.config.bus.axes.0 | self.persist.axes.0);
                 axis_of(unit, axes).is_none()
@@ -191,7 +194,7 @@ impl Gateway {
     fn apply(&mut self, write: GatewayWrite) {
         match write {
             GatewayWrite::Nothing | GatewayWrite::ChannelRequest | GatewayWrite::SyncStart => {}
-            GatewayWrite::AckFailsafe => self.failsafe.clear(),
+            GatewayWrite::AckFailsafe => self.failsafe.acknowledge(true),
             GatewayWrite::Watchdog(ms) => {
                 self.config.watchdog = Duration::from_millis(u64::from(ms))
             }

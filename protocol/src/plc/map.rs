@@ -332,7 +332,7 @@ pub const MAP: &[Entry] = &[
     e(Unit::Axis, Coil, COIL_STOP, 1, "STOP", "", "", true, "Decelerating stop on each write of ON; reads 0", Full),
     e(Unit::Gateway, Status, G_VERSION, 2, "VERSION", "", "", false, "Firmware version: major<<8|minor, patch", Gateway),
     e(Unit::Gateway, Status, G_UPTIME, 2, "UPTIME", "s", "uint32", false, "Time since start", Gateway),
-    e(Unit::Gateway, Holding, G_FAILSAFE, 1, "FAILSAFE", "bits", "write 0", true, "Latched fail-safe: b0 PLC watchdog, b1 stop input; write 0 to clear", Gateway),
+    e(Unit::Gateway, Holding, G_FAILSAFE, 1, "FAILSAFE", "bits", "write 0", true, "Latched fail-safe: b0 PLC watchdog, b1 stop input; write 0 to acknowledge (03 while the stop input is open)", Gateway),
     e(Unit::Gateway, Status, G_FAILSAFE_COUNT, 1, "FSCOUNT", "count", "", false, "Fail-safe trips", Gateway),
     e(Unit::Gateway, Holding, G_WATCHDOG, 1, "WATCHDOG", "ms", "0, 50-60000", true, "PLC silence that stops every moving axis (0 = off)", Gateway),
     e(Unit::Gateway, Holding, G_BUS_BAUD, 1, "BUSBAUD", "100 bit/s", "96 144 192 288 384 576 768 1152", true, "RS485 line rate, taken on APPLY or at the next start", Gateway),

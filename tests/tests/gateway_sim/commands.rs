@@ -207,11 +207,73 @@ fn plc_silence_trips_the_watchdog_and_stops_every_axis() {
         [1, 1],
         "latched, counted"
     );
+    // Latched and the PLC talks again: no motion starts until it acknowledges (CMST: reason 12).
+    write(&mut h, unit(0), DIRECT, &[0, 10_00, 0, 10, 0, 10_00, 30]).unwrap();
+    assert_eq!(
+        h.node.gateway().command_state(axis(0)),
+        (CommandState::Failed, (Reason::Failsafe as u16) << 8)
+    );
     write(&mut h, 63, G_FAILSAFE, &[0]).unwrap();
     assert_eq!(read(&mut h, 63, G_FAILSAFE, 1).unwrap(), [0]);
+    write(&mut h, unit(0), DIRECT, &[0, 10_00, 0, 10, 0, 10_00, 30]).unwrap();
+    h.run_until(h.now + 100 * MS);
+    assert!(
+        h.bus.controller(axis(0)).unwrap().moving(),
+        "acknowledged: moves"
+    );
     // The stop input latches bit 1.
     h.node.set_stop_input(Instant(h.now), true);
     assert_eq!(h.node.gateway().failsafe(), 2);
+}
+
+/// FAILSAFE is acknowledged as a safety relay's reset: refused (exception 03, the bit stays)
+/// while the stop input is still open; once it is closed the latch still holds every motion
+/// until the PLC acknowledges.
+#[test]
+fn the_fail_safe_is_acknowledged_only_once_the_stop_input_is_closed() {
+    let mut h = gateway(1);
+    home(&mut h, 0);
+    h.node.set_stop_input(Instant(h.now), true);
+    assert_eq!(
+        write(&mut h, 63, G_FAILSAFE, &[0]),
+        Err(Exception::IllegalDataValue),
+        "the cause is still there"
+    );
+    assert_eq!(read(&mut h, 63, G_FAILSAFE, 1).unwrap(), [2]);
+    h.node.set_stop_input(Instant(h.now), false);
+    write(&mut h, unit(0), DIRECT, &[0, 50_00, 0, 10, 0, 20_00, 30]).unwrap();
+    h.run_until(h.now + 300 * MS);
+    assert!(
+        !h.bus.controller(axis(0)).unwrap().moving(),
+        "held by the latch"
+    );
+    assert_eq!(
+        h.node.gateway().command_state(axis(0)),
+        (CommandState::Failed, (Reason::Failsafe as u16) << 8)
+    );
+    write(&mut h, 63, G_FAILSAFE, &[0]).unwrap();
+    assert_eq!(read(&mut h, 63, G_FAILSAFE, 1).unwrap(), [0]);
+    write(&mut h, unit(0), DIRECT, &[0, 50_00, 0, 10, 0, 20_00, 30]).unwrap();
+    h.run_until(h.now + 300 * MS);
+    assert!(
+        h.bus.controller(axis(0)).unwrap().moving(),
+        "acknowledged: moves"
+    );
+}
+
+/// With the watchdog's action "latch only" the PLC chose to keep the axes running: its latch
+/// is shown but holds no motion.
+#[test]
+fn a_latch_only_watchdog_holds_no_motion() {
+    let mut h = gateway(1);
+    home(&mut h, 0);
+    write(&mut h, 63, G_WD_ACTION, &[1]).unwrap();
+    write(&mut h, 63, G_WATCHDOG, &[300]).unwrap();
+    h.run_until(h.now + 600 * MS);
+    assert_eq!(read(&mut h, 63, G_FAILSAFE, 1).unwrap(), [1], "latched");
+    write(&mut h, unit(0), DIRECT, &[0, 50_00, 0, 10, 0, 20_00, 30]).unwrap();
+    h.run_until(h.now + 200 * MS);
+    assert!(h.bus.controller(axis(0)).unwrap().moving(), "not held");
 }
 
 #[test]
