@@ -132,7 +132,8 @@ pub enum JobError {
     /// A frame got no valid response (none in time, or only corrupted ones) after every
     /// allowed retry.
     Timeout,
-    /// An `m` got no response: it may or may not have moved. The position is re-read.
+    /// An `m` got no response: it may or may not have moved. The position is re-read (before
+    /// this is reported).
     OutcomeUnknown,
     /// The controller rejected a command with this warning code.
     Rejected(AlarmCode),
@@ -186,8 +187,32 @@ pub(crate) enum Op {
     Await(Condition),
 }
 
+impl JobError {
+    /// Whether the axis may have moved somewhere the job did not mean: the answer to its move
+    /// was lost, it went into alarm, or it did not arrive in time. A move or a home that fails
+    /// so reads its position before the failure is reported, as a completed one does.
+    pub(crate) fn position_unknown(self) -> bool {
+        matches!(
+            self,
+            JobError::OutcomeUnknown | JobError::Alarm(_) | JobError::WaitTimeout
+        )
+    }
+}
+
+/// Whether op `index` of `job` is its read of the position ([`read_position`]).
+pub(crate) fn reads_position(job: &Job, index: usize) -> bool {
+    matches!(
+        program(job, index),
+        Some(Op::Send(step)) if matches!(
+            step.request.command,
+            Command::ReadMemory { address } if address == crate::memory::PNOW
+        )
+    )
+}
+
 /// The last op of every move and of homing: read where it stopped, so that the job finishes
-/// with the final position already known (a PLC reads PNOW when PEND comes on).
+/// with the final position already known (a PLC reads PNOW when PEND comes on), and so does a
+/// move that fails with the position unknown ([`JobError::position_unknown`]).
 fn read_position(axis: Axis) -> Op {
     Op::Send(Step {
         request: Request::new(

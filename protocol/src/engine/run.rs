@@ -2,7 +2,7 @@
 //! description and a cursor into its program ([`program`]); responses move the cursor, waits
 //! are judged on status responses, and the end of the program (or a failure) reports once.
 
-use super::job::{self, program, readback_slot, written, Op, STORE_COMPARED};
+use super::job::{self, program, readback_slot, reads_position, written, Op, STORE_COMPARED};
 use super::{Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Next, Origin};
 use crate::axes::AxisSet;
 use crate::jobs::{PointReadback, StepError};
@@ -32,6 +32,8 @@ pub(super) struct Active {
     pub(super) wait_deadline: Option<Instant>,
     readback: PointReadback,
     last: Last,
+    /// The job has failed with the position unknown and reads it before reporting this.
+    failing: Option<JobError>,
 }
 
 impl Engine {
@@ -130,6 +132,7 @@ impl Engine {
                 wait_deadline,
                 readback: PointReadback::default(),
                 last: Last::Done,
+                failing: None,
             });
         }
     }
@@ -162,17 +165,8 @@ impl Engine {
     /// that ends a move or homing): the schedule need not read it as well.
     pub(super) fn job_reads_position(&self, axis: Axis) -> bool {
         self.active[axis].as_ref().is_some_and(|active| {
-            let reads = |index: usize| {
-                matches!(
-                    program(&active.job, index),
-                    Some(Op::Send(step)) if matches!(
-                        step.request.command,
-                        Command::ReadMemory { address } if address == crate::memory::PNOW
-                    )
-                )
-            };
             let at = usize::from(active.cursor);
-            reads(at) || reads(at + 1)
+            reads_position(&active.job, at) || reads_position(&active.job, at + 1)
         })
     }
 
@@ -271,6 +265,11 @@ impl Engine {
                 return;
             }
         }
+        if let (Some(error), None) = (active.failing, program(&active.job, cursor)) {
+            // The position is read: now the failure.
+            self.finish(axis, Err(error));
+            return;
+        }
         match program(&active.job, cursor) {
             Some(Op::Await(_)) => active.wait_deadline = Some(now + motion_timeout),
             Some(Op::Send(_)) => {}
@@ -314,7 +313,31 @@ impl Engine {
         });
     }
 
+    /// Fail the running job of `axis`. A move or a home that fails with the position unknown
+    /// ([`JobError::position_unknown`]) on an axis that still answers goes on to its read of the
+    /// position first, so that PNOW is fresh when CMST shows the failure, as it is when it shows
+    /// a move done; whatever ends that read (its answer, a time-out, a stop) reports the first
+    /// failure.
     pub(super) fn fail_job(&mut self, axis: Axis, error: JobError) {
+        let online = self.axes[axis].link == super::Link::Online;
+        if let Some(active) = self.active[axis].as_mut() {
+            if let Some(first) = active.failing {
+                self.finish(axis, Err(first));
+                return;
+            }
+            let read = (usize::from(active.cursor) + 1..usize::from(u8::MAX))
+                .take(8)
+                .find(|&i| reads_position(&active.job, i))
+                .and_then(|i| u8::try_from(i).ok());
+            if let (true, true, Some(read)) = (online, error.position_unknown(), read) {
+                active.failing = Some(error);
+                active.cursor = read;
+                active.high_water = read;
+                active.attempt = 0;
+                active.wait_deadline = None;
+                return;
+            }
+        }
         self.finish(axis, Err(error));
     }
 }

@@ -132,8 +132,8 @@ impl Engine {
             }
             Origin::Job => {
                 let error = if matches!(flight.request.command, Command::MoveRelative(_)) {
-                    // It may have moved: never resend, read where it is.
-                    self.schedule.position_due(axis);
+                    // It may have moved: never resend; the job reads where it is
+                    // (`fail_job`).
                     JobError::OutcomeUnknown
                 } else {
                     JobError::Timeout

@@ -137,15 +137,31 @@ fn relative_move_is_never_resent_and_position_is_reread() {
         .unwrap();
     let m = next_frame(&mut engine, &mut now);
     assert_eq!(m.command, Command::MoveRelative(Pulses(800)));
-    // No answer: the next frame is not another `m`.
+    // No answer: the next frame is not another `m` but the job's read of where the axis is,
+    // and the failure is reported only once that is known (PNOW fresh when CMST shows it).
+    let done = |engine: &mut Engine| {
+        events(engine).into_iter().find_map(|e| match e {
+            Event::JobDone { id: i, result, .. } if i == id => Some(result),
+            _ => None,
+        })
+    };
     let next = next_frame(&mut engine, &mut now);
-    assert_ne!(next.command, m.command);
+    assert_eq!(
+        next.command,
+        Command::ReadMemory {
+            address: protocol::memory::PNOW
+        }
+    );
     assert_eq!(engine.axis(axis(0)).counters.retries, 0);
-    let done = events(&mut engine).into_iter().find_map(|e| match e {
-        Event::JobDone { id: i, result, .. } if i == id => Some(result),
-        _ => None,
-    });
-    assert_eq!(done, Some(Err(JobError::OutcomeUnknown)));
+    assert_eq!(done(&mut engine), None, "not before the position is read");
+    let moved = Reply::Memory {
+        axis: axis(0),
+        code: MemoryCode::ReadMemory,
+        value: 500,
+    };
+    reply(&mut engine, &mut now, moved);
+    assert_eq!(engine.axis(axis(0)).position, Some(Pulses(500)));
+    assert_eq!(done(&mut engine), Some(Err(JobError::OutcomeUnknown)));
     assert_eq!(
         engine.axis(axis(0)).link,
         Link::Online,
@@ -450,4 +466,74 @@ fn a_move_seen_only_in_position_is_read_again_until_it_rests() {
     let values: Vec<i32> = reads_after_done.iter().map(|r| r.1).collect();
     assert_eq!(values, [-4, -4]);
     assert!(reads_after_done[1].0 .0 - reads_after_done[0].0 .0 >= 20_000);
+}
+
+/// A move that ends in an alarm reads where the axis stopped before the failure is reported;
+/// when that read goes unanswered the failure reported is still the alarm, not the time-out.
+#[test]
+fn a_move_that_fails_reads_its_position_first_and_reports_the_first_failure() {
+    let mut engine = Engine::new(config(1));
+    let mut now = Instant(0);
+    let poll = next_frame(&mut engine, &mut now);
+    reply(&mut engine, &mut now, ready(&poll));
+    let id = engine
+        .submit(Job {
+            axis: axis(0),
+            kind: JobKind::MoveToPoint(PositionNo::new(2).unwrap()),
+        })
+        .unwrap();
+    let q3 = next_frame(&mut engine, &mut now);
+    assert!(matches!(q3.command, Command::MoveToPoint(_)));
+    // Taken and moving (no PFIN); the status poll during the wait shows an error alarm.
+    let mut moving = ready(&q3);
+    if let Reply::Status { report, .. } = &mut moving {
+        report.outputs = Outputs::ALM_N;
+    }
+    reply(&mut engine, &mut now, moving);
+    let read_pnow = Command::ReadMemory {
+        address: protocol::memory::PNOW,
+    };
+    let mut alarm_sent = false;
+    loop {
+        let frame = next_frame(&mut engine, &mut now);
+        match frame.command {
+            // The schedule's reads during the move are answered; after the alarm, the read is
+            // the job's.
+            c if c == read_pnow && alarm_sent => break,
+            c if c == read_pnow => {
+                let at = Reply::Memory {
+                    axis: axis(0),
+                    code: MemoryCode::ReadMemory,
+                    value: 100,
+                };
+                reply(&mut engine, &mut now, at);
+            }
+            _ => {
+                let mut status = ready(&frame);
+                if let Reply::Status { report, .. } = &mut status {
+                    report.alarm = AlarmCode(0xC8);
+                    report.outputs = Outputs::NONE;
+                }
+                reply(&mut engine, &mut now, status);
+                alarm_sent = true;
+            }
+        }
+    }
+    let done = |engine: &mut Engine| {
+        events(engine).into_iter().find_map(|e| match e {
+            Event::JobDone { id: i, result, .. } if i == id => Some(result),
+            _ => None,
+        })
+    };
+    assert_eq!(done(&mut engine), None, "not before the position is read");
+    // The read is never answered: resent, then the axis is offline.
+    let mut result = None;
+    for _ in 0..10 {
+        if let Some(r) = done(&mut engine) {
+            result = Some(r);
+            break;
+        }
+        let _ = next_frame(&mut engine, &mut now);
+    }
+    assert_eq!(result, Some(Err(JobError::Alarm(AlarmCode(0xC8)))));
 }
