@@ -541,3 +541,37 @@ fn unknown_toml_keys_are_refused_by_name() {
     let empty = ok(sim.run(&with_axis(&["points", "read", "0"])));
     assert_eq!(empty.lines().count(), 1, "nothing written: {empty}");
 }
+
+#[test]
+fn a_port_that_is_not_a_serial_port_and_a_negative_lead_are_explained() {
+    let out = commission(&["--port", "/dev/null", "status", "0"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("/dev/null: not a serial port"),
+        "{}",
+        stderr(&out)
+    );
+    let out = commission(&["--port", "/dev/null", "--lead", "-3", "status", "0"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("lead `-3` must be between 0.01 and 655.35 mm"),
+        "not 'unexpected argument': {}",
+        stderr(&out)
+    );
+    let out = commission(&[
+        "--port",
+        "/dev/null",
+        "--lead",
+        "8",
+        "--home",
+        "motor",
+        "move",
+        "0",
+        "--mm",
+        "5",
+        "--speed",
+        "-5",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("must be >= 0"), "{}", stderr(&out));
+}

@@ -95,10 +95,10 @@ enum Cmd {
         #[arg(long, value_parser = parse_point)]
         point: Option<PositionNo>,
         /// Speed, mm/s (with --mm; default: the controller's).
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true)]
         speed: Option<f64>,
         /// Acceleration, G (with --speed).
-        #[arg(long, default_value_t = 0.3)]
+        #[arg(long, default_value_t = 0.3, allow_negative_numbers = true)]
         accel: f64,
     },
     /// Jog: move by this many mm (negative toward home), as a relative move.
