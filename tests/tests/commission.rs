@@ -355,3 +355,223 @@ fn an_absent_axis_is_a_clear_error() {
         stderr(&out)
     );
 }
+
+/// `points write` with `file`, failing: standard error.
+fn refused(sim: &Sim, file: &std::path::Path, extra: &[&str]) -> String {
+    let file = file.to_str().expect("path");
+    let out = sim.run(&with_axis(
+        &[&["points", "write", "0", "--file", file][..], extra].concat(),
+    ));
+    assert_eq!(out.status.code(), Some(1), "{}", stdout(&out));
+    stderr(&out)
+}
+
+#[test]
+fn rows_the_controller_would_lose_or_clamp_are_refused_and_nothing_is_written() {
+    // rc-sim's axis: 100 mm stroke, soft limits at the stroke.
+    let sim = Sim::start(&["--axes", "0,", "--baud", "38400", "--rtim", "3"]);
+    let table = temp(
+        "lossy.csv",
+        "point,position_mm,speed_mm_s,accel_g,band_mm\n\
+         1,10,100,0.3,0.1\n\
+         2,20,0,0.3,0.1\n\
+         3,-5,100,0.3,0.1\n\
+         4,500,100,0.3,0.1\n\
+         5,30,100,0,0.1\n",
+    );
+    let err = refused(&sim, &table, &[]);
+    assert!(err.contains("nothing written: 4 of 5 rows"), "{err}");
+    assert!(
+        err.contains("lossy.csv:3: point 2: speed 0 mm/s"),
+        "the row and the reason: {err}"
+    );
+    assert!(
+        err.contains("lossy.csv:4: point 3: position -5.00 mm: behind the home end"),
+        "{err}"
+    );
+    assert!(
+        err.contains(
+            "lossy.csv:5: point 4: position 500.00 mm: beyond the controller's soft limit"
+        ),
+        "{err}"
+    );
+    assert!(
+        err.contains("lossy.csv:6: point 5: acceleration 0.00 G"),
+        "{err}"
+    );
+    assert!(!err.contains("point 1:"), "row 1 is fine: {err}");
+    let table_now = ok(sim.run(&with_axis(&["points", "read", "0"])));
+    assert_eq!(
+        table_now.lines().count(),
+        1,
+        "not even the good row was written: {table_now}"
+    );
+
+    // Within the soft limits but beyond the stroke declared: refused as well; the same rows
+    // in TOML name their lines too.
+    let short = temp(
+        "short.toml",
+        "[[point]]\npoint = 1\nposition_mm = 10.0\nspeed_mm_s = 100.0\naccel_g = 0.3\nband_mm = 0.1\n\n\
+         [[point]]\npoint = 2\nposition_mm = 60.0\nspeed_mm_s = 100.0\naccel_g = 0.3\nband_mm = 0.1\n",
+    );
+    let err = refused(&sim, &short, &["--stroke", "50"]);
+    assert!(
+        err.contains("short.toml:8: point 2: position 60.00 mm: beyond the stroke, 50.00 mm"),
+        "{err}"
+    );
+    let negative = sim.run(&with_axis(&[
+        "points",
+        "write",
+        "0",
+        "--file",
+        short.to_str().expect("path"),
+        "--stroke",
+        "-3",
+    ]));
+    assert_eq!(negative.status.code(), Some(2), "bad input");
+    assert!(
+        stderr(&negative).contains("`-3`: a stroke is a length, more than 0 mm"),
+        "{}",
+        stderr(&negative)
+    );
+    let fine = ok(sim.run(&with_axis(&[
+        "points",
+        "write",
+        "0",
+        "--file",
+        short.to_str().expect("path"),
+        "--stroke",
+        "100",
+    ])));
+    assert!(fine.contains("2 of 2 points stored and verified"), "{fine}");
+}
+
+#[test]
+fn a_bad_file_is_reported_without_a_bus() {
+    let table = temp(
+        "offline.csv",
+        "point,position_mm,speed_mm_s,accel_g,band_mm\n1,10,0,0.3,0.1\n",
+    );
+    let out = commission(&with_axis(&[
+        "--port",
+        "/nonexistent/tty",
+        "points",
+        "write",
+        "0",
+        "--file",
+        table.to_str().expect("path"),
+    ]));
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("offline.csv:2: point 1: speed 0 mm/s"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn csv_columns_are_read_by_their_header_in_any_order() {
+    let sim = Sim::start(&["--axes", "0,", "--baud", "38400", "--rtim", "3"]);
+    let table = temp(
+        "reordered.csv",
+        "speed_mm_s, point ,band_mm,position_mm,accel_g\n100,4,0.1,12.5,0.3\n",
+    );
+    let written = ok(sim.run(&with_axis(&[
+        "points",
+        "write",
+        "0",
+        "--file",
+        table.to_str().expect("path"),
+    ])));
+    assert!(
+        written.contains("~ point  4: empty -> 12.50 mm at 100.00 mm/s, 0.30 G, band 0.10 mm"),
+        "{written}"
+    );
+    let back = ok(sim.run(&with_axis(&["points", "read", "0"])));
+    assert_eq!(
+        back,
+        "point,position_mm,speed_mm_s,accel_g,band_mm\n4,12.50,100.00,0.30,0.10\n"
+    );
+
+    for (name, content, expected) in [
+        (
+            "unknown.csv",
+            "point,position_mm,speed,accel_g,band_mm\n1,10,100,0.3,0.1\n",
+            "unknown.csv:1: unknown column `speed`",
+        ),
+        (
+            "missing.csv",
+            "point,position_mm,accel_g,band_mm\n1,10,0.3,0.1\n",
+            "missing.csv:1: no column `speed_mm_s`",
+        ),
+        (
+            "headerless.csv",
+            "1,10,100,0.3,0.1\n",
+            "headerless.csv:1: the first line must be the header",
+        ),
+        (
+            "short_row.csv",
+            "point,position_mm,speed_mm_s,accel_g,band_mm\n1,10,100,0.3\n",
+            "short_row.csv:2: 4 fields, the header has 5",
+        ),
+        (
+            "decimals.csv",
+            "point,position_mm,speed_mm_s,accel_g,band_mm\n1,10.005,100,0.3,0.1\n",
+            "decimals.csv:2: position_mm: `10.005` has more than 2 decimals",
+        ),
+    ] {
+        let err = refused(&sim, &temp(name, content), &[]);
+        assert!(err.contains(expected), "{name}: {err}");
+    }
+}
+
+#[test]
+fn unknown_toml_keys_are_refused_by_name() {
+    let sim = Sim::start(&["--axes", "0,", "--baud", "38400", "--rtim", "3"]);
+    let typo = temp(
+        "typo.toml",
+        "[[point]]\npoint = 1\nposition_mm = 10.0\nspeed_mm_s = 100.0\naccel_g = 0.3\nband_mm = 0.1\nspeed = 50.0\n",
+    );
+    let err = refused(&sim, &typo, &[]);
+    assert!(err.contains("typo.toml"), "{err}");
+    assert!(err.contains("unknown field `speed`"), "{err}");
+    let top = temp("top.toml", "axis = 0\n[[point]]\npoint = 1\nposition_mm = 10.0\nspeed_mm_s = 100.0\naccel_g = 0.3\nband_mm = 0.1\n");
+    let err = refused(&sim, &top, &[]);
+    assert!(err.contains("unknown field `axis`"), "{err}");
+    let empty = ok(sim.run(&with_axis(&["points", "read", "0"])));
+    assert_eq!(empty.lines().count(), 1, "nothing written: {empty}");
+}
+
+#[test]
+fn a_port_that_is_not_a_serial_port_and_a_negative_lead_are_explained() {
+    let out = commission(&["--port", "/dev/null", "status", "0"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("/dev/null: not a serial port"),
+        "{}",
+        stderr(&out)
+    );
+    let out = commission(&["--port", "/dev/null", "--lead", "-3", "status", "0"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("lead `-3` must be between 0.01 and 655.35 mm"),
+        "not 'unexpected argument': {}",
+        stderr(&out)
+    );
+    let out = commission(&[
+        "--port",
+        "/dev/null",
+        "--lead",
+        "8",
+        "--home",
+        "motor",
+        "move",
+        "0",
+        "--mm",
+        "5",
+        "--speed",
+        "-5",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("must be >= 0"), "{}", stderr(&out));
+}

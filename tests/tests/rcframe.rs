@@ -537,6 +537,49 @@ fn bad_command_line_input_exits_2() {
 }
 
 #[test]
+fn empty_input_is_bad_input_with_a_message() {
+    let dir = std::env::temp_dir().join(format!("rcframe-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let empty = dir.join("empty.txt");
+    std::fs::write(&empty, "").expect("write");
+    let comments = dir.join("comments.txt");
+    std::fs::write(&comments, "# a capture header, no bytes\n\n").expect("write");
+    let (empty, comments) = (
+        empty.to_str().expect("path"),
+        comments.to_str().expect("path"),
+    );
+    for (args, stdin, says) in [
+        (&["decode", ""][..], "", "the argument holds no frame"),
+        (&["decode", "  "][..], "", "the argument holds no frame"),
+        (
+            &["decode", "--file", empty][..],
+            "",
+            "empty.txt holds no frame",
+        ),
+        (
+            &["decode", "--file", comments][..],
+            "",
+            "comments.txt holds no frame",
+        ),
+        (&["decode", "-"][..], "", "standard input holds no frame"),
+    ] {
+        let out = run(args, Some(stdin));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(out.stdout.is_empty(), "{args:?}");
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+    // Noise only is a capture without a frame: exit status 1, and the reason on stderr.
+    let out = run(&["decode", "-"], Some("FF 00 41\n"));
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("no frame in the capture's 3 bytes"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
 fn alarm_texts_come_from_the_codec_table() {
     let out = rcframe(&["alarm", "E0"]);
     assert_eq!(out.status.code(), Some(0));

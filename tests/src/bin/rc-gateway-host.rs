@@ -37,7 +37,7 @@ LINES
                               9.6 kbit/s, communication change) runs first unless
                               --no-establish; --axes says which axes are on the bus
   The first line on standard output is `PLC <device>`: the device the Modbus master opens.
-  Units: axis n is Modbus unit n + 1; the gateway itself is --unit (63).
+  Units: axis n is Modbus unit n + 1; the gateway itself is --unit (63; 1-247, not an axis' unit).
 
 CONTROL LINES (standard input)
   On by default with --sim, off with --bus (--control / --no-control). One command per line;
@@ -118,17 +118,19 @@ struct Cli {
     /// --sim: store point 1 = 20 mm and point 3 = 40 mm on every axis.
     #[arg(long)]
     points: bool,
-    /// The gateway's own Modbus unit.
-    #[arg(long, default_value_t = protocol::plc::DEFAULT_GATEWAY_UNIT)]
+    /// The gateway's own Modbus unit, 1-247 (not an axis' unit: axis n is unit n + 1).
+    #[arg(long, default_value_t = protocol::plc::DEFAULT_GATEWAY_UNIT, value_parser = parse_unit)]
     unit: u8,
     /// The PLC watchdog, ms (0 = off, else 50-60000).
     #[arg(long, default_value_t = protocol::plc::DEFAULT_WATCHDOG_MS, value_name = "MS")]
     watchdog_ms: u16,
     /// Screw lead of every axis, mm.
-    #[arg(long, default_value = "8", value_name = "MM", value_parser = parse_hundredths)]
+    #[arg(long, default_value = "8", value_name = "MM", allow_negative_numbers = true,
+          value_parser = parse_hundredths)]
     lead_mm: u32,
     /// Stroke of every axis, mm.
-    #[arg(long, default_value = "100", value_name = "MM", value_parser = parse_hundredths)]
+    #[arg(long, default_value = "100", value_name = "MM", allow_negative_numbers = true,
+          value_parser = parse_hundredths)]
     stroke_mm: u32,
     /// Home end of every axis.
     #[arg(long, value_enum, default_value_t = Home::Motor)]
@@ -198,9 +200,24 @@ fn parse_bus_baud(text: &str) -> Result<u32, String> {
     }
 }
 
-/// A length in mm with at most two decimals, as 0.01 mm.
+/// A Modbus unit id a gateway can have: 1-247 (Serial Line §2.2; 0 is the broadcast address,
+/// 248-255 are reserved).
+fn parse_unit(text: &str) -> Result<u8, String> {
+    text.trim()
+        .parse::<u8>()
+        .ok()
+        .filter(|unit| (1..=247).contains(unit))
+        .ok_or_else(|| format!("{text:?}: a Modbus unit id is 1-247"))
+}
+
+/// A length in mm with at most two decimals, more than 0, as 0.01 mm.
 fn parse_hundredths(text: &str) -> Result<u32, String> {
-    let bad = || format!("{text:?}: a length in mm such as 8 or 2.5");
+    if text.trim().starts_with('-') {
+        return Err(format!(
+            "{text:?}: a lead or stroke is a length, more than 0 mm"
+        ));
+    }
+    let bad = || format!("{text:?}: a length in mm more than 0, such as 8 or 2.5");
     let (whole, fraction) = text.trim().split_once('.').unwrap_or((text.trim(), ""));
     if fraction.len() > 2 || !fraction.chars().all(|c| c.is_ascii_digit()) {
         return Err(bad());

@@ -39,7 +39,8 @@
 //! whitespace, commas, `0x` and `#` comments allowed) goes byte by byte through the gateway's
 //! deframer, which resynchronises over noise: one JSON line per packet or rejected candidate,
 //! and with `--summary` a final count. Exit status 0 if at least one packet was found and every
-//! candidate was valid.
+//! candidate was valid; 1 otherwise (noise only says so on standard error). An empty capture
+//! (no hex bytes at all) is bad input.
 //!
 //! ```text
 //! $ rcframe decode --file capture.txt --summary

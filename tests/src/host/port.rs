@@ -78,28 +78,42 @@ impl Port {
     /// A serial device in raw mode, 8 data bits, 1 stop bit, no flow control, at `bps`.
     pub fn serial(path: &Path, bps: u32, parity: Parity) -> io::Result<Port> {
         let rate = termios_rate(bps).ok_or_else(|| unsupported_rate(bps))?;
+        // Every failure names the device: "Inappropriate ioctl for device" alone does not say
+        // which of the two lines is not a serial port.
+        let named = |e: io::Error| {
+            let what = if e.raw_os_error() == Some(Errno::ENOTTY as i32) {
+                format!("not a serial port ({e})")
+            } else {
+                e.to_string()
+            };
+            io::Error::new(e.kind(), format!("{}: {what}", path.display()))
+        };
         let file = std::fs::OpenOptions::new()
             .read(true)
             .write(true)
             .custom_flags(nix::libc::O_NOCTTY | nix::libc::O_NONBLOCK)
             .open(path)
-            .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", path.display())))?;
-        let mut attrs = termios::tcgetattr(&file)?;
-        termios::cfmakeraw(&mut attrs);
-        attrs.control_flags &= !(ControlFlags::CSTOPB
-            | ControlFlags::CRTSCTS
-            | ControlFlags::PARENB
-            | ControlFlags::PARODD);
-        attrs.control_flags |= ControlFlags::CLOCAL | ControlFlags::CREAD | ControlFlags::CS8;
-        attrs.input_flags &= !(InputFlags::IXON | InputFlags::IXOFF | InputFlags::INPCK);
-        match parity {
-            Parity::None => {}
-            Parity::Even => attrs.control_flags |= ControlFlags::PARENB,
-            Parity::Odd => attrs.control_flags |= ControlFlags::PARENB | ControlFlags::PARODD,
-        }
-        termios::cfsetspeed(&mut attrs, rate)?;
-        termios::tcsetattr(&file, SetArg::TCSANOW, &attrs)?;
-        termios::tcflush(&file, termios::FlushArg::TCIOFLUSH)?;
+            .map_err(named)?;
+        let set_up = || -> io::Result<()> {
+            let mut attrs = termios::tcgetattr(&file)?;
+            termios::cfmakeraw(&mut attrs);
+            attrs.control_flags &= !(ControlFlags::CSTOPB
+                | ControlFlags::CRTSCTS
+                | ControlFlags::PARENB
+                | ControlFlags::PARODD);
+            attrs.control_flags |= ControlFlags::CLOCAL | ControlFlags::CREAD | ControlFlags::CS8;
+            attrs.input_flags &= !(InputFlags::IXON | InputFlags::IXOFF | InputFlags::INPCK);
+            match parity {
+                Parity::None => {}
+                Parity::Even => attrs.control_flags |= ControlFlags::PARENB,
+                Parity::Odd => attrs.control_flags |= ControlFlags::PARENB | ControlFlags::PARODD,
+            }
+            termios::cfsetspeed(&mut attrs, rate)?;
+            termios::tcsetattr(&file, SetArg::TCSANOW, &attrs)?;
+            termios::tcflush(&file, termios::FlushArg::TCIOFLUSH)?;
+            Ok(())
+        };
+        set_up().map_err(named)?;
         Ok(Port {
             file,
             slave: None,

@@ -53,10 +53,29 @@ pub fn run(args: &DecodeArgs) -> Result<bool, String> {
 }
 
 fn input(args: &DecodeArgs) -> Result<Input, String> {
+    let input = read_input(args)?;
+    match input {
+        Input::Capture(ref bytes) if bytes.is_empty() => {
+            let source = match (&args.file, args.input.as_slice()) {
+                (Some(path), _) => format!("{} holds", path.display()),
+                (None, [dash]) if dash == "-" => "standard input holds".to_owned(),
+                (None, _) => "the argument holds".to_owned(),
+            };
+            Err(format!(
+                "nothing to decode: {source} no frame and no hex bytes (only blanks or # comments)"
+            ))
+        }
+        input => Ok(input),
+    }
+}
+
+fn read_input(args: &DecodeArgs) -> Result<Input, String> {
     if let Some(path) = &args.file {
         let text = std::fs::read_to_string(path)
             .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        return parse_hex(&text).map(Input::Capture);
+        return parse_hex(&text)
+            .map(Input::Capture)
+            .map_err(|e| format!("{}: {e}", path.display()));
     }
     match args.input.as_slice() {
         [] => Err("nothing to decode: give a frame, a hex dump, `-` or --file".to_owned()),
@@ -241,6 +260,13 @@ fn capture(bytes: &[u8], args: &DecodeArgs) -> bool {
             "noise_bytes": counters.noise_bytes,
         }});
         println!("{summary}");
+    }
+    if tally.packets == 0 && tally.errors == 0 {
+        // Nothing printed above: say why the exit status is 1.
+        eprintln!(
+            "rcframe: no frame in the capture's {} bytes (noise only)",
+            bytes.len()
+        );
     }
     tally.errors == 0 && tally.packets > 0
 }

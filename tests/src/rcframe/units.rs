@@ -68,7 +68,9 @@ pub fn parse_lead(text: &str) -> Result<Lead, String> {
     u16::try_from(value)
         .ok()
         .and_then(Lead::from_hundredths)
-        .ok_or_else(|| format!("lead `{text}` must be between 0.01 and 655.35 mm"))
+        .ok_or_else(|| {
+            format!("lead `{text}` must be between 0.01 and 655.35 mm (a screw's pitch, positive)")
+        })
 }
 
 /// An unsigned integer, decimal or `0x` hex.
@@ -177,7 +179,7 @@ impl From<Home> for HomeDirection {
 #[derive(Args, Clone, Debug)]
 pub struct ScaleArgs {
     /// Screw lead in mm (e.g. 2.5)
-    #[arg(long, value_parser = parse_lead)]
+    #[arg(long, value_parser = parse_lead, allow_negative_numbers = true)]
     pub lead: Option<Lead>,
     /// The end the axis homes to, which sets the sign of positions
     #[arg(long, value_enum)]

@@ -35,7 +35,14 @@ impl Line {
         let port = serialport::new(path, baud.bits_per_second())
             .timeout(MAX_WAIT)
             .open()
-            .map_err(|e| format!("{path}: {e}"))?;
+            .map_err(|e| {
+                // serialport words ENOTTY as "Not a typewriter": say what it means here.
+                if e.description == nix::errno::Errno::ENOTTY.desc() {
+                    format!("{path}: not a serial port ({e})")
+                } else {
+                    format!("{path}: {e}")
+                }
+            })?;
         let config = Config {
             axes,
             baud,

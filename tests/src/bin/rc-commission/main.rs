@@ -24,6 +24,7 @@ use std::time::Duration;
 use clap::{Parser, Subcommand, ValueEnum};
 use protocol::engine::{Event, Job, JobKind, JobOutput, Link};
 use protocol::line::Baud;
+use protocol::memory::common;
 use protocol::units::{Accel, Length, Speed};
 use protocol::{Axis, AxisSet, PositionNo, Rtim};
 use rc_host::rcframe::units::{parse_axis, parse_point, ScaleArgs};
@@ -94,10 +95,10 @@ enum Cmd {
         #[arg(long, value_parser = parse_point)]
         point: Option<PositionNo>,
         /// Speed, mm/s (with --mm; default: the controller's).
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true)]
         speed: Option<f64>,
         /// Acceleration, G (with --speed).
-        #[arg(long, default_value_t = 0.3)]
+        #[arg(long, default_value_t = 0.3, allow_negative_numbers = true)]
         accel: f64,
     },
     /// Jog: move by this many mm (negative toward home), as a relative move.
@@ -151,6 +152,10 @@ enum PointsCmd {
         /// Only print the differences.
         #[arg(long)]
         dry_run: bool,
+        /// The axis' stroke, mm: positions beyond it are refused (as are positions beyond the
+        /// soft limits the controller reports, and below 0).
+        #[arg(long, value_name = "MM", allow_negative_numbers = true, value_parser = parse_stroke)]
+        stroke: Option<Length>,
     },
 }
 
@@ -166,6 +171,14 @@ fn parse_baud(text: &str) -> Result<u32, String> {
         .and_then(Baud::from_bits_per_second)
         .map(Baud::bits_per_second)
         .ok_or_else(|| format!("{text:?}: a rate the controllers support (9600 ... 230400)"))
+}
+
+fn parse_stroke(text: &str) -> Result<Length, String> {
+    let length = rc_host::rcframe::units::parse_length(text)?;
+    if length.0 <= 0 {
+        return Err(format!("`{text}`: a stroke is a length, more than 0 mm"));
+    }
+    Ok(length)
 }
 
 fn baud(bps: u32) -> Result<Baud, String> {
@@ -253,7 +266,8 @@ fn run(cli: &Cli) -> Result<(), String> {
                 axis,
                 file,
                 dry_run,
-            } => write_points(cli, *axis, rtim, file, *dry_run),
+                stroke,
+            } => write_points(cli, *axis, rtim, file, *dry_run, *stroke),
         },
     }
 }
@@ -434,19 +448,68 @@ fn read_points(
     Ok(())
 }
 
+/// The soft limits (LIML, LIMM) in effect: the execution area's copy of the common parameters.
+fn soft_limits(
+    line: &mut Line,
+    axis: Axis,
+) -> Result<(protocol::Pulses, protocol::Pulses), String> {
+    let mut read = |address: protocol::Address| {
+        let address = protocol::Address(protocol::memory::EXECUTION_OFFSET + address.0);
+        match line.job(
+            Job {
+                axis,
+                kind: JobKind::Command(protocol::Command::ReadMemory { address }),
+            },
+            JOB_LIMIT,
+        )? {
+            JobOutput::Value(v) => Ok(protocol::Pulses(v as i32)),
+            _ => Err(format!("axis {}: no value", axis.get())),
+        }
+    };
+    Ok((read(common::LIML)?, read(common::LIMM)?))
+}
+
 fn write_points(
     cli: &Cli,
     axis: Axis,
     rtim: Rtim,
     file: &std::path::Path,
     dry_run: bool,
+    stroke: Option<Length>,
 ) -> Result<(), String> {
     let scale = cli.scale.require_position()?;
-    let rows = points::read(file)?;
-    let mut line = connect(cli, axis, rtim)?;
+    let entries = points::read(file)?;
+    let mut travel = points::Travel {
+        stroke: stroke.map(|s| s.0),
+        soft: None,
+    };
+    // What the file alone shows is reported even without a bus; with one, together with the
+    // positions beyond the soft limits.
+    let offline = points::check(&entries, file, &scale, &travel);
+    let mut line = match connect(cli, axis, rtim) {
+        Ok(line) => line,
+        Err(e) => return offline.and(Err(e)),
+    };
+    match soft_limits(&mut line, axis) {
+        Ok(soft) => {
+            let (low, high) = points::soft_limits_mm(soft, &scale);
+            println!("  axis {}: soft limits {low} to {high} mm", axis.get());
+            travel.soft = Some(soft);
+        }
+        Err(e) if stroke.is_some() => {
+            eprintln!("rc-commission: soft limits not read ({e}): positions checked against --stroke only");
+        }
+        Err(e) => {
+            return Err(format!(
+                "the soft limits LIMM/LIML, to check the positions against, not read ({e}); \
+                 give the axis' stroke with --stroke MM"
+            ))
+        }
+    }
+    let stored = points::check(&entries, file, &scale, &travel)?;
     let mut changes = Vec::new();
-    for row in &rows {
-        let (point, data) = row.to_wire(&scale)?;
+    for (entry, &(point, data)) in entries.iter().zip(&stored) {
+        let row = entry.row;
         let JobOutput::Point(current) = line.job(
             Job {
                 axis,
@@ -470,7 +533,7 @@ fn write_points(
         println!(
             "dry run: {} of {} points would be stored",
             changes.len(),
-            rows.len()
+            entries.len()
         );
         return Ok(());
     }
@@ -489,7 +552,7 @@ fn write_points(
     println!(
         "{} of {} points stored and verified",
         changes.len(),
-        rows.len()
+        entries.len()
     );
     Ok(())
 }
