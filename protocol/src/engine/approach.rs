@@ -83,13 +83,22 @@ impl Approach {
     };
 
     /// A move command was accepted at `now`, with the position last read (for a relative
-    /// move). Other commands leave the estimate alone.
-    pub(super) fn command_accepted(&mut self, now: Instant, command: &Command, at: Option<Pulses>) {
+    /// move) and, for a move to a point, the point's position if its job knows it. Other
+    /// commands leave the estimate alone.
+    pub(super) fn command_accepted(
+        &mut self,
+        now: Instant,
+        command: &Command,
+        at: Option<Pulses>,
+        point_at: Option<Pulses>,
+    ) {
         let target = match *command {
             Command::MoveAbsolute(to) => Some(to),
             Command::MoveRelative(by) => at.map(|from| Pulses(from.0.saturating_add(by.0))),
-            // A point's or a home's position is not in the command: no estimate.
-            Command::MoveToPoint(_) | Command::Home(_) => None,
+            // A point's position is not in the command: only if its job knows it.
+            Command::MoveToPoint(_) => point_at,
+            // A home's is not known: no estimate.
+            Command::Home(_) => None,
             _ => return,
         };
         *self = Approach {
@@ -227,7 +236,12 @@ mod tests {
     #[test]
     fn extrapolates_the_speed_between_two_reads_to_the_target() {
         let mut a = Approach::NONE;
-        a.command_accepted(Instant(0), &Command::MoveAbsolute(Pulses(10_000)), None);
+        a.command_accepted(
+            Instant(0),
+            &Command::MoveAbsolute(Pulses(10_000)),
+            None,
+            None,
+        );
         // 1000 pulses in 100 ms, 6000 to go: 600 ms.
         a.position_read(
             Instant(200 * MS),
@@ -240,6 +254,7 @@ mod tests {
             Instant(0),
             &Command::MoveRelative(Pulses(-5_000)),
             Some(Pulses(10_000)),
+            None,
         );
         a.position_read(
             Instant(50 * MS),
@@ -256,10 +271,29 @@ mod tests {
             Instant(0),
             &Command::MoveToPoint(crate::PositionNo::MIN),
             None,
+            None,
         );
         a.position_read(Instant(20), Pulses(5), Some((Pulses(0), Instant(10))));
         assert_eq!(a.eta(), None, "a point's position is unknown here");
-        a.command_accepted(Instant(100), &Command::MoveAbsolute(Pulses(1_000)), None);
+        // Known to its job (the gateway's cached row): estimated as an `a` is.
+        a.command_accepted(
+            Instant(0),
+            &Command::MoveToPoint(crate::PositionNo::MIN),
+            None,
+            Some(Pulses(105)),
+        );
+        a.position_read(Instant(20), Pulses(5), Some((Pulses(0), Instant(10))));
+        assert_eq!(
+            a.eta(),
+            Some(Instant(20 + 200)),
+            "100 pulses left at 0.5 pulse/µs"
+        );
+        a.command_accepted(
+            Instant(100),
+            &Command::MoveAbsolute(Pulses(1_000)),
+            None,
+            None,
+        );
         a.position_read(Instant(120), Pulses(5), Some((Pulses(0), Instant(90))));
         assert_eq!(a.eta(), None, "the earlier read is from before the move");
         a.position_read(Instant(140), Pulses(5), Some((Pulses(5), Instant(120))));
@@ -303,21 +337,26 @@ mod tests {
         assert!(!a.settling());
         // A new move ends it.
         a.stopped();
-        a.command_accepted(Instant(0), &Command::MoveAbsolute(Pulses(0)), None);
+        a.command_accepted(Instant(0), &Command::MoveAbsolute(Pulses(0)), None, None);
         assert!(!a.settling());
     }
 
     #[test]
     fn other_commands_keep_the_estimate_and_extremes_do_not_overflow() {
         let mut a = Approach::NONE;
-        a.command_accepted(Instant(0), &Command::MoveAbsolute(Pulses(i32::MAX)), None);
+        a.command_accepted(
+            Instant(0),
+            &Command::MoveAbsolute(Pulses(i32::MAX)),
+            None,
+            None,
+        );
         a.position_read(
             Instant(u64::MAX / 2),
             Pulses(i32::MIN + 1),
             Some((Pulses(i32::MIN), Instant(0))),
         );
         assert_eq!(a.eta(), Some(Instant(u64::MAX)), "saturates");
-        a.command_accepted(Instant(1), &Command::Status, None);
+        a.command_accepted(Instant(1), &Command::Status, None, None);
         assert_eq!(a.eta(), Some(Instant(u64::MAX)));
     }
 }

@@ -27,8 +27,11 @@ pub enum JobKind {
     /// The homing procedure (complete edition §6-2): wait ready (PFIN), `o`, wait for ZFIN,
     /// then read the position (0), so that it is known when the job is done.
     Home(HomeDirection),
-    /// Q3, then wait for positioning complete.
-    MoveToPoint(PositionNo),
+    /// Q3, then wait for positioning complete. With the point's position, if the submitter
+    /// knows it (the gateway's cached row): the Q3 does not say where the axis goes, and only
+    /// a known target lets the schedule estimate the arrival
+    /// ([`approach`](super::approach)).
+    MoveToPoint(PositionNo, Option<Pulses>),
     /// `a`, then wait for positioning complete.
     MoveAbsolute(Pulses),
     /// `m`, then wait. Never resent on time-out: the outcome is then unknown (§5 (2)).
@@ -320,7 +323,7 @@ pub(crate) fn program(job: &Job, index: usize) -> Option<Op> {
 /// [`JobKind::AwaitInPosition`] is the same without a command.
 fn move_program(axis: Axis, kind: JobKind, index: usize) -> Option<Op> {
     let (command, commands) = match kind {
-        JobKind::MoveToPoint(point) => (Command::MoveToPoint(point), 1),
+        JobKind::MoveToPoint(point, _) => (Command::MoveToPoint(point), 1),
         JobKind::MoveAbsolute(position) => (Command::MoveAbsolute(position), 1),
         JobKind::MoveRelative(distance) => (Command::MoveRelative(distance), 1),
         JobKind::DirectMove {

@@ -112,6 +112,8 @@ struct InFlight {
     /// With [`Config::wire_timing`], the answer cannot be complete before this (command, RTIM,
     /// response on the wire): a frame that ends earlier is someone else's.
     earliest_reply: Instant,
+    /// When the command was handed over to go on the wire.
+    sent: Instant,
     attempt: u8,
 }
 
@@ -394,9 +396,17 @@ impl Engine {
         }
         if flight.origin == Origin::Job && reply.rejection().is_none() {
             let at = self.axes[axis].position;
-            self.schedule
-                .approach(axis)
-                .command_accepted(now, &flight.request.command, at);
+            // A point's position is not in its Q3: the job may know it.
+            let point_at = match self.active[axis].as_ref().map(|a| a.job.kind) {
+                Some(JobKind::MoveToPoint(_, target)) => target,
+                _ => None,
+            };
+            self.schedule.approach(axis).command_accepted(
+                now,
+                &flight.request.command,
+                at,
+                point_at,
+            );
         }
         match flight.origin {
             Origin::Poll | Origin::Probe | Origin::Position | Origin::Cancelled => {}

@@ -105,7 +105,16 @@ pub(super) struct Schedule {
     arrival_run: u8,
     /// Polls of idle axes that were due, in a row.
     idle_run: u8,
+    /// What an answered transaction takes on this bus, measured ([`MEASURE_WEIGHT`]), and the
+    /// nominal time it was measured against: a pseudo-terminal or a USB adapter answers faster
+    /// than the wire's time, a slow converter slower, and a cycle is what the bus really does.
+    transaction: Duration,
+    measured_against: Duration,
 }
+
+/// A new transaction time counts for 1/8 of the measured one (an average over about the last
+/// eight transactions: a late reply moves it little, a different bus within a cycle).
+pub const MEASURE_WEIGHT: i64 = 8;
 
 impl Schedule {
     pub(super) const fn new(position_reads_per_cycle: u8) -> Schedule {
@@ -122,6 +131,31 @@ impl Schedule {
             approach: AxisMap::new(Approach::NONE),
             arrival_run: 0,
             idle_run: 0,
+            transaction: Duration::ZERO,
+            measured_against: Duration::ZERO,
+        }
+    }
+
+    /// An answered transaction took `took` (command handed over to answer in, plus the host
+    /// gap) on a bus whose nominal transaction is `nominal`. A new nominal time (another rate or
+    /// RTIM) starts the measurement again.
+    pub(super) fn transaction_measured(&mut self, nominal: Duration, took: Duration) {
+        if self.measured_against != nominal {
+            self.measured_against = nominal;
+            self.transaction = took;
+            return;
+        }
+        let (was, now) = (self.transaction.0 as i64, took.0 as i64);
+        self.transaction = Duration(was.saturating_add((now - was) / MEASURE_WEIGHT).max(0) as u64);
+    }
+
+    /// One transaction on this bus: as measured, or `nominal` until one is (or after the rate
+    /// changed).
+    fn transaction(&self, nominal: Duration) -> Duration {
+        if self.measured_against == nominal {
+            self.transaction
+        } else {
+            nominal
         }
     }
 
@@ -173,7 +207,8 @@ impl Engine {
         self.axes[axis].moving() || self.busy(axis) || self.schedule.approach[axis].unseen()
     }
 
-    /// One status poll of every axis that answers (or may), at the wire limit.
+    /// One status poll of every axis that answers (or may), at the measured transaction time
+    /// (the wire limit until one is measured).
     pub(super) fn cycle_time(&self) -> Duration {
         let polled = self
             .config
@@ -182,7 +217,8 @@ impl Engine {
             .filter(|&a| self.axes[a].link != Link::Offline)
             .count()
             .max(1);
-        let transaction = timing::transaction_time(self.config.baud, self.config.rtim);
+        let nominal = timing::transaction_time(self.config.baud, self.config.rtim);
+        let transaction = self.schedule.transaction(nominal);
         Duration(transaction.0.saturating_mul(polled as u64))
     }
 

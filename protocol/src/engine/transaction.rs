@@ -54,6 +54,15 @@ impl Engine {
         };
         self.in_flight = None;
         self.free_at = now + timing::HOST_GAP;
+        // A V5's answer waits for the memory write, and a rejoin or the establishment talks at
+        // another rate: not what a poll takes.
+        let typical = !matches!(flight.request.command, Command::StoreFromEdit(_))
+            && !matches!(flight.origin, Origin::Rejoin | Origin::Establish);
+        if typical {
+            let nominal = timing::transaction_time(self.config.baud, self.config.rtim);
+            let took = Duration(now.0.saturating_sub(flight.sent.0)).plus(timing::HOST_GAP);
+            self.schedule.transaction_measured(nominal, took);
+        }
         self.complete(now, flight, reply);
     }
 
@@ -94,6 +103,7 @@ impl Engine {
             origin,
             deadline,
             earliest_reply,
+            sent: now,
             attempt,
         });
         Output::Transmit(frame)

@@ -444,7 +444,7 @@ impl Pio {
     /// the point the axis is at. Any other refused job leaves a wait for an accepted move as it
     /// is.
     pub fn refused(&mut self, job: &JobKind) {
-        if matches!(job, JobKind::Home(_) | JobKind::MoveToPoint(_)) {
+        if matches!(job, JobKind::Home(_) | JobKind::MoveToPoint(..)) {
             self.waiting = None;
         }
     }
@@ -596,7 +596,7 @@ impl Pio {
         }
         if let Some(point) = self.pending_move.take() {
             self.waiting = Some(Await::new(Target::Point(point), now, axis, &report));
-            return Some(JobKind::MoveToPoint(point));
+            return Some(JobKind::MoveToPoint(point, None));
         }
         None
     }

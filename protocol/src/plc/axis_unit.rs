@@ -123,7 +123,7 @@ impl Gateway {
             self.command_written(axis, JobKind::Home(home))?;
         }
         if rising(DRG1_CSTR) {
-            self.command_written(axis, JobKind::MoveToPoint(old.posr))?;
+            self.command_written(axis, JobKind::MoveToPoint(old.posr, None))?;
         }
         Ok(())
     }

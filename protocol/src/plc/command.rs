@@ -95,7 +95,7 @@ impl Motion {
     pub(super) fn of(kind: &JobKind) -> Motion {
         match kind {
             JobKind::Home(_) => Motion::Home,
-            JobKind::MoveToPoint(_)
+            JobKind::MoveToPoint(..)
             | JobKind::DirectMove { .. }
             | JobKind::Jog(_)
             | JobKind::MoveAbsolute(_)

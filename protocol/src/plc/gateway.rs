@@ -20,8 +20,9 @@ use crate::axes::{AxisMap, AxisSet};
 use crate::engine::{
     Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Link, Output, SubmitError,
 };
+use crate::memory::PointField;
 use crate::time::{earliest, Duration, Instant};
-use crate::Axis;
+use crate::{Axis, Pulses};
 
 /// While SON is held ON and the servo is off, it is turned on again at most this often.
 const SON_RETRY: Duration = Duration::from_millis(2000);
@@ -266,6 +267,16 @@ impl Gateway {
         if !stop && !self.engine.online(axis) {
             return Err(Refused::Offline);
         }
+        // A point's position, if its row is cached (the PLC wrote or read it): the schedule
+        // then estimates the arrival as it does for a direct move.
+        let kind = match kind {
+            JobKind::MoveToPoint(point, None) => {
+                let row = self.points.get(axis, point);
+                let at = row.map(|r| Pulses::from_wire(r.get(PointField::Position)));
+                JobKind::MoveToPoint(point, at)
+            }
+            other => other,
+        };
         // (A stop does not move the axis: it is never blocked.)
         let motion = Motion::of(&kind);
         let blocked = motion != Motion::None && self.blocked().contains(axis);

@@ -479,7 +479,7 @@ fn a_move_that_fails_reads_its_position_first_and_reports_the_first_failure() {
     let id = engine
         .submit(Job {
             axis: axis(0),
-            kind: JobKind::MoveToPoint(PositionNo::new(2).unwrap()),
+            kind: JobKind::MoveToPoint(PositionNo::new(2).unwrap(), None),
         })
         .unwrap();
     let q3 = next_frame(&mut engine, &mut now);

@@ -37,7 +37,7 @@ fn an_input_counts_after_exactly_the_debounce_time() {
     assert_eq!(rig.run(6), vec![]);
     assert!(!rig.pio.inputs().cstr());
     // The sample 6 ms after the pin changed recognises it; PC1-PC8 have long been stable.
-    assert_eq!(rig.run(1), vec![(6, JobKind::MoveToPoint(p(3)))]);
+    assert_eq!(rig.run(1), vec![(6, JobKind::MoveToPoint(p(3), None))]);
     assert!(rig.pio.inputs().cstr());
 }
 
@@ -50,7 +50,7 @@ fn a_glitch_restarts_the_debounce_time() {
     assert_eq!(rig.run(1), vec![]);
     rig.set(In::CSTR, true);
     let jobs = rig.run(10);
-    assert_eq!(jobs, vec![(11, JobKind::MoveToPoint(p(3)))]);
+    assert_eq!(jobs, vec![(11, JobKind::MoveToPoint(p(3), None))]);
 }
 
 #[test]
@@ -62,7 +62,7 @@ fn zero_debounce_and_settle_act_on_the_sample() {
     });
     rig.select(9);
     rig.set(In::CSTR, true);
-    assert_eq!(rig.run(1), vec![(0, JobKind::MoveToPoint(p(9)))]);
+    assert_eq!(rig.run(1), vec![(0, JobKind::MoveToPoint(p(9), None))]);
     rig.set(In::STP_N, false);
     assert_eq!(rig.run(1), vec![(1, JobKind::Stop)]);
 }
@@ -78,7 +78,7 @@ fn cstr_latches_the_position_once_the_pc_bits_have_settled() {
     rig.set(In::CSTR, true);
     // PC recognised at 6, CSTR at 8: PC has been stable only 2 ms then; latched at 6 + 6 = 12.
     let jobs = rig.run(40);
-    assert_eq!(jobs, vec![(12, JobKind::MoveToPoint(p(5)))]);
+    assert_eq!(jobs, vec![(12, JobKind::MoveToPoint(p(5), None))]);
 }
 
 #[test]
@@ -94,20 +94,20 @@ fn a_strobe_waits_while_the_pc_bits_keep_changing_and_is_not_dropped() {
     // t=7: CSTR falls (recognised at 13), before the latch: the strobe stays.
     rig.set(In::CSTR, false);
     let jobs = rig.run(40);
-    assert_eq!(jobs, vec![(15, JobKind::MoveToPoint(p(12)))]);
+    assert_eq!(jobs, vec![(15, JobKind::MoveToPoint(p(12), None))]);
 }
 
 #[test]
 fn cstr_held_on_moves_once_and_each_new_edge_moves_again() {
     let mut rig = Rig::new(Config::default());
     rig.set(In::CSTR, true);
-    assert_eq!(rig.run(200), vec![(6, JobKind::MoveToPoint(p(3)))]);
+    assert_eq!(rig.run(200), vec![(6, JobKind::MoveToPoint(p(3), None))]);
     rig.set(In::CSTR, false);
     assert_eq!(rig.run(20), vec![]);
     rig.select(12);
     assert_eq!(rig.run(20), vec![]);
     rig.set(In::CSTR, true);
-    assert_eq!(rig.run(50), vec![(246, JobKind::MoveToPoint(p(12)))]);
+    assert_eq!(rig.run(50), vec![(246, JobKind::MoveToPoint(p(12), None))]);
 }
 
 #[test]
@@ -137,7 +137,7 @@ fn inputs_on_at_start_up_must_go_off_before_their_edge_counts() {
             jobs.push((t, job));
         }
     }
-    assert_eq!(jobs, vec![(116, JobKind::MoveToPoint(p(3)))]);
+    assert_eq!(jobs, vec![(116, JobKind::MoveToPoint(p(3), None))]);
 }
 
 #[test]
@@ -267,7 +267,7 @@ fn cstr_and_home_are_ignored_while_stp_is_off_and_release_does_not_resume() {
     rig.set(In::CSTR, false);
     assert_eq!(rig.run(20), vec![]);
     rig.set(In::CSTR, true);
-    assert_eq!(rig.run(20), vec![(186, JobKind::MoveToPoint(p(3)))]);
+    assert_eq!(rig.run(20), vec![(186, JobKind::MoveToPoint(p(3), None))]);
 }
 
 #[test]

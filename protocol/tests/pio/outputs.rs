@@ -84,7 +84,7 @@ fn pend_and_pm_are_off_from_the_strobe_until_the_move_completes() {
     rig.set(In::CSTR, true);
     assert_eq!(rig.run(6), vec![]);
     assert!(rig.out.pend(), "CSTR not recognised yet");
-    assert_eq!(rig.tick(), Some(JobKind::MoveToPoint(p(5))));
+    assert_eq!(rig.tick(), Some(JobKind::MoveToPoint(p(5), None)));
     assert!(!rig.out.pend());
     assert_eq!(rig.out.pm(), 0);
     rig.set(In::CSTR, false);
@@ -113,7 +113,7 @@ fn a_short_move_missed_by_the_samples_completes_on_pm() {
     rig.select(9);
     rig.set(In::CSTR, true);
     // PC and CSTR recognised together at 6; PC stable for the settle time at 12.
-    assert_eq!(rig.run(20), vec![(12, JobKind::MoveToPoint(p(9)))]);
+    assert_eq!(rig.run(20), vec![(12, JobKind::MoveToPoint(p(9), None))]);
     rig.set(In::CSTR, false);
     rig.run(10);
     // The only status seen after the command already shows it done.
@@ -128,7 +128,7 @@ fn pm_is_shown_while_cstr_is_held_but_pend_only_after_it_falls() {
     let mut rig = Rig::new(Config::default());
     rig.select(2);
     rig.set(In::CSTR, true);
-    assert_eq!(rig.run(20), vec![(12, JobKind::MoveToPoint(p(2)))]);
+    assert_eq!(rig.run(20), vec![(12, JobKind::MoveToPoint(p(2), None))]);
     rig.status(READY_STATUS, 0, 0xA0);
     rig.run(2);
     rig.status(READY_STATUS, 0, DONE_OUT | 2);
@@ -178,7 +178,7 @@ fn a_move_the_gateway_refuses_releases_the_outputs_and_nothing_else_does() {
     rig.run(1);
     assert!(!rig.out.pend(), "still waiting: the move was taken");
     // The move itself refused (the stop input holds the axis): nothing is coming.
-    rig.pio.refused(&JobKind::MoveToPoint(p(5)));
+    rig.pio.refused(&JobKind::MoveToPoint(p(5), None));
     rig.run(1);
     assert!(rig.out.pend());
     assert_eq!(rig.out.pm(), 3, "the point the axis is at");
@@ -206,7 +206,7 @@ fn an_alarm_during_a_move_shows_the_alarm() {
     let mut rig = Rig::new(Config::default());
     rig.select(6);
     rig.set(In::CSTR, true);
-    assert_eq!(rig.run(20), vec![(12, JobKind::MoveToPoint(p(6)))]);
+    assert_eq!(rig.run(20), vec![(12, JobKind::MoveToPoint(p(6), None))]);
     rig.status(0x01, 0xC8, 0x09);
     rig.run(1);
     assert!(rig.out.alarm());

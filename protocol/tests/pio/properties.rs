@@ -93,7 +93,7 @@ proptest! {
 
             let (out, job) = pio.sample(Instant(now), In::from_bits(s.inputs), &state, s.link_ok, HomeDirection::MotorEnd);
 
-            let motion = matches!(job, Some(JobKind::MoveToPoint(_) | JobKind::Home(_)));
+            let motion = matches!(job, Some(JobKind::MoveToPoint(..) | JobKind::Home(_)));
             prop_assert!(
                 !(motion && stp_recognised != Some(true)),
                 "motion {:?} with *STP {:?}",

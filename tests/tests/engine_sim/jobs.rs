@@ -80,7 +80,7 @@ fn home_then_absolute_move_then_point_write_with_verify() {
         &mut h,
         Job {
             axis: axis(1),
-            kind: JobKind::MoveToPoint(point),
+            kind: JobKind::MoveToPoint(point, None),
         },
         10 * S,
     )

@@ -30,7 +30,7 @@ pub(crate) fn job_requests(job: &Job) -> Vec<Request> {
         JobKind::Command(c) => one(c),
         JobKind::Servo(on) => one(Command::Servo(on)),
         JobKind::Home(d) => one(Command::Home(d)),
-        JobKind::MoveToPoint(p) => one(Command::MoveToPoint(p)),
+        JobKind::MoveToPoint(p, _) => one(Command::MoveToPoint(p)),
         JobKind::MoveAbsolute(x) | JobKind::Jog(x) => one(Command::MoveAbsolute(x)),
         JobKind::MoveRelative(d) => one(Command::MoveRelative(d)),
         JobKind::DirectMove {
@@ -112,7 +112,7 @@ pub(crate) fn kind_name(kind: &JobKind) -> &'static str {
         JobKind::Command(_) => "Command",
         JobKind::Servo(_) => "Servo",
         JobKind::Home(_) => "Home",
-        JobKind::MoveToPoint(_) => "MoveToPoint",
+        JobKind::MoveToPoint(..) => "MoveToPoint",
         JobKind::MoveAbsolute(_) => "MoveAbsolute",
         JobKind::MoveRelative(_) => "MoveRelative",
         JobKind::DirectMove { relative: true, .. } => "DirectMove (m)",

@@ -161,7 +161,7 @@ impl Soak {
                         verify: true,
                     },
                 );
-                self.submit(a, JobKind::MoveToPoint(point));
+                self.submit(a, JobKind::MoveToPoint(point, None));
             }
             71..=75 => {
                 let written = self.plc[n].written;
@@ -170,7 +170,7 @@ impl Soak {
                     while written & (1 << p) == 0 {
                         p = p % 15 + 1;
                     }
-                    self.submit(a, JobKind::MoveToPoint(PositionNo::new(p).unwrap()));
+                    self.submit(a, JobKind::MoveToPoint(PositionNo::new(p).unwrap(), None));
                 }
             }
             76..=81 => {

@@ -227,7 +227,7 @@ fn run(cli: &Cli) -> Result<(), String> {
             accel,
         } => {
             let kind = match (mm, point) {
-                (_, Some(point)) => JobKind::MoveToPoint(*point),
+                (_, Some(point)) => JobKind::MoveToPoint(*point, None),
                 (Some(mm), None) => {
                     let scale = cli.scale.require_position()?;
                     let target = scale
