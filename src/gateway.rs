@@ -158,7 +158,14 @@ pub async fn run(
         while let Some(action) = node.poll(clock) {
             let Board { bus, plc, .. } = &mut *board;
             match action {
-                Action::Bus(frame) => plc.settle_then(pin!(bus.send(&frame))).await,
+                // COMM_CHANGE goes out as a frame does: one send (and one await) for both.
+                Action::Bus(_) | Action::Line(LineAction::CommChange) => {
+                    let bytes = match action {
+                        Action::Bus(frame) => frame,
+                        _ => protocol::frame::COMM_CHANGE,
+                    };
+                    plc.settle_then(pin!(bus.send(&bytes))).await;
+                }
                 // Left to the UART: see the module documentation.
                 Action::Reply(reply) => plc.start_send(reply).await,
                 Action::Line(LineAction::SetBaud(baud)) => {
@@ -169,10 +176,6 @@ pub async fn run(
                     plc.settle_then(pin!(bus.break_start())).await
                 }
                 Action::Line(LineAction::BreakEnd) => bus.break_end(),
-                Action::Line(LineAction::CommChange) => {
-                    plc.settle_then(pin!(bus.send(&protocol::frame::COMM_CHANGE)))
-                        .await
-                }
                 // After the reply to the write that asked for it has left.
                 Action::PlcLine(line) => plc.set_line(line.baud, line.parity).await,
                 Action::Store(Store::Save(record)) => {

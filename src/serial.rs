@@ -185,8 +185,11 @@ impl Rs485 {
     }
 
     /// Changes the rate (both directions) after any transmission in progress has completed.
-    pub async fn set_baud(&mut self, bits_per_second: u32) {
-        self.set_line(bits_per_second, self.parity).await
+    /// (Not `async`: the caller awaits `set_line`'s future itself, without a state machine of
+    /// this wrapper's around it.)
+    pub fn set_baud(&mut self, bits_per_second: u32) -> impl Future<Output = ()> + '_ {
+        let parity = self.parity;
+        self.set_line(bits_per_second, parity)
     }
 
     /// Changes rate and framing after any transmission in progress has completed. A change the
@@ -222,10 +225,10 @@ impl Rs485 {
         self.char_time() * n as u32
     }
 
-    /// Waits until everything written has left the line.
-    pub async fn flush(&mut self) {
+    /// Waits until everything written has left the line. (Not `async`, as `set_baud`.)
+    pub fn flush(&mut self) -> impl Future<Output = ()> + '_ {
         self.sending = true;
-        self.settle().await;
+        self.settle()
     }
 
     /// Starts holding the line low (driver enabled), after any transmission has completed.
