@@ -178,21 +178,23 @@ pub async fn run(
                 Action::Line(LineAction::BreakEnd) => bus.break_end(),
                 // After the reply to the write that asked for it has left.
                 Action::PlcLine(line) => plc.set_line(line.baud, line.parity).await,
-                Action::Store(Store::Save(record)) => {
-                    // The reply to SAVE leaves first: on the F103 an erase stops the CPU, and
-                    // with it the interrupt that feeds the UART, for 20-40 ms.
+                Action::Store(store) => {
+                    // The reply to the write that asked for it leaves first: on the F103 an
+                    // erase stops the CPU, and with it the interrupt that feeds the UART, for
+                    // 20-40 ms.
                     plc.settle().await;
-                    let saved = settings.save(&record);
-                    node.stored(saved);
-                }
-                Action::Store(store @ (Store::FactoryReset | Store::Restart)) => {
-                    // The reply to the write that asked for it goes out first (and before an
-                    // erase stops the F103's CPU).
-                    plc.settle().await;
-                    if matches!(store, Store::FactoryReset) {
-                        settings.factory_reset();
+                    match store {
+                        Store::Save(record) => {
+                            let saved = settings.save(&record);
+                            node.stored(saved);
+                        }
+                        Store::FactoryReset | Store::Restart => {
+                            if matches!(store, Store::FactoryReset) {
+                                settings.factory_reset();
+                            }
+                            cortex_m::peripheral::SCB::sys_reset();
+                        }
                     }
-                    cortex_m::peripheral::SCB::sys_reset();
                 }
             }
             clock = now();
