@@ -141,11 +141,11 @@ pub async fn run(
         }
         // Whatever else has arrived meanwhile goes in before anything goes out.
         loop {
-            let n = board.bus.read_ready(&mut bus_buf).await;
+            let n = board.bus.read_ready(&mut bus_buf);
             if n > 0 {
                 node.bus_received(now(), bytes(&bus_buf, n));
             }
-            let m = board.plc.read_ready(&mut plc_buf).await;
+            let m = board.plc.read_ready(&mut plc_buf);
             if m > 0 {
                 node.plc_received(now(), bytes(&plc_buf, m));
             }

@@ -93,12 +93,14 @@ impl Rs485 {
     /// The received bytes already buffered, without waiting (0 when none, and while a send on
     /// this line has not settled: the other end answers only after it, so what is there is read
     /// once the line has settled, and a reply is never started behind an unsettled one).
-    pub async fn read_ready(&mut self, buf: &mut [u8]) -> usize {
+    /// (Not `async`: with bytes buffered, the blocking read returns them at once; no state
+    /// machine of its own, nor one per call in the gateway task.)
+    pub fn read_ready(&mut self, buf: &mut [u8]) -> usize {
         if self.sending {
             return 0;
         }
         match self.uart.read_ready() {
-            Ok(true) => self.read(buf).await,
+            Ok(true) => embedded_io::Read::read(&mut self.uart, buf).unwrap_or(0),
             _ => 0,
         }
     }
