@@ -141,11 +141,11 @@ pub async fn run(
         }
         // Whatever else has arrived meanwhile goes in before anything goes out.
         loop {
-            let n = board.bus.read_ready(&mut bus_buf).await;
+            let n = board.bus.read_ready(&mut bus_buf);
             if n > 0 {
                 node.bus_received(now(), bytes(&bus_buf, n));
             }
-            let m = board.plc.read_ready(&mut plc_buf).await;
+            let m = board.plc.read_ready(&mut plc_buf);
             if m > 0 {
                 node.plc_received(now(), bytes(&plc_buf, m));
             }
@@ -158,7 +158,14 @@ pub async fn run(
         while let Some(action) = node.poll(clock) {
             let Board { bus, plc, .. } = &mut *board;
             match action {
-                Action::Bus(frame) => plc.settle_then(pin!(bus.send(&frame))).await,
+                // COMM_CHANGE goes out as a frame does: one send (and one await) for both.
+                Action::Bus(_) | Action::Line(LineAction::CommChange) => {
+                    let bytes = match action {
+                        Action::Bus(frame) => frame,
+                        _ => protocol::frame::COMM_CHANGE,
+                    };
+                    plc.settle_then(pin!(bus.send(&bytes))).await;
+                }
                 // Left to the UART: see the module documentation.
                 Action::Reply(reply) => plc.start_send(reply).await,
                 Action::Line(LineAction::SetBaud(baud)) => {
@@ -169,27 +176,25 @@ pub async fn run(
                     plc.settle_then(pin!(bus.break_start())).await
                 }
                 Action::Line(LineAction::BreakEnd) => bus.break_end(),
-                Action::Line(LineAction::CommChange) => {
-                    plc.settle_then(pin!(bus.send(&protocol::frame::COMM_CHANGE)))
-                        .await
-                }
                 // After the reply to the write that asked for it has left.
                 Action::PlcLine(line) => plc.set_line(line.baud, line.parity).await,
-                Action::Store(Store::Save(record)) => {
-                    // The reply to SAVE leaves first: on the F103 an erase stops the CPU, and
-                    // with it the interrupt that feeds the UART, for 20-40 ms.
+                Action::Store(store) => {
+                    // The reply to the write that asked for it leaves first: on the F103 an
+                    // erase stops the CPU, and with it the interrupt that feeds the UART, for
+                    // 20-40 ms.
                     plc.settle().await;
-                    let saved = settings.save(&record);
-                    node.stored(saved);
-                }
-                Action::Store(store @ (Store::FactoryReset | Store::Restart)) => {
-                    // The reply to the write that asked for it goes out first (and before an
-                    // erase stops the F103's CPU).
-                    plc.settle().await;
-                    if matches!(store, Store::FactoryReset) {
-                        settings.factory_reset();
+                    match store {
+                        Store::Save(record) => {
+                            let saved = settings.save(&record);
+                            node.stored(saved);
+                        }
+                        Store::FactoryReset | Store::Restart => {
+                            if matches!(store, Store::FactoryReset) {
+                                settings.factory_reset();
+                            }
+                            cortex_m::peripheral::SCB::sys_reset();
+                        }
                     }
-                    cortex_m::peripheral::SCB::sys_reset();
                 }
             }
             clock = now();

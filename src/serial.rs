@@ -93,12 +93,14 @@ impl Rs485 {
     /// The received bytes already buffered, without waiting (0 when none, and while a send on
     /// this line has not settled: the other end answers only after it, so what is there is read
     /// once the line has settled, and a reply is never started behind an unsettled one).
-    pub async fn read_ready(&mut self, buf: &mut [u8]) -> usize {
+    /// (Not `async`: with bytes buffered, the blocking read returns them at once; no state
+    /// machine of its own, nor one per call in the gateway task.)
+    pub fn read_ready(&mut self, buf: &mut [u8]) -> usize {
         if self.sending {
             return 0;
         }
         match self.uart.read_ready() {
-            Ok(true) => self.read(buf).await,
+            Ok(true) => embedded_io::Read::read(&mut self.uart, buf).unwrap_or(0),
             _ => 0,
         }
     }
@@ -185,8 +187,11 @@ impl Rs485 {
     }
 
     /// Changes the rate (both directions) after any transmission in progress has completed.
-    pub async fn set_baud(&mut self, bits_per_second: u32) {
-        self.set_line(bits_per_second, self.parity).await
+    /// (Not `async`: the caller awaits `set_line`'s future itself, without a state machine of
+    /// this wrapper's around it.)
+    pub fn set_baud(&mut self, bits_per_second: u32) -> impl Future<Output = ()> + '_ {
+        let parity = self.parity;
+        self.set_line(bits_per_second, parity)
     }
 
     /// Changes rate and framing after any transmission in progress has completed. A change the
@@ -222,10 +227,10 @@ impl Rs485 {
         self.char_time() * n as u32
     }
 
-    /// Waits until everything written has left the line.
-    pub async fn flush(&mut self) {
+    /// Waits until everything written has left the line. (Not `async`, as `set_baud`.)
+    pub fn flush(&mut self) -> impl Future<Output = ()> + '_ {
         self.sending = true;
-        self.settle().await;
+        self.settle()
     }
 
     /// Starts holding the line low (driver enabled), after any transmission has completed.
