@@ -105,16 +105,18 @@ pub(super) struct Schedule {
     arrival_run: u8,
     /// Polls of idle axes that were due, in a row.
     idle_run: u8,
-    /// What an answered transaction takes on this bus, measured ([`MEASURE_WEIGHT`]), and the
+    /// What an answered transaction takes on this bus, measured ([`MEASURE_SHIFT`]), and the
     /// nominal time it was measured against: a pseudo-terminal or a USB adapter answers faster
     /// than the wire's time, a slow converter slower, and a cycle is what the bus really does.
     transaction: Duration,
     measured_against: Duration,
 }
 
-/// A new transaction time counts for 1/8 of the measured one (an average over about the last
-/// eight transactions: a late reply moves it little, a different bus within a cycle).
-pub const MEASURE_WEIGHT: i64 = 8;
+/// A new transaction time counts for 1/2^3 = 1/8 of the measured one (an average over about the
+/// last eight transactions: a late reply moves it little, a different bus within a cycle). A
+/// shift, not a division: a 64-bit division would pull 1 KB of the compiler's routines into the
+/// F103's flash.
+pub const MEASURE_SHIFT: u32 = 3;
 
 impl Schedule {
     pub(super) const fn new(position_reads_per_cycle: u8) -> Schedule {
@@ -145,8 +147,8 @@ impl Schedule {
             self.transaction = took;
             return;
         }
-        let (was, now) = (self.transaction.0 as i64, took.0 as i64);
-        self.transaction = Duration(was.saturating_add((now - was) / MEASURE_WEIGHT).max(0) as u64);
+        let was = self.transaction.0;
+        self.transaction = Duration(was - (was >> MEASURE_SHIFT) + (took.0 >> MEASURE_SHIFT));
     }
 
     /// One transaction on this bus: as measured, or `nominal` until one is (or after the rate

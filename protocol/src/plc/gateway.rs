@@ -20,9 +20,8 @@ use crate::axes::{AxisMap, AxisSet};
 use crate::engine::{
     Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Link, Output, SubmitError,
 };
-use crate::memory::PointField;
 use crate::time::{earliest, Duration, Instant};
-use crate::{Axis, Pulses};
+use crate::Axis;
 
 /// While SON is held ON and the servo is off, it is turned on again at most this often.
 const SON_RETRY: Duration = Duration::from_millis(2000);
@@ -271,9 +270,7 @@ impl Gateway {
         // then estimates the arrival as it does for a direct move.
         let kind = match kind {
             JobKind::MoveToPoint(point, None) => {
-                let row = self.points.get(axis, point);
-                let at = row.map(|r| Pulses::from_wire(r.get(PointField::Position)));
-                JobKind::MoveToPoint(point, at)
+                JobKind::MoveToPoint(point, self.points.position(axis, point))
             }
             other => other,
         };

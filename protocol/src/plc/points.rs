@@ -19,7 +19,7 @@ use super::refused::Refused;
 use crate::axes::AxisMap;
 use crate::engine::{Engine, Job, JobError, JobId, JobKind, JobOutput};
 use crate::jobs::{PointData, PointReadback};
-use crate::{Axis, PositionNo};
+use crate::{Axis, PositionNo, Pulses};
 
 /// Rows kept, for all axes together.
 pub const CACHED_ROWS: usize = 18;
@@ -79,6 +79,14 @@ impl PointCache {
         let row = self.rows.get_mut(slot)?.as_mut()?;
         row.used = clock;
         Some(row.data)
+    }
+
+    /// The point's position, if its row is cached (as the controller holds it, in pulses; not
+    /// marked as used: a move is not a use of the table).
+    pub(super) fn position(&self, axis: Axis, point: PositionNo) -> Option<Pulses> {
+        let row = self.rows.get(self.slot(axis, point)?)?.as_ref()?;
+        // PointField::ALL starts with the position.
+        row.data.0.first().map(|&wire| Pulses::from_wire(wire))
     }
 
     fn put(&mut self, axis: Axis, point: PositionNo, data: PointReadback) {
