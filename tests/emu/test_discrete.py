@@ -106,6 +106,10 @@ def test_stp_stops_a_move(emu):
     wait_output(emu, MOVE, 0, 10, "stopped")
     assert "CancelMotion" in [c[2] for c in emu.bus_changes(0)[before:]]
     assert emu.outputs() & 0xF != 3, "PM1-PM8 do not show point 3: never reached"
+    # Cut short, the move is not complete: PEND stays OFF (PCON's *STP pauses; PEND waits for
+    # the point), PM 0, however long the controller shows PFIN where the axis stopped.
+    time.sleep(0.3)
+    assert output(emu, PEND) == 0 and emu.outputs() & 0xF == 0, "not complete"
     # While *STP is OFF, CSTR is ignored: nothing more goes out.
     settled = len(emu.bus_changes(0))
     pins.pulse(CSTR)
@@ -116,8 +120,11 @@ def test_stp_stops_a_move(emu):
     pins.set(STP_N, True)
     time.sleep(0.5)
     assert output(emu, MOVE) == 0
+    assert output(emu, PEND) == 0, "still not at its point"
     pins.pulse(CSTR)
     wait_output(emu, MOVE, 1, 10, "moving again")
+    wait_output(emu, PEND, 1, 15, "PEND once at point 3")
+    assert emu.outputs() & 0xF == 3
 
 
 def test_res_clears_an_alarm(emu):
@@ -149,6 +156,7 @@ def test_the_stop_input_stops_a_move_and_blocks_the_next(emu):
     time.sleep(0.5)
     assert all(c[2] == "CancelMotion" for c in emu.bus_changes(0)[settled:]), "no move while open"
     assert output(emu, MOVE) == 0
+    assert output(emu, PEND) == 0 and emu.outputs() & 0xF == 0, "cut short: not complete"
 
 
 AXISCFG, APPLY, BUS_BAUD = 0x0100, 0x000A, 0x0007
