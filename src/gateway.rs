@@ -20,7 +20,7 @@ use embassy_futures::select::{select4, Either4};
 use embassy_time::Timer;
 
 use crate::board::Board;
-use crate::io::{self, Sample, SAMPLES};
+use crate::io::{self, Sample, SAMPLED};
 use crate::node::{Action, Instant, Node};
 use crate::serial::Rs485;
 use crate::settings::Settings;
@@ -97,10 +97,9 @@ pub async fn run(
     board.plc.set_line(plc.baud, plc.parity).await;
     // The harness waits for this line: both UARTs receive at their settings from now on.
     info!("ready");
-    let first = SAMPLES.try_take().unwrap_or(boot);
-    let mut stop = first.stop;
+    let mut stop = boot.stop;
     node.set_stop_input(now(), stop);
-    node.sample_inputs(now(), first.inputs);
+    node.sample_inputs(now(), boot.inputs);
     let mut indicators_at = Instant::ZERO;
     // The clock as the last pass left it: the heartbeat and the indicators' period count from
     // there, so that a pass reads the clock only where the node needs it (each reading costs a
@@ -112,7 +111,7 @@ pub async fn run(
         let event = select4(
             bus_read(&mut board.bus, &mut bus_buf, hold),
             plc_read(&mut board.plc, &mut plc_buf),
-            SAMPLES.wait(),
+            SAMPLED.wait(),
             deadline(protocol::time::earliest(
                 node.poll_at(),
                 Some(clock + HEARTBEAT),
@@ -122,13 +121,7 @@ pub async fn run(
         match event {
             Either4::First(n) => node.bus_received(now(), bytes(&bus_buf, n)),
             Either4::Second(n) => node.plc_received(now(), bytes(&plc_buf, n)),
-            Either4::Third(sample) => {
-                if sample.stop != stop {
-                    stop = sample.stop;
-                    node.set_stop_input(now(), stop);
-                }
-                node.sample_inputs(now(), sample.inputs);
-            }
+            Either4::Third(()) => samples(node, &mut stop),
             Either4::Fourth(()) => {}
         }
         #[cfg(feature = "emulator")]
@@ -209,6 +202,26 @@ pub async fn run(
             indicators_at = clock + INDICATORS_PERIOD;
         }
         board.watchdog.pet();
+    }
+}
+
+/// Hands the node what the I/O task has sampled since the last call, at the times it was sampled:
+/// each run of one level ([`io::Run`]) as its first and its last sample. The debouncer decides as
+/// on every sample (a level counts once its samples span the debounce time); what a level starts
+/// is stamped with the run's last sample: not earlier than every sample would have, and not
+/// later than this task could act on it anyway.
+fn samples(node: &mut Node, stop: &mut bool) {
+    while let Some(run) = io::take() {
+        let (first, last) = run.at(now().0);
+        let (first, last) = (Instant(first), Instant(last));
+        if run.sample.stop != *stop {
+            *stop = run.sample.stop;
+            node.set_stop_input(first, *stop);
+        }
+        node.sample_inputs(first, run.sample.inputs);
+        if last != first {
+            node.sample_inputs(last, run.sample.inputs);
+        }
     }
 }
 

@@ -14,10 +14,12 @@
 //! task cost about 1,600 instructions (the wake, re-arming both UART reads and its timers, the
 //! pins); one of this task about 575, still 0.9 points of CPU load at 1 kHz.
 
+use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use embassy_futures::select::{select, Either};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Ticker, Timer};
 
@@ -48,9 +50,104 @@ impl Sample {
     }
 }
 
-/// Samples for the gateway task; a newer one replaces one not taken yet (the node acts on the
-/// pins' state, and the time it sees them).
-pub static SAMPLES: Signal<CriticalSectionRawMutex, Sample> = Signal::new();
+/// Samples wait here for the gateway task, as runs: a run is one level of the pins and the
+/// stamps of its first and last samples, taken when the pins were read. The gateway task takes
+/// nothing while it awaits a bus command's send, a rate change or a flush (a command at 9.6
+/// kbit/s keeps it 16.7 ms); stamped here and kept, the samples of that time reach the node as
+/// they were taken, so a pulse longer than the debounce plus one sample period is neither lost
+/// nor shortened. When the gateway task kept only the newest sample and stamped it as it took it,
+/// 8 ms CSTR pulses at 9.6 kbit/s with four axes were taken 6 times of 20
+/// (`tests/emu/test_discrete.py`).
+///
+/// [`RUNS`] levels fit: an input must hold a level for the debounce time (6 ms) to count, so a
+/// PLC changes them far less often than the longest wait fills (a PC change, CSTR ON and CSTR
+/// OFF within 17 ms are 4 levels). A fifth (a contact bouncing during a 2 s flush of a 1.2
+/// kbit/s reply) replaces the newest run: that level is lost, and the one before it may look
+/// held through it (a bounce the debouncer would have counted goes unseen).
+static PENDING: Mutex<CriticalSectionRawMutex, RefCell<Runs>> = Mutex::new(RefCell::new(Runs {
+    runs: [Run::EMPTY; RUNS],
+    head: 0,
+    len: 0,
+}));
+
+/// Wakes the gateway task when a sample is pending.
+pub static SAMPLED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+
+/// How many levels wait for the gateway task at most: see [`PENDING`].
+const RUNS: usize = 4;
+
+/// Samples of one level, in a row: see [`PENDING`].
+#[derive(Clone, Copy)]
+pub struct Run {
+    /// The level.
+    pub sample: Sample,
+    /// The first sample's time: the low 32 bits of its µs since boot ([`Run::at`]).
+    first: u32,
+    /// The last sample's time, the same way.
+    last: u32,
+}
+
+impl Run {
+    const EMPTY: Run = Run {
+        sample: Sample {
+            stop: false,
+            inputs: PioInputs::NONE,
+        },
+        first: 0,
+        last: 0,
+    };
+
+    /// The first and the last sample's time in µs since boot, given `now` (µs, not earlier than
+    /// them; they are at most minutes old, far less than the 71 minutes 32 bits count).
+    pub fn at(&self, now: u64) -> (u64, u64) {
+        let back = |stamp: u32| now.saturating_sub(u64::from((now as u32).wrapping_sub(stamp)));
+        (back(self.first), back(self.last))
+    }
+}
+
+/// A ring of [`RUNS`] runs: `len` of them from `head` on.
+struct Runs {
+    runs: [Run; RUNS],
+    head: usize,
+    len: usize,
+}
+
+/// Keeps `sample`, read at `now` (µs since boot; the low 32 bits are kept).
+fn push(sample: Sample, now: u64) {
+    let now = now as u32;
+    PENDING.lock(|pending| {
+        let mut pending = pending.borrow_mut();
+        let Runs { runs, head, len } = &mut *pending;
+        let newest = (*head + *len + RUNS - 1) % RUNS;
+        match runs.get_mut(newest) {
+            Some(run) if *len > 0 && run.sample == sample => run.last = now,
+            _ => {
+                // Full: the newest run is replaced.
+                *len = (*len + 1).min(RUNS);
+                if let Some(run) = runs.get_mut((*head + *len - 1) % RUNS) {
+                    *run = Run {
+                        sample,
+                        first: now,
+                        last: now,
+                    };
+                }
+            }
+        }
+    });
+    SAMPLED.signal(());
+}
+
+/// The oldest run the gateway task has not taken yet.
+pub fn take() -> Option<Run> {
+    PENDING.lock(|pending| {
+        let mut pending = pending.borrow_mut();
+        let Runs { runs, head, len } = &mut *pending;
+        let run = runs.get(*head).copied().filter(|_| *len > 0)?;
+        *head = (*head + 1) % RUNS;
+        *len -= 1;
+        Some(run)
+    })
+}
 
 /// What the gateway task wants on the pins: the PIO outputs in bits 0-15, the bus link LED in
 /// bit 16, the alarm LED in bit 17. All OFF until it says otherwise.
@@ -105,6 +202,13 @@ pub struct Pins {
 #[used]
 static EMU_STOP_WAKES: AtomicU32 = AtomicU32::new(0);
 
+/// The emulator build only: the span between the first and the last sample that read CSTR ON
+/// in its latest pulse, µs, read by the emulator tests (qtest, by its symbol): what the firmware
+/// saw of a pulse the harness timed on the host, whose own timing QEMU does not keep under load.
+#[cfg(feature = "emulator")]
+#[used]
+static EMU_CSTR_SPAN_US: AtomicU32 = AtomicU32::new(0);
+
 /// Samples the inputs and drives the outputs and LEDs, forever: every millisecond while a PIO
 /// axis is configured, else on a change of the stop input and every [`INDICATORS_PERIOD`].
 #[embassy_executor::task]
@@ -116,11 +220,23 @@ pub async fn run(pins: &'static mut Pins) -> ! {
     } = pins;
     let mut ticker = Ticker::every(SAMPLE_PERIOD);
     let mut sent: Option<Sample> = None;
+    #[cfg(feature = "emulator")]
+    let mut cstr_on: Option<u32> = None;
     loop {
+        // Stamped as read: the gateway task may take it much later.
+        let now = embassy_time::Instant::now();
         let sample = Sample::of(inputs);
         let every_sample = EVERY_SAMPLE.load(Ordering::Relaxed);
+        #[cfg(feature = "emulator")]
+        {
+            let us = now.as_micros() as u32;
+            cstr_on = sample.inputs.cstr().then(|| cstr_on.unwrap_or(us));
+            if let Some(first) = cstr_on {
+                EMU_CSTR_SPAN_US.store(us.wrapping_sub(first), Ordering::Relaxed);
+            }
+        }
         if sent != Some(sample) || every_sample {
-            SAMPLES.signal(sample);
+            push(sample, now.as_micros());
             sent = Some(sample);
         }
         let shown = SHOWN.load(Ordering::Relaxed);
@@ -129,11 +245,7 @@ pub async fn run(pins: &'static mut Pins) -> ! {
             link: shown & LINK != 0,
             alarm: shown & ALARM != 0,
         };
-        leds.show(
-            embassy_time::Instant::now(),
-            indicators,
-            PROGRESS.load(Ordering::Relaxed),
-        );
+        leds.show(now, indicators, PROGRESS.load(Ordering::Relaxed));
         if every_sample {
             ticker.next().await;
         } else {

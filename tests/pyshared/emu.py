@@ -523,7 +523,7 @@ def elf_symbols(path):
                 found[symbol.name] = symbol["st_value"]
             else:  # mangled: rc_gateway::gateway::EMU_PANIC, rc_gateway::rt::load::EMU_BUSY_US
                 for name in ("EMU_PANIC", "EMU_STALL", "EMU_OVERFLOW", "EMU_BUSY_US", "EMU_CLOCK_US",
-                             "EMU_STOP_WAKES"):
+                             "EMU_STOP_WAKES", "EMU_CSTR_SPAN_US"):
                     if name in symbol.name:
                         found[name] = symbol["st_value"]
         return found

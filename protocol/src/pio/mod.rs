@@ -38,7 +38,7 @@
 //! | MOVE | OUT6 | ON = moving | Servo on, positioning not complete, no alarm | OUT6 MOVE |
 //! | ZONE1 | OUT7 | ON = inside | The controller's ZONE (between ZONL and ZONM, homed) | OUT7 ZONE1 |
 //! | HEND | OUT10 | ON = homed | ZFIN | OUT10 HEND |
-//! | PEND | OUT11 | ON = complete | PFIN, OFF from a start until the move is complete and while CSTR is ON | OUT11 PEND |
+//! | PEND | OUT11 | ON = complete | PFIN, OFF from a start until the move is complete, after a move cut short and while CSTR is ON | OUT11 PEND |
 //! | SV | OUT12 | ON = servo on | Status servo bit | OUT12 SV |
 //! | LINK | OUT13 | ON = link OK | The gateway hears the axis (the RC has no emergency-stop signal; same polarity as *EMGS: ON = able to run) | OUT13 *EMGS |
 //! | *ALM | OUT14 | negative: OFF = alarm | OFF while the controller is in alarm, the link is down, or the gateway's fail-safe is latched | OUT14 *ALM |
@@ -67,7 +67,8 @@
 //! ***STP** is the fail-safe path. The sample on which it is recognised OFF returns
 //! [`JobKind::Stop`] (before anything else; it also drops a waiting strobe). The Robo Cylinder
 //! protocol has no pause: `d` cancels the remaining motion, so turning *STP ON again does **not**
-//! resume the interrupted move; the PLC strobes CSTR again. While *STP is OFF (or not yet
+//! resume the interrupted move; the PLC strobes CSTR again (PEND stays OFF until then: see
+//! [Outputs](#outputs)). While *STP is OFF (or not yet
 //! recognised after start-up), CSTR and HOME are ignored, and if the axis reports moving anyway
 //! (a command from elsewhere, a stop lost while the link was down) the stop is repeated every
 //! [`STOP_REPEAT`]. The stop is returned even while the link is down (it can only help).
@@ -111,10 +112,20 @@
 //! - from the sample that returns a move or home until the status shows it done, PEND is OFF and
 //!   PM is 0 (and HEND OFF for a home), as the controller does once it has the command (§4-2:
 //!   "PM1-PM8 turn off ... after a new PTP move command"). "Done" is judged on statuses
-//!   received after the command was returned: PFIN on with PM equal to the point; or PFIN going
-//!   off and on again (ZFIN on too for a home); the wait ends early on an alarm, a rejected
-//!   command (the axis' rejection count changes), a stop, a new move or home, or the link going
-//!   down;
+//!   received after the command was returned: PFIN on with PM equal to the point (for a home,
+//!   PFIN going off and on again with ZFIN on); the wait ends early on an alarm, a rejected
+//!   command (the axis' rejection count changes), a new move or home, or the link going down;
+//! - after a move or home the PIO returned was cut short, PEND stays OFF and PM 0 until a move
+//!   or home reaches its point (HEND, SV, MOVE and *ALM follow the status). Cut short: *STP
+//!   turned OFF while it was awaited, or the status showed the move running and then PFIN
+//!   without its point (the gateway's stop input, the PLC watchdog's stop, a Modbus stop). On
+//!   PCON, *STP is a pause (field-research §2: IN12 *STP): the move is held, not complete, and
+//!   PEND (positioning complete) comes on only within the positioning band of the target (the
+//!   RC's PFIN likewise: complete edition §4-2, "turns on ... when axis is within the
+//!   Positioning Band of the set point data"). The Robo Cylinder has no pause: `d` cancels the
+//!   move, and the controller then shows PFIN with PM 0 where the axis stopped, which a PLC
+//!   waiting for PEND would take for the move done. A move cut short when the PIO did not start
+//!   it (over Modbus) leaves PEND to the status;
 //! - while CSTR is ON, PEND is OFF (PM still shows the number), as on IAI's controllers: their
 //!   manuals say PEND is withheld while the start signal stays ON, even inside the positioning
 //!   band, while the completed position number is output (ROBONET manual, Modbus start command
@@ -315,6 +326,17 @@ enum Phase {
     Started,
 }
 
+/// How a wait for a move or home ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum End {
+    /// The axis reached the point (or home).
+    Reached,
+    /// The axis stopped elsewhere: the move was cancelled.
+    Short,
+    /// An alarm or a rejected command: the outputs follow the status.
+    Other,
+}
+
 #[derive(Clone, Copy, Debug)]
 struct Await {
     target: Target,
@@ -337,22 +359,22 @@ impl Await {
         }
     }
 
-    /// Advance on the axis' status; `true` when the wait is over.
-    fn update(&mut self, axis: &AxisState, report: &StatusReport) -> bool {
+    /// Advance on the axis' status; how the wait ended, if it has.
+    fn update(&mut self, axis: &AxisState, report: &StatusReport) -> Option<End> {
         if axis.counters.rejections != self.rejections {
-            return true;
+            return Some(End::Other);
         }
         if axis.report_at.is_none_or(|at| at <= self.since) {
-            return false;
+            return None;
         }
         let out = report.outputs;
         if out.alarm_active() {
-            return true;
+            return Some(End::Other);
         }
         let (complete, running) = match self.target {
             Target::Point(point) => {
                 if out.pfin() && out.pm() == point.get() {
-                    return true;
+                    return Some(End::Reached);
                 }
                 (out.pfin(), !out.pfin())
             }
@@ -361,10 +383,16 @@ impl Await {
         match self.phase {
             Phase::Before if out.pfin() => self.phase = Phase::Ready,
             Phase::Ready if running => self.phase = Phase::Started,
-            Phase::Started if complete => return true,
+            // A move that ran and stopped without showing its point was cut short.
+            Phase::Started if complete => {
+                return Some(match self.target {
+                    Target::Point(_) => End::Short,
+                    Target::Home => End::Reached,
+                })
+            }
             _ => {}
         }
-        false
+        None
     }
 }
 
@@ -386,6 +414,8 @@ pub struct Pio {
     last_stop: Option<Instant>,
     last_servo: Option<Instant>,
     waiting: Option<Await>,
+    /// A move or home was stopped short: PEND OFF and PM 0 until one reaches its point.
+    short: bool,
     outputs: PioOutputs,
     /// A RES edge while the axis showed no alarm, not taken yet.
     acknowledge: bool,
@@ -417,6 +447,7 @@ impl Pio {
             last_stop: None,
             last_servo: None,
             waiting: None,
+            short: false,
             outputs: PioOutputs::SAFE,
             acknowledge: false,
         }
@@ -488,6 +519,7 @@ impl Pio {
         // *STP: the fail-safe path first.
         if changed & PioInputs::STP_N.bits() != 0 && !may_run {
             self.stop_due = true;
+            self.short |= self.waiting.is_some();
             self.waiting = None;
         }
         if stp_known
@@ -549,8 +581,13 @@ impl Pio {
         let job = self.next_job(now, axis, report, home);
 
         if let (Some(waiting), Some(report)) = (self.waiting.as_mut(), report.as_ref()) {
-            if waiting.update(axis, report) {
+            if let Some(end) = waiting.update(axis, report) {
                 self.waiting = None;
+                match end {
+                    End::Reached => self.short = false,
+                    End::Short => self.short = true,
+                    End::Other => {}
+                }
             }
         }
         self.outputs = self.outputs_for(axis, report);
@@ -571,6 +608,7 @@ impl Pio {
             self.strobe = false;
             self.pending_move = None;
             self.pending_home = false;
+            self.short |= self.waiting.is_some();
             self.waiting = None;
             return Some(JobKind::Stop);
         }
@@ -607,7 +645,7 @@ impl Pio {
         };
         let out = report.outputs;
         let alarm = out.alarm_active();
-        let masked = self.waiting.is_some();
+        let masked = self.waiting.is_some() || self.short;
         let homing = self
             .waiting
             .is_some_and(|w| matches!(w.target, Target::Home));

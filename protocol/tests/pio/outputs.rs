@@ -274,3 +274,61 @@ proptest! {
         prop_assert_eq!(Out::from_bits(Out::from_bits(bits).bits()), Out::from_bits(bits));
     }
 }
+
+/// *STP OFF mid-move cancels it (`d`); the controller then shows PFIN with PM 0 where the axis
+/// stopped. PCON's *STP only pauses, and its PEND stays OFF until the move completes: a PLC that
+/// waits for PEND must not take a move stopped short for done.
+#[test]
+fn pend_stays_off_after_stp_cancels_a_move_until_a_move_completes() {
+    let mut rig = strobed_to_point_5();
+    rig.status(READY_STATUS, 0, 0xA0); // moving
+    rig.run(3);
+    rig.set(In::STP_N, false);
+    let stop_at = rig.t() + 6;
+    assert_eq!(rig.run(10), vec![(stop_at, JobKind::Stop)]);
+    rig.status(READY_STATUS, 0, DONE_OUT); // stopped short: PFIN, PM 0
+    rig.run(5);
+    assert!(
+        !rig.out.pend(),
+        "PEND OFF: the move did not reach its point"
+    );
+    assert_eq!(rig.out.pm(), 0);
+    assert!(rig.out.sv() && rig.out.alm_n() && !rig.out.moving());
+    // *STP ON again: still not at its point.
+    rig.set(In::STP_N, true);
+    rig.run(20);
+    assert!(!rig.out.pend() && rig.out.pm() == 0);
+    // A new strobe, the move completes: PEND again.
+    rig.set(In::CSTR, true);
+    let strobe_at = rig.t() + 6;
+    assert_eq!(rig.run(10), vec![(strobe_at, JobKind::MoveToPoint(p(5)))]);
+    rig.set(In::CSTR, false);
+    rig.run(10);
+    rig.status(READY_STATUS, 0, 0xA0);
+    rig.run(2);
+    assert!(!rig.out.pend());
+    rig.status(READY_STATUS, 0, DONE_OUT | 5);
+    rig.run(1);
+    assert!(rig.out.pend());
+    assert_eq!(rig.out.pm(), 5);
+}
+
+/// A move stopped short by anything else (the gateway's stop input, the PLC watchdog, a Modbus
+/// stop): the same, and a refused strobe meanwhile does not bring PEND back either.
+#[test]
+fn pend_stays_off_after_any_stop_cuts_a_move_short() {
+    let mut rig = strobed_to_point_5();
+    rig.status(READY_STATUS, 0, 0xA0);
+    rig.run(3);
+    rig.status(READY_STATUS, 0, DONE_OUT); // stopped: PFIN, PM 0
+    rig.run(5);
+    assert!(!rig.out.pend() && rig.out.pm() == 0);
+    // The PLC strobes again while the stop input holds the axis: the move is refused.
+    rig.set(In::CSTR, true);
+    let jobs = rig.run(10);
+    assert_eq!(jobs.len(), 1, "{jobs:?}");
+    rig.pio.refused(&jobs[0].1);
+    rig.set(In::CSTR, false);
+    rig.run(10);
+    assert!(!rig.out.pend() && rig.out.pm() == 0);
+}
