@@ -301,7 +301,10 @@ fn pend_stays_off_after_stp_cancels_a_move_until_a_move_completes() {
     // A new strobe, the move completes: PEND again.
     rig.set(In::CSTR, true);
     let strobe_at = rig.t() + 6;
-    assert_eq!(rig.run(10), vec![(strobe_at, JobKind::MoveToPoint(p(5), None))]);
+    assert_eq!(
+        rig.run(10),
+        vec![(strobe_at, JobKind::MoveToPoint(p(5), None))]
+    );
     rig.set(In::CSTR, false);
     rig.run(10);
     rig.status(READY_STATUS, 0, 0xA0);

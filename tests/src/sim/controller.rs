@@ -446,6 +446,12 @@ impl Controller {
     pub fn rtim_ms(&self) -> u8 {
         self.rtim
     }
+    /// Answer after `ms` from now on, whatever the master set: a controller behind a converter
+    /// faster or slower than the wire time the master counts on (benchmarks vary the
+    /// transaction time with it).
+    pub fn set_rtim_ms(&mut self, ms: u8) {
+        self.rtim = ms;
+    }
     /// A communication change waiting: when, and the rate and RTIM it will set.
     pub fn pending_comm_change(&self) -> Option<(u64, Baud, u8)> {
         self.comm_change

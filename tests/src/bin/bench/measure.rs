@@ -108,9 +108,9 @@ pub(crate) fn config(baud: Baud) -> Config {
 }
 
 /// 16 controllers fresh from power-up and an engine with `config`, run until established (at
-/// `config.baud`, RTIM 3 ms), every axis online, and warmed up.
+/// `config.baud` and `config.rtim`), every axis online, and warmed up.
 pub(crate) fn established(config: Config) -> Result<Harness, String> {
-    let baud = config.baud;
+    let (baud, rtim) = (config.baud, config.rtim);
     let axes = all_axes()?;
     let bus = Bus::with_axes(BusConfig::default(), &axes);
     let mut h = Harness::new(Engine::new(config), bus);
@@ -129,7 +129,7 @@ pub(crate) fn established(config: Config) -> Result<Harness, String> {
             .bus
             .controller(a)
             .ok_or_else(|| format!("no controller {}", a.get()))?;
-        if (c.baud(), c.rtim_ms()) != (baud, Rtim::MIN.get()) {
+        if (c.baud(), c.rtim_ms()) != (baud, rtim.get()) {
             return Err(format!(
                 "axis {} runs at {:?}/{} ms after establishment",
                 a.get(),

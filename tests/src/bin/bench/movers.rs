@@ -1,11 +1,16 @@
-//! Scenario 5: four of 16 axes moving back and forth (the adaptive polling's targets): how soon
-//! a completed move shows in what the PLC reads, how old the idle axes' status gets meanwhile,
-//! and what one dead axis costs the live ones while the others move.
+//! Scenarios 5 and 6: four of 16 axes moving back and forth (the adaptive polling's targets): how
+//! soon a completed move shows in what the PLC reads, how old the idle axes' status gets
+//! meanwhile, and what one dead axis costs the live ones while the others move. Scenario 6 moves
+//! to stored points (Q3, what POSR + CSTR and the PIO's strobe send) with every controller
+//! answering sooner or later than the wire time the gateway counts on: a pseudo-terminal or a
+//! USB adapter has no wire time, a slow converter adds some, and the figures are then taken
+//! against the transaction time measured in the run.
 
 use protocol::engine::{Event, Job, JobId, JobKind, Link};
 use protocol::line::Baud;
+use protocol::memory::PointField;
 use protocol::status::Outputs;
-use protocol::{Axis, Pulses};
+use protocol::{Axis, PositionNo, Pulses, Rtim};
 
 use crate::measure::{all_axes, axis, config, cycles, established, Stats};
 use crate::scenarios::{homed, start_homing};
@@ -28,6 +33,29 @@ pub(crate) enum Ends {
     Together,
 }
 
+/// What the movers' controllers are told, and how they answer.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Moves {
+    /// `a` to a position, the controllers answering in the wire time (scenario 5).
+    Absolute,
+    /// Q3 to one of two stored points, whose positions the engine is given (as the gateway
+    /// gives them from its cached rows), every controller answering after `real` ms where the
+    /// engine counts on `assumed` (its RTIM).
+    Points { assumed: u8, real: u8 },
+}
+
+/// Scenario 6's two paces: faster than the wire time the engine counts on (0.69 of it, as on a
+/// pseudo-terminal, where a 6.8 ms transaction took 4.6 ms), and slower (1.59 times).
+pub(crate) const FASTER: Moves = Moves::Points {
+    assumed: 7,
+    real: 3,
+};
+/// See [`FASTER`].
+pub(crate) const SLOWER: Moves = Moves::Points {
+    assumed: 3,
+    real: 7,
+};
+
 pub(crate) struct MoversResult {
     /// From the moment a move is complete on the controller (PFIN: in its band) to the moment
     /// the gateway holds a status report showing it (what DSS1 PEND and the PEND output read).
@@ -37,6 +65,9 @@ pub(crate) struct MoversResult {
     /// The longest time between successive status polls of any live axis.
     pub(crate) live_max: u64,
     pub(crate) moves: usize,
+    /// The time per transaction on the bus during the window, µs: the median time from one
+    /// command to the next (the bus is always busy).
+    pub(crate) transaction: f64,
 }
 
 struct Mover {
@@ -48,9 +79,24 @@ struct Mover {
     toward_far: bool,
 }
 
-/// Scenario 5 at 115.2 kbit/s, RTIM 3 ms; with `dead`, axis [`DEAD`] silent throughout.
-pub(crate) fn movers(dead: bool, ends: Ends) -> Result<MoversResult, String> {
-    let mut h = established(config(Baud::B115200))?;
+/// Scenario 5 (and 6, with `moves`) at 115.2 kbit/s; with `dead`, axis [`DEAD`] silent
+/// throughout.
+pub(crate) fn movers(dead: bool, ends: Ends, moves: Moves) -> Result<MoversResult, String> {
+    let mut engine_config = config(Baud::B115200);
+    if let Moves::Points { assumed, .. } = moves {
+        engine_config.rtim = Rtim::new(assumed).ok_or("RTIM out of range")?;
+        // Answers sooner than the wire time it counts on: taken, as on a pseudo-terminal.
+        engine_config.wire_timing = false;
+    }
+    let mut h = established(engine_config)?;
+    if let Moves::Points { real, .. } = moves {
+        for a in all_axes()? {
+            h.bus
+                .controller_mut(a)
+                .ok_or("no controller")?
+                .set_rtim_ms(real);
+        }
+    }
     let mut movers = Vec::new();
     for n in MOVERS {
         let a = axis(n)?;
@@ -90,6 +136,25 @@ pub(crate) fn movers(dead: bool, ends: Ends) -> Result<MoversResult, String> {
         };
         near - stroke / 100 * percent
     };
+    // Scenario 6: the same two positions as points 1 and 2 of each mover (with the speed and
+    // acceleration its `a` moves run at).
+    let (near_point, far_point) = (PositionNo::new(1), PositionNo::new(2));
+    if let Moves::Points { .. } = moves {
+        for (i, m) in movers.iter().enumerate() {
+            let memory = h
+                .bus
+                .controller_mut(m.axis)
+                .ok_or("no moving controller")?
+                .memory_mut();
+            for (index, at) in [(1usize, near), (2, far(i))] {
+                let mut row = memory.exec.point;
+                let position = rc_host::sim::memory::pi(PointField::Position);
+                *row.get_mut(position).ok_or("no position field")? = Pulses(at).to_wire();
+                *memory.nv.points.get_mut(index).ok_or("no point")? = row;
+                *memory.nv.written.get_mut(index).ok_or("no point")? = true;
+            }
+        }
+    }
 
     let from = h.now;
     let mut complete = Vec::new();
@@ -128,13 +193,17 @@ pub(crate) fn movers(dead: bool, ends: Ends) -> Result<MoversResult, String> {
             }
             if m.job.is_none() && m.seen {
                 let to = if m.toward_far { far(i) } else { near };
+                let point = if m.toward_far { far_point } else { near_point };
                 m.toward_far = !m.toward_far;
+                let kind = match (moves, point) {
+                    (Moves::Points { .. }, Some(point)) => {
+                        JobKind::MoveToPoint(point, Some(Pulses(to)))
+                    }
+                    _ => JobKind::MoveAbsolute(Pulses(to)),
+                };
                 let id = h
                     .engine
-                    .submit(Job {
-                        axis: m.axis,
-                        kind: JobKind::MoveAbsolute(Pulses(to)),
-                    })
+                    .submit(Job { axis: m.axis, kind })
                     .map_err(|e| format!("move refused: {e:?}"))?;
                 *m = Mover {
                     job: Some(id),
@@ -162,7 +231,15 @@ pub(crate) fn movers(dead: bool, ends: Ends) -> Result<MoversResult, String> {
         .filter(|a| !MOVERS.contains(&a.get()))
         .collect();
     let live_cycles = cycles(&h.sent, &live, from, h.now);
+    let sent: Vec<u64> = h
+        .sent
+        .iter()
+        .map(|(t, _)| *t)
+        .filter(|&t| t >= from)
+        .collect();
+    let gaps: Vec<u64> = sent.windows(2).map(|w| w[1] - w[0]).collect();
     Ok(MoversResult {
+        transaction: Stats::of(&gaps)?.p50 as f64,
         moves: complete.len(),
         complete: Stats::of(&complete)?,
         idle_age: Stats::of(&cycles(&h.sent, &idle, from, h.now))?,
