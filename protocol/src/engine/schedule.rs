@@ -13,9 +13,9 @@
 //!    (a move's first reads), and an axis whose position was never read (every position register
 //!    of the axis waits for it).
 //! 4. **Idle axes that are due**: [`IDLE_PERIOD_CYCLES`] cycles after their last poll (a cycle
-//!    is one transaction per axis that answers, the wire limit), the longest waiting first; but
-//!    not more than [`IDLE_RUN`] in a row before one of the rest (on a bus slower than its
-//!    nominal transaction time every idle axis would always be due).
+//!    is one transaction per axis that answers, at the transaction time measured on this bus:
+//!    a pseudo-terminal answers faster than the wire, a slow converter slower), the longest
+//!    waiting first; but not more than [`IDLE_RUN`] in a row before one of the rest.
 //! 5. **Other position reads**: movers (each as often as its part of the share allows, once a
 //!    cycle at least), axes that just stopped (unless their move job reads it), and axes that
 //!    stopped until two reads agree (they stop in their position band, short of where they
@@ -32,7 +32,8 @@
 //! 8. **Status (`n`), earliest deadline first**, among the others: an idle axis, and a mover
 //!    whose arrival is estimated but not near, is due [`IDLE_PERIOD_CYCLES`] cycles after its
 //!    last poll; a mover whose estimate is a read away twice a cycle; one whose arrival cannot
-//!    be estimated (a point's or a home's move, a job without a move) or is overdue as soon as
+//!    be estimated (a home, a point whose position its job does not carry, a job without a
+//!    move) or is overdue as soon as
 //!    it has been polled. Ties go to the one polled longest ago, then in axis order from a
 //!    rotating cursor. Work-conserving: when all are idle nobody waits for a deadline, so the
 //!    axes are polled round robin at the wire limit.
