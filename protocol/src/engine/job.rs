@@ -29,8 +29,7 @@ pub enum JobKind {
     Home(HomeDirection),
     /// Q3, then wait for positioning complete. With the point's position, if the submitter
     /// knows it (the gateway's cached row): the Q3 does not say where the axis goes, and only
-    /// a known target lets the schedule estimate the arrival
-    /// ([`approach`](super::approach)).
+    /// a known target lets the schedule estimate the arrival.
     MoveToPoint(PositionNo, Option<Pulses>),
     /// `a`, then wait for positioning complete.
     MoveAbsolute(Pulses),
