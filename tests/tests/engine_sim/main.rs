@@ -3,6 +3,7 @@
 
 mod jobs;
 mod link;
+mod pacing;
 
 use protocol::engine::*;
 use protocol::line::Baud;
