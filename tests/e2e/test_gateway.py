@@ -193,17 +193,26 @@ def test_alarm_and_reset(gateway):
 
 def test_point_table_write_and_read_back(gateway):
     gw = gateway
-    velocity = 4  # field offset from 0x400: VCMD
-    value = 1234
+    velocity, position = 4, 0  # field offsets from 0x400: VCMD, PCMD
+    value = 123_45  # 0.01 mm/s: 4629 x 0.2 rpm with the 8 mm lead (4629.375 truncated)
+    held = 123_44  # what the controller holds, in 0.01 mm/s
     stores = gw.sim(0)["nv_writes"]
     first = gw.channel([2, 0, 5, velocity, value >> 16, value & 0xFFFF])
-    assert first[:4] == [2, 0, 0, value], first
+    assert first[:4] == [2, 0, 0, held], first
     assert 1 <= first[4] < 0xFFFF, f"written with V5: {first}"
     assert gw.sim(0)["nv_writes"] == stores + 1
     readback = gw.channel([1, 0, 5, velocity, 0, 0])
-    assert readback == [1, 0, 0, value, 0], readback
+    assert readback == [1, 0, 0, held, 0], readback
+    assert gw.channel([3, 0, 5, velocity, 0, 0]) == [3, 0, 0, 4629, 0], "code 3: as stored"
     again = gw.channel([2, 0, 5, velocity, value >> 16, value & 0xFFFF])
-    assert again == [2, 0, 0, value, 0xFFFF], f"unchanged: no V5 spent: {again}"
+    assert again == [2, 0, 0, held, 0xFFFF], f"unchanged: no V5 spent: {again}"
+    assert gw.sim(0)["nv_writes"] == stores + 1
+    # A position past the 100 mm stroke: refused, nothing stored.
+    assert (
+        gw.exception(gw.write, GATEWAY_UNIT, G_REQUEST, [2, 0, 5, position, 0, 200_00])
+        == ILLEGAL_DATA_VALUE
+    )
+    assert gw.read(GATEWAY_UNIT, G_RESPONSE, 5) == [0] * 5
     assert gw.sim(0)["nv_writes"] == stores + 1
     # Invalid request: point 16.
     assert (

@@ -6,15 +6,28 @@
 //! 4. the PLC clears the request (code 0);
 //! 5. the gateway clears the response.
 //!
-//! Code 1 reads a field, code 2 writes it. A write reads the point first and skips the write
-//! when the value is already stored (RESP word 4 = 0xFFFF), so the controller's non-volatile
-//! memory (about 100,000 writes per area) is never worn by unchanged data.
+//! Code 1 reads a field, code 2 writes it, in the register map's units: the position from home
+//! and the band in 0.01 mm, the velocity in 0.01 mm/s, the acceleration in 0.01 G, converted
+//! with the axis' AXISCFG and checked as the position table's registers are
+//! ([`table::field_to_plc`], [`table::field_from_plc`]): a value out of range (a position
+//! outside 0..stroke) refuses the request's write with 03, as a table row is refused, and nothing
+//! reaches the bus. A field without a unit is the same in any code. Code 3 reads a field as the
+//! controller stores it (pulses, 0.2 rpm, 0.1 rpm/ms); there is no raw write, so every value
+//! the channel stores is checked.
+//!
+//! A write reads the point first and skips the write when the controller already holds the value
+//! it would store (RESP word 4 = 0xFFFF), so its non-volatile memory (about 100,000 writes per
+//! area) is never worn by unchanged data. The response's value is the field as the controller
+//! holds it after the request, in the request's units: a write of a value the controller cannot
+//! hold exactly answers the nearest one it holds.
 
 use super::command::Reason;
+use super::config::{AxisConfig, GatewayConfig};
 use super::map::{G_REQUEST, G_REQUEST_LEN, G_RESPONSE, G_RESPONSE_LEN};
 use super::refused::Refused;
 use super::registers::{join, split};
-use crate::axes::AxisSet;
+use super::table;
+use crate::axes::AxisMap;
 use crate::engine::{Engine, Job, JobError, JobId, JobKind, JobOutput};
 use crate::memory::PointField;
 use crate::{Address, Axis, PositionNo};
@@ -24,10 +37,12 @@ pub(super) const REQ_LEN: usize = G_REQUEST_LEN as usize;
 /// Registers of the response block: code, error, value high, value low, V5 write count.
 pub(super) const RESP_LEN: usize = G_RESPONSE_LEN as usize;
 
-/// Request code: read a field.
+/// Request code: read a field, in the register map's units.
 const READ_FIELD: u16 = 1;
-/// Request code: write a field.
+/// Request code: write a field, in the register map's units, checked.
 const WRITE_FIELD: u16 = 2;
+/// Request code: read a field as the controller stores it.
+const READ_RAW: u16 = 3;
 /// In RESP word 4: the write was skipped because the value was already stored (no V5 spent).
 const UNCHANGED: u16 = 0xFFFF;
 /// In RESP word 0: the request failed (word 1 says why, as CMER).
@@ -35,14 +50,19 @@ const FAILED: u16 = 0x8000;
 
 type Request = [u16; REQ_LEN];
 
+/// What a checked request starts: the axis, the point and the value a write stores (in the
+/// controller's units; 0 for a read).
+pub(super) type Start = (Axis, PositionNo, u32);
+
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 enum State {
     #[default]
     Idle,
-    /// Reading the point (both codes start so: a write compares first), for this request.
-    Reading(JobId, Request),
-    /// Writing the field, for this request.
-    Writing(JobId, Request),
+    /// Reading the point (every code starts so: a write compares first), for this request;
+    /// the value a write stores, in the controller's units.
+    Reading(JobId, Request, u32),
+    /// Writing the field, for this request: the value stored.
+    Writing(JobId, Request, u32),
     /// Response posted; waiting for the PLC to clear the request.
     Answered,
 }
@@ -100,14 +120,15 @@ impl Channel {
     }
 
     /// Check a new request block before anything is stored: the axis and point it would
-    /// start on, if it starts something. Step 1 requires the response to be clear: a request
-    /// while one runs or is answered is refused with 04.
+    /// start on and the value a write stores (in the controller's units), if it starts
+    /// something. Step 1 requires the response to be clear: a request while one runs or is
+    /// answered is refused with 04.
     pub(super) fn check(
         &self,
         request: Request,
-        axes: AxisSet,
-    ) -> Result<Option<(Axis, PositionNo)>, Refused> {
-        let [code, axis, point, offset, _, _] = request;
+        config: &GatewayConfig,
+    ) -> Result<Option<Start>, Refused> {
+        let [code, axis, point, offset, hi, lo] = request;
         if code == 0 {
             return Ok(None);
         }
@@ -121,27 +142,29 @@ impl Channel {
         let axis = u8::try_from(axis)
             .ok()
             .and_then(Axis::new)
-            .filter(|&a| axes.contains(a))
+            .filter(|&a| config.bus.axes.contains(a))
             .ok_or(Refused::OutOfRange)?;
         let point = u8::try_from(point)
             .ok()
             .and_then(PositionNo::new)
             .ok_or(Refused::OutOfRange)?;
-        field(offset).ok_or(Refused::OutOfRange)?;
-        if code != READ_FIELD && code != WRITE_FIELD {
-            return Err(Refused::OutOfRange);
-        }
-        Ok(Some((axis, point)))
+        let field = field(offset).ok_or(Refused::OutOfRange)?;
+        let value = match code {
+            READ_FIELD | READ_RAW => 0,
+            WRITE_FIELD => table::field_from_plc(field, join(hi, lo), &config.axes[axis])?,
+            _ => return Err(Refused::OutOfRange),
+        };
+        Ok(Some((axis, point, value)))
     }
 
     /// Store the checked request block and act on it: start a request, or step 4 -> 5.
     pub(super) fn store(
         &mut self,
         request: Request,
-        start: Option<(Axis, PositionNo)>,
+        start: Option<Start>,
         engine: &mut Engine,
     ) -> Result<(), Refused> {
-        let Some((axis, point)) = start else {
+        let Some((axis, point, value)) = start else {
             self.request = request;
             if request[0] == 0 && matches!(self.state, State::Answered) {
                 // Step 4 -> 5: the PLC cleared its request, the gateway clears the response.
@@ -160,7 +183,7 @@ impl Channel {
             })
             .map_err(|_| Refused::QueueFull)?;
         self.request = request;
-        self.state = State::Reading(id, request);
+        self.state = State::Reading(id, request, value);
         Ok(())
     }
 
@@ -170,10 +193,13 @@ impl Channel {
         &mut self,
         id: JobId,
         result: &Result<JobOutput, JobError>,
+        config: &AxisMap<AxisConfig>,
         engine: &mut Engine,
     ) -> Option<(Axis, PositionNo)> {
-        let request = match self.state {
-            State::Reading(r, request) | State::Writing(r, request) if r == id => request,
+        let (request, wanted) = match self.state {
+            State::Reading(r, request, wanted) | State::Writing(r, request, wanted) if r == id => {
+                (request, wanted)
+            }
             _ => return None,
         };
         if self.request != request {
@@ -182,28 +208,30 @@ impl Channel {
             self.state = State::Idle;
             return None;
         }
-        let [code, axis, point, offset, hi, lo] = request;
-        let wanted = join(hi, lo);
+        let [code, axis, point, offset, _, _] = request;
         let unexpected = Reason::Unexpected.code(0);
         // The response, or the CMER code it fails with: posted in one place.
         let response: Result<[u16; RESP_LEN], u16> = 'response: {
+            let (Some(field), Some(axis), Some(point)) = (
+                field(offset),
+                u8::try_from(axis).ok().and_then(Axis::new),
+                u8::try_from(point).ok().and_then(PositionNo::new),
+            ) else {
+                break 'response Err(unexpected);
+            };
+            // A value as the controller holds it, in the request's units.
+            let shown = |stored: u32| match code {
+                READ_RAW => split(stored),
+                _ => split(table::field_to_plc(field, stored, &config[axis])),
+            };
             match (self.state, result) {
                 (State::Reading(..), Ok(JobOutput::Point(readback))) => {
-                    let Some(field) = field(offset) else {
-                        break 'response Err(unexpected);
-                    };
                     let stored = readback.get(field);
-                    if code == READ_FIELD || stored == wanted {
+                    if code != WRITE_FIELD || stored == wanted {
                         let count = if code == WRITE_FIELD { UNCHANGED } else { 0 };
-                        let [h, l] = split(stored);
+                        let [h, l] = shown(stored);
                         break 'response Ok([code, 0, h, l, count]);
                     }
-                    let (Some(axis), Some(point)) = (
-                        u8::try_from(axis).ok().and_then(Axis::new),
-                        u8::try_from(point).ok().and_then(PositionNo::new),
-                    ) else {
-                        break 'response Err(unexpected);
-                    };
                     let job = Job {
                         axis,
                         kind: JobKind::WriteField {
@@ -214,7 +242,7 @@ impl Channel {
                     };
                     match engine.submit(job) {
                         Ok(w) => {
-                            self.state = State::Writing(w, request);
+                            self.state = State::Writing(w, request, wanted);
                             return Some((axis, point));
                         }
                         Err(_) => Err(Reason::QueueFull.code(0)),
@@ -225,7 +253,8 @@ impl Channel {
                         JobOutput::Value(v) => u16::try_from(*v).unwrap_or(u16::MAX - 1),
                         _ => 0,
                     };
-                    Ok([code, 0, hi, lo, count])
+                    let [h, l] = shown(wanted);
+                    Ok([code, 0, h, l, count])
                 }
                 (_, Err(e)) => Err(Reason::of(*e)),
                 _ => Err(unexpected),

@@ -381,7 +381,10 @@ impl Gateway {
             self.sync_ended(end);
         }
         self.points.job_done(id, axis, &result);
-        if let Some((axis, point)) = self.channel.job_done(id, &result, &mut self.engine) {
+        if let Some((axis, point)) =
+            self.channel
+                .job_done(id, &result, &self.config.axes, &mut self.engine)
+        {
             self.points.forget(axis, point);
         }
     }

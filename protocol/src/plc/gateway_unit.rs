@@ -268,7 +268,7 @@ impl Gateway {
         }
         let request = self.channel.after_write(address, values);
         let start = match request {
-            Some(request) => self.channel.check(request, self.config.bus.axes)?,
+            Some(request) => self.channel.check(request, &self.config)?,
             None => None,
         };
         if let Some(request) = request {

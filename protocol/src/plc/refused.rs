@@ -28,3 +28,10 @@ pub enum Refused {
     /// start they then do not carry out.
     Stopped,
 }
+
+impl From<crate::units::UnitError> for Refused {
+    /// A value the controller's units cannot express is out of range (03).
+    fn from(_: crate::units::UnitError) -> Refused {
+        Refused::OutOfRange
+    }
+}

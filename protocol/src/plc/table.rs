@@ -6,14 +6,15 @@
 //! A Robo Cylinder row has a position, band, velocity and one acceleration (used for both
 //! acceleration and deceleration), so DCMD reads as ACMD; it has no per-point zones, load
 //! threshold or control flags, so those read 0 and must be written 0. Push points (PPOW) are
-//! not exposed here (the command channel writes any field).
+//! not exposed here (the command channel writes any field; it converts and checks a field with
+//! a unit as this table does: [`field_to_plc`], [`field_from_plc`]).
 
 use super::config::AxisConfig;
 use super::refused::Refused;
 use super::registers::{join, split};
 use crate::jobs::{PointData, PointReadback};
 use crate::memory::PointField;
-use crate::units::{Accel, Length, Speed};
+use crate::units::{Accel, Length, Scale, Speed};
 use crate::{Acceleration, Pulses, Velocity};
 
 /// First register of the table.
@@ -30,52 +31,97 @@ pub(crate) fn locate(address: u16) -> Option<(u16, u16)> {
     (row < ROWS).then_some((row, offset % ROW_LEN))
 }
 
+/// A point field as the PLC reads it: the position from home and the band in 0.01 mm, the
+/// velocity in 0.01 mm/s, the acceleration in 0.01 G (a velocity or acceleration the controller
+/// could not hold reads 0); a field without a unit as stored.
+pub(crate) fn field_to_plc(field: PointField, stored: u32, config: &AxisConfig) -> u32 {
+    let scale = config.scale;
+    match field {
+        PointField::Position => scale.position_from_wire(Pulses::from_wire(stored)).0 as u32,
+        PointField::Band => scale.length(i64::from(stored)).0.max(0) as u32,
+        PointField::Velocity => u16::try_from(stored)
+            .ok()
+            .and_then(Velocity::new)
+            .map_or(0, |v| scale.speed(v).0),
+        PointField::Acceleration => u16::try_from(stored)
+            .ok()
+            .and_then(Acceleration::new)
+            .map_or(0, |a| scale.accel(a).0),
+        _ => stored,
+    }
+}
+
+/// A point field written by the PLC in its units ([`field_to_plc`]), checked as the table's
+/// registers are: the value to store. A field without a unit is stored as written.
+pub(crate) fn field_from_plc(
+    field: PointField,
+    value: u32,
+    config: &AxisConfig,
+) -> Result<u32, Refused> {
+    let scale = &config.scale;
+    Ok(match field {
+        PointField::Position => position(value, config)?.to_wire(),
+        PointField::Band => band(value, scale)?,
+        PointField::Velocity => velocity(value, scale)?.get().into(),
+        PointField::Acceleration => acceleration(value, scale)?.get().into(),
+        _ => value,
+    })
+}
+
+/// PCMD: a position from home within 0..=stroke.
+fn position(pcmd: u32, config: &AxisConfig) -> Result<Pulses, Refused> {
+    let pcmd = pcmd as i32;
+    if pcmd < 0 || pcmd > config.stroke.0 {
+        return Err(Refused::OutOfRange);
+    }
+    Ok(config.scale.position_to_wire(Length(pcmd))?)
+}
+
+/// INP: a band width (within i32, not negative).
+fn band(inp: u32, scale: &Scale) -> Result<u32, Refused> {
+    let inp = i32::try_from(inp).map_err(|_| Refused::OutOfRange)?;
+    Ok(scale.band_to_wire(Length(inp))?)
+}
+
+/// VCMD: a speed, not 0.
+fn velocity(vcmd: u32, scale: &Scale) -> Result<Velocity, Refused> {
+    if vcmd == 0 {
+        return Err(Refused::OutOfRange);
+    }
+    Ok(scale.velocity(Speed(vcmd))?)
+}
+
+/// ACMD: an acceleration the controller can hold (not 0 once converted).
+fn acceleration(acmd: u32, scale: &Scale) -> Result<Acceleration, Refused> {
+    Ok(scale.acceleration(Accel(acmd))?)
+}
+
 /// The 16 registers of a row read back from the controller.
 pub(crate) fn registers(readback: &PointReadback, config: &AxisConfig) -> [u16; 16] {
-    let scale = config.scale;
-    let pcmd = scale.position_from_wire(Pulses::from_wire(readback.get(PointField::Position)));
-    let band = i64::from(readback.get(PointField::Band));
-    let inp = scale.length(band).0;
-    let vcmd = u16::try_from(readback.get(PointField::Velocity))
-        .ok()
-        .and_then(Velocity::new)
-        .map_or(0, |v| scale.speed(v).0);
-    let acmd = u16::try_from(readback.get(PointField::Acceleration))
-        .ok()
-        .and_then(Acceleration::new)
-        .map_or(0, |a| scale.accel(a).0);
-    let acmd = u16::try_from(acmd).unwrap_or(u16::MAX);
-    let [p0, p1] = split(pcmd.0 as u32);
-    let [i0, i1] = split(inp.max(0) as u32);
-    let [v0, v1] = split(vcmd);
+    let get = |field| field_to_plc(field, readback.get(field), config);
+    let acmd = u16::try_from(get(PointField::Acceleration)).unwrap_or(u16::MAX);
+    let [p0, p1] = split(get(PointField::Position));
+    let [i0, i1] = split(get(PointField::Band));
+    let [v0, v1] = split(get(PointField::Velocity));
     [p0, p1, i0, i1, v0, v1, 0, 0, 0, 0, acmd, acmd, 0, 0, 0, 0]
 }
 
 /// A whole row written by the PLC, checked, as the point to store.
 pub(crate) fn point(values: &[u16], config: &AxisConfig) -> Result<PointData, Refused> {
     let reg = |i: usize| values.get(i).copied().unwrap_or(0);
-    let bad = Refused::OutOfRange;
-    let pcmd = join(reg(0), reg(1)) as i32;
-    if pcmd < 0 || pcmd > config.stroke.0 {
-        return Err(bad);
-    }
-    let inp = i32::try_from(join(reg(2), reg(3))).map_err(|_| bad)?;
-    let vcmd = join(reg(4), reg(5));
     let (acmd, dcmd) = (reg(10), reg(11));
     // Zones, push, load threshold, control flags, reserved: not in a Robo Cylinder row.
     let unsupported = [6, 7, 8, 9, 12, 13, 14, 15].iter().any(|&i| reg(i) != 0);
-    if unsupported || vcmd == 0 || (dcmd != 0 && dcmd != acmd) {
-        return Err(bad);
+    if unsupported || (dcmd != 0 && dcmd != acmd) {
+        return Err(Refused::OutOfRange);
     }
-    let scale = config.scale;
+    let scale = &config.scale;
     Ok(PointData {
-        position: scale.position_to_wire(Length(pcmd)).map_err(|_| bad)?,
-        velocity: scale.velocity(Speed(vcmd)).map_err(|_| bad)?,
-        acceleration: scale
-            .acceleration(Accel(u32::from(acmd)))
-            .map_err(|_| bad)?,
+        position: position(join(reg(0), reg(1)), config)?,
+        velocity: velocity(join(reg(4), reg(5)), scale)?,
+        acceleration: acceleration(u32::from(acmd), scale)?,
         flags: PointData::FLAGS_MOTION_AND_BAND,
-        band: scale.band_to_wire(Length(inp)).map_err(|_| bad)?,
+        band: band(join(reg(2), reg(3)), scale)?,
         max_acceleration: 0,
     })
 }

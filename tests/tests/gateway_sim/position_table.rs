@@ -141,14 +141,8 @@ fn an_abandoned_channel_write_invalidates_the_cached_row() {
     let _ = read(&mut h, unit(0), ROW3, 16);
     h.run_until(h.now + 200 * MS);
     assert!(read(&mut h, unit(0), ROW3, 16).is_ok());
-    let x = stored_mm100(60_00) as u32;
-    write(
-        &mut h,
-        63,
-        G_REQUEST,
-        &[2, 0, 3, 0, (x >> 16) as u16, x as u16],
-    )
-    .unwrap();
+    // 60 mm, in the channel's 0.01 mm.
+    write(&mut h, 63, G_REQUEST, &[2, 0, 3, 0, 0, 60_00]).unwrap();
     let sent0 = h.sent.len();
     for _ in 0..200 {
         h.run_until(h.now + MS);
