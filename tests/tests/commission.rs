@@ -76,6 +76,12 @@ fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
+/// Exited with `code`, saying `text` on standard error.
+fn fails_with(out: &Output, code: i32, text: &str) {
+    assert_eq!(out.status.code(), Some(code), "{}", stderr(out));
+    assert!(stderr(out).contains(text), "{}", stderr(out));
+}
+
 /// Succeeds, and returns standard output.
 fn ok(out: Output) -> String {
     assert_eq!(
@@ -129,12 +135,7 @@ fn scan_finds_exactly_the_axes_there_at_their_rate() {
     );
     // Nobody at a rate nobody runs: a failure with a hint.
     let none = sim.run(&["--rtim", "3", "scan", "--rates", "9600"]);
-    assert_eq!(none.status.code(), Some(1));
-    assert!(
-        stderr(&none).contains("no axis answered"),
-        "{}",
-        stderr(&none)
-    );
+    fails_with(&none, 1, "no axis answered");
 }
 
 #[test]
@@ -213,12 +214,7 @@ fn an_alarm_is_reported_in_words_and_reset() {
     ok(sim.run(&with_axis(&["home", "0"])));
     // Point 9 was never written: the controller answers the move with alarm B1.
     let refused = sim.run(&with_axis(&["move", "0", "--point", "9"]));
-    assert_eq!(refused.status.code(), Some(1));
-    assert!(
-        stderr(&refused).contains("alarm B1"),
-        "{}",
-        stderr(&refused)
-    );
+    fails_with(&refused, 1, "alarm B1");
     let status = ok(sim.run(&with_axis(&["status", "0"])));
     assert!(status.contains("alarm B1"), "{status}");
     let reset = ok(sim.run(&with_axis(&["alarm-reset", "0"])));
@@ -348,12 +344,7 @@ fn sniff_decodes_what_is_on_the_line() {
 fn an_absent_axis_is_a_clear_error() {
     let sim = Sim::start(&["--axes", "0,", "--baud", "38400", "--rtim", "3"]);
     let out = sim.run(&with_axis(&["status", "5"]));
-    assert_eq!(out.status.code(), Some(1));
-    assert!(
-        stderr(&out).contains("axis 5: no reply at 38400 bit/s"),
-        "{}",
-        stderr(&out)
-    );
+    fails_with(&out, 1, "axis 5: no reply at 38400 bit/s");
 }
 
 /// `points write` with `file`, failing: standard error.
@@ -461,12 +452,7 @@ fn a_bad_file_is_reported_without_a_bus() {
         "--file",
         table.to_str().expect("path"),
     ]));
-    assert_eq!(out.status.code(), Some(1));
-    assert!(
-        stderr(&out).contains("offline.csv:2: point 1: speed 0 mm/s"),
-        "{}",
-        stderr(&out)
-    );
+    fails_with(&out, 1, "offline.csv:2: point 1: speed 0 mm/s");
 }
 
 #[test]
@@ -545,12 +531,7 @@ fn unknown_toml_keys_are_refused_by_name() {
 #[test]
 fn a_port_that_is_not_a_serial_port_and_a_negative_lead_are_explained() {
     let out = commission(&["--port", "/dev/null", "status", "0"]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(
-        stderr(&out).contains("/dev/null: not a serial port"),
-        "{}",
-        stderr(&out)
-    );
+    fails_with(&out, 1, "/dev/null: not a serial port");
     let out = commission(&["--port", "/dev/null", "--lead", "-3", "status", "0"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(

@@ -15,6 +15,12 @@ fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
+/// Exited with `code`, saying `text` on standard error.
+fn fails_with(out: &Output, code: i32, text: &str) {
+    assert_eq!(out.status.code(), Some(code), "{}", stderr(out));
+    assert!(stderr(out).contains(text), "{}", stderr(out));
+}
+
 #[test]
 fn a_device_that_is_not_a_serial_port_is_named() {
     for args in [
@@ -30,12 +36,7 @@ fn a_device_that_is_not_a_serial_port_is_named() {
         );
     }
     let out = gateway(&["--plc-pty", "--bus", "/nonexistent/ttyUSB9", "--no-control"]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(
-        stderr(&out).contains("/nonexistent/ttyUSB9: "),
-        "{}",
-        stderr(&out)
-    );
+    fails_with(&out, 1, "/nonexistent/ttyUSB9: ");
 }
 
 #[test]

@@ -9,6 +9,30 @@ use protocol::*;
 
 use crate::{answer, answer_delay, axis, config, events, next_frame, ready, reply};
 
+/// One axis online (its first poll answered), `kind` submitted: the engine, the time and the
+/// job.
+fn online_with_job(kind: JobKind) -> (Engine, Instant, JobId) {
+    let mut engine = Engine::new(config(1));
+    let mut now = Instant(0);
+    let poll = next_frame(&mut engine, &mut now);
+    reply(&mut engine, &mut now, ready(&poll));
+    let id = engine
+        .submit(Job {
+            axis: axis(0),
+            kind,
+        })
+        .unwrap();
+    (engine, now, id)
+}
+
+/// The result of job `id`, if an event since the last call reported it.
+fn result_of(engine: &mut Engine, id: JobId) -> Option<Result<JobOutput, JobError>> {
+    events(engine).into_iter().find_map(|e| match e {
+        Event::JobDone { id: i, result, .. } if i == id => Some(result),
+        _ => None,
+    })
+}
+
 #[test]
 fn polls_every_configured_axis_round_robin_with_host_gap() {
     let mut engine = Engine::new(config(3));
@@ -125,26 +149,11 @@ fn reply_slack_extends_the_response_timeout() {
 
 #[test]
 fn relative_move_is_never_resent_and_position_is_reread() {
-    let mut engine = Engine::new(config(1));
-    let mut now = Instant(0);
-    let poll = next_frame(&mut engine, &mut now);
-    reply(&mut engine, &mut now, ready(&poll));
-    let id = engine
-        .submit(Job {
-            axis: axis(0),
-            kind: JobKind::MoveRelative(Pulses(800)),
-        })
-        .unwrap();
+    let (mut engine, mut now, id) = online_with_job(JobKind::MoveRelative(Pulses(800)));
     let m = next_frame(&mut engine, &mut now);
     assert_eq!(m.command, Command::MoveRelative(Pulses(800)));
     // No answer: the next frame is not another `m` but the job's read of where the axis is,
     // and the failure is reported only once that is known (PNOW fresh when CMST shows it).
-    let done = |engine: &mut Engine| {
-        events(engine).into_iter().find_map(|e| match e {
-            Event::JobDone { id: i, result, .. } if i == id => Some(result),
-            _ => None,
-        })
-    };
     let next = next_frame(&mut engine, &mut now);
     assert_eq!(
         next.command,
@@ -153,7 +162,11 @@ fn relative_move_is_never_resent_and_position_is_reread() {
         }
     );
     assert_eq!(engine.axis(axis(0)).counters.retries, 0);
-    assert_eq!(done(&mut engine), None, "not before the position is read");
+    assert_eq!(
+        result_of(&mut engine, id),
+        None,
+        "not before the position is read"
+    );
     let moved = Reply::Memory {
         axis: axis(0),
         code: MemoryCode::ReadMemory,
@@ -161,7 +174,10 @@ fn relative_move_is_never_resent_and_position_is_reread() {
     };
     reply(&mut engine, &mut now, moved);
     assert_eq!(engine.axis(axis(0)).position, Some(Pulses(500)));
-    assert_eq!(done(&mut engine), Some(Err(JobError::OutcomeUnknown)));
+    assert_eq!(
+        result_of(&mut engine, id),
+        Some(Err(JobError::OutcomeUnknown))
+    );
     assert_eq!(
         engine.axis(axis(0)).link,
         Link::Online,
@@ -472,16 +488,8 @@ fn a_move_seen_only_in_position_is_read_again_until_it_rests() {
 /// when that read goes unanswered the failure reported is still the alarm, not the time-out.
 #[test]
 fn a_move_that_fails_reads_its_position_first_and_reports_the_first_failure() {
-    let mut engine = Engine::new(config(1));
-    let mut now = Instant(0);
-    let poll = next_frame(&mut engine, &mut now);
-    reply(&mut engine, &mut now, ready(&poll));
-    let id = engine
-        .submit(Job {
-            axis: axis(0),
-            kind: JobKind::MoveToPoint(PositionNo::new(2).unwrap(), None),
-        })
-        .unwrap();
+    let point = PositionNo::new(2).unwrap();
+    let (mut engine, mut now, id) = online_with_job(JobKind::MoveToPoint(point, None));
     let q3 = next_frame(&mut engine, &mut now);
     assert!(matches!(q3.command, Command::MoveToPoint(_)));
     // Taken and moving (no PFIN); the status poll during the wait shows an error alarm.
@@ -519,17 +527,15 @@ fn a_move_that_fails_reads_its_position_first_and_reports_the_first_failure() {
             }
         }
     }
-    let done = |engine: &mut Engine| {
-        events(engine).into_iter().find_map(|e| match e {
-            Event::JobDone { id: i, result, .. } if i == id => Some(result),
-            _ => None,
-        })
-    };
-    assert_eq!(done(&mut engine), None, "not before the position is read");
+    assert_eq!(
+        result_of(&mut engine, id),
+        None,
+        "not before the position is read"
+    );
     // The read is never answered: resent, then the axis is offline.
     let mut result = None;
     for _ in 0..10 {
-        if let Some(r) = done(&mut engine) {
+        if let Some(r) = result_of(&mut engine, id) {
             result = Some(r);
             break;
         }
