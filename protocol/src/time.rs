@@ -61,7 +61,9 @@ impl Instant {
         div(self.0, US_PER_S)
     }
 
-    /// The time elapsed since `earlier` (zero if `earlier` is later).
+    /// The time elapsed since `earlier` (zero if `earlier` is later). Not inlined, as
+    /// `Instant + Duration` below: 20 B less of the F103's flash.
+    #[inline(never)]
     pub const fn since(self, earlier: Instant) -> Duration {
         Duration(self.0.saturating_sub(earlier.0))
     }
@@ -71,6 +73,9 @@ impl Instant {
 ///
 /// `Option::min` would take `None` as the smaller value and so lose every real deadline merged
 /// with an empty one: a loop sleeping on the result would sleep forever.
+///
+/// Not inlined: two 64-bit options compared at each use took 44 B more of the F103's flash.
+#[inline(never)]
 pub const fn earliest(a: Option<Instant>, b: Option<Instant>) -> Option<Instant> {
     match (a, b) {
         (Some(a), Some(b)) => Some(if a.0 <= b.0 { a } else { b }),
