@@ -202,21 +202,20 @@ impl<F: NorFlash> Store<F> {
     /// two, or the flash's words are not powers of two up to 32 bytes.
     pub fn new(flash: F, range: Range<u32>) -> Option<Store<F>> {
         let word = Self::WORD;
-        let page = usize::try_from(Self::PAGE).ok()?;
-        if !(word.is_power_of_two() && word <= MAX_WORD && page == F::ERASE_SIZE)
-            || !F::ERASE_SIZE.is_multiple_of(word)
-            || !range.start.is_multiple_of(Self::PAGE)
-        {
-            return None;
-        }
+        let whole_words = word.is_power_of_two()
+            && word <= MAX_WORD
+            && usize::try_from(Self::PAGE).is_ok_and(|page| page == F::ERASE_SIZE)
+            && F::ERASE_SIZE.is_multiple_of(word)
+            && range.start.is_multiple_of(Self::PAGE);
         let len = range.end.checked_sub(range.start)?;
-        if !len.is_multiple_of(Self::PAGE) || len / Self::PAGE < 2 {
+        let pages = len.checked_div(Self::PAGE)?;
+        if !whole_words || !len.is_multiple_of(Self::PAGE) || pages < 2 {
             return None;
         }
         Some(Store {
             flash,
             start: range.start,
-            pages: len / Self::PAGE,
+            pages,
             buffer: Buffer([0; Buffer::LEN]),
         })
     }

@@ -292,7 +292,7 @@ fn power_loss_during_the_erase_a_save_needs() {
             let loaded = block_on(s.load());
             assert_eq!(loaded.settings, Some(old), "cut after {cut} bytes");
             assert_eq!(loaded.boot.load_errors, 0, "cut after {cut} bytes");
-            assert_eq!(block_on(s.save(&new.encode())), Ok(saves as u32 + 1));
+            assert_eq!(block_on(s.save(&new.encode())), Ok(saves + 1));
             let mut s = store(s.into_flash());
             assert_eq!(
                 block_on(s.load()).settings,
