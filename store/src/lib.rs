@@ -6,7 +6,8 @@
 //! records fill the pages one after the other, round the range: when the newest record's page
 //! has no room left for the next one, the following page (cyclically: the one holding the
 //! oldest records) is erased and written from its start. A page is thus erased only when the
-//! range has filled up, oldest first, and wear is spread over every page of the range. Nothing
+//! range has filled up, oldest first, and wear is spread over every page of the range (the
+//! first time round, each page is erased once more, before its first record). Nothing
 //! is written but to erased (0xFF) flash, and a record is written in one go, at a position
 //! aligned to the flash's write and read words (`WRITE_SIZE`, `READ_SIZE`: powers of two up to
 //! 32 bytes, 2 on the F103, 8 on the L475).
