@@ -48,7 +48,7 @@ impl Settings {
     /// settings over them, or nothing (after a factory reset if `inputs` ask for one), and
     /// what the start found.
     ///
-    /// The store's operations are async (sequential-storage), but over this chip's blocking
+    /// The store's operations are async (`embedded-storage-async`), but over this chip's blocking
     /// flash they never wait: each is run to completion on the spot, in a function of its own,
     /// so that the store's code is in the firmware once rather than inlined into the gateway
     /// task's state machine at every call.

@@ -87,7 +87,7 @@ pub struct Board {
 /// The chip's flash, blocking.
 #[cfg(feature = "hw")]
 type Flash = embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>;
-/// The flash the settings store writes, as sequential-storage wants it (async over blocking);
+/// The flash the settings store writes, as `settings_store` wants it (async over blocking);
 /// on the L475 with its data cache off while it writes ([`l475::DcacheOff`]).
 #[cfg(all(feature = "hw", feature = "board-l475"))]
 pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<l475::DcacheOff<Flash>>;

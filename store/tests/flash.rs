@@ -1,6 +1,7 @@
 //! The settings store on sequential-storage's in-memory flash, in the geometry of both boards'
-//! internal flash: first start, save and load, damaged and foreign records, factory reset,
-//! power loss at every byte of a save, and wear over many saves.
+//! internal flash: first start, save and load, damaged and foreign records, a range left in the
+//! previous firmware's format, factory reset, power loss at every byte of a save and during
+//! the erase it needs, and wear over many saves.
 
 use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use futures::executor::block_on;
@@ -106,7 +107,37 @@ fn a_factory_reset_forgets_the_settings_and_keeps_the_counts() {
 }
 
 #[repr(align(32))]
-struct Aligned([u8; 64]);
+struct Aligned([u8; 256]);
+
+/// A record of the store's format (see the crate's description) holding `item`, with sequence
+/// number `seq`, written after the last written word of `flash` (the test's records all fit in
+/// its first page).
+fn append_raw<const P: usize, const W: usize, const N: usize>(
+    flash: &mut MockFlashBase<P, W, N>,
+    item: &[u8],
+    seq: u32,
+) {
+    let mut record = vec![0xA5, item.len() as u8];
+    record.extend(seq.to_le_bytes());
+    record.extend(item);
+    record.extend(protocol::modbus::crc::checksum(&record).to_le_bytes());
+    record.push(0);
+    record.resize(record.len().div_ceil(W) * W, 0);
+    let used = flash
+        .as_bytes()
+        .iter()
+        .rposition(|&b| b != 0xFF)
+        .map_or(0, |i| i + 1);
+    let at = used.div_ceil(W) * W;
+    assert!(
+        at + record.len() <= W * N,
+        "the test's records fit in the first page"
+    );
+    // The flash takes words from word-aligned memory (the mock checks it).
+    let mut aligned = Aligned([0; 256]);
+    aligned.0[..record.len()].copy_from_slice(&record);
+    block_on(flash.write(at as u32, &aligned.0[..record.len()])).unwrap();
+}
 
 /// An item of another format after the settings (another firmware's, or this store's before a
 /// change of layout): that start runs the defaults and counts it, the counts of the last item
@@ -116,18 +147,11 @@ fn an_item_of_another_format_gives_the_defaults_once_and_keeps_the_counts() {
     let mut s = store(l4());
     block_on(s.save(&settings(500, 2).encode())).unwrap();
     let foreign: &[&[u8]] = &[&[1, 2, 3], &[settings_store::FORMAT], &[0xFF; 40]];
-    for bytes in foreign {
-        let flash = s.into_flash();
-        let mut queue = QueueStorage::new(
-            flash,
-            QueueConfig::new(L4::FULL_FLASH_RANGE),
-            Cache::new_uncached(),
-        );
-        // The flash takes words from word-aligned memory (the mock checks it).
-        let mut aligned = Aligned([0; 64]);
-        aligned.0[..bytes.len()].copy_from_slice(bytes);
-        block_on(queue.push(&aligned.0[..bytes.len()], false)).unwrap();
-        let mut s2 = store(queue.destroy().0);
+    for (i, bytes) in foreign.iter().enumerate() {
+        let mut flash = s.into_flash();
+        // Newer than any record of the store's so far.
+        append_raw(&mut flash, bytes, 1000 * (i as u32 + 1));
+        let mut s2 = store(flash);
         let loaded = block_on(s2.load());
         assert_eq!(loaded.settings, None, "{bytes:?}");
         assert_eq!(loaded.boot.source, ConfigSource::Damaged, "{bytes:?}");
@@ -147,6 +171,138 @@ fn an_item_of_another_format_gives_the_defaults_once_and_keeps_the_counts() {
     assert_eq!(block_on(s.save(&settings(700, 3).encode())), Ok(2));
     let mut s = store(s.into_flash());
     assert_eq!(block_on(s.load()).settings, Some(settings(700, 3)));
+}
+
+/// A board whose settings range holds the format of the firmware before this store
+/// (sequential-storage's queue of items, some of them the range's whole length round): the
+/// first start runs the defaults and counts it once, the next ones run the defaults without
+/// counting, and saves work (their count starting again).
+#[test]
+fn a_range_in_sequential_storages_format_gives_the_defaults_once_then_works() {
+    fn check<const P: usize, const W: usize, const N: usize>(
+        empty: MockFlashBase<P, W, N>,
+        items: u32,
+    ) {
+        let mut queue = QueueStorage::new(
+            empty,
+            QueueConfig::new(MockFlashBase::<P, W, N>::FULL_FLASH_RANGE),
+            Cache::new_uncached(),
+        );
+        for i in 0..items {
+            // The previous store's items: the format, saves, load errors, the record.
+            let mut item = Aligned([0; 256]);
+            item.0[0] = settings_store::FORMAT;
+            item.0[1..5].copy_from_slice(&(i + 1).to_le_bytes());
+            item.0[7..7 + RECORD_LEN].copy_from_slice(&settings(100 + i as u16, 2).encode());
+            block_on(queue.push(&item.0[..settings_store::ITEM_LEN], true)).unwrap();
+        }
+        let mut s = store(queue.destroy().0);
+        let first = block_on(s.load());
+        assert_eq!(first.settings, None, "{items} items");
+        assert_eq!(first.boot.source, ConfigSource::Damaged, "{items} items");
+        assert_eq!((first.boot.save_count, first.boot.load_errors), (0, 1));
+        for _ in 0..2 {
+            let mut again = store(s.into_flash());
+            let loaded = block_on(again.load());
+            assert_eq!(loaded.boot.source, ConfigSource::Defaults, "{items} items");
+            assert_eq!(loaded.boot.load_errors, 1, "counted once: {items} items");
+            s = again;
+        }
+        for i in 0..25u16 {
+            assert_eq!(
+                block_on(s.save(&settings(300 + i, 4).encode())),
+                Ok(u32::from(i) + 1)
+            );
+            let mut again = store(s.into_flash());
+            let loaded = block_on(again.load());
+            assert_eq!(loaded.settings, Some(settings(300 + i, 4)), "{items} items");
+            assert_eq!(loaded.boot.load_errors, 1);
+            s = again;
+        }
+    }
+    for items in [1, 3, 30] {
+        check(l4(), items);
+        check(F1::new(WriteCountCheck::OnceOnly, None, true), items);
+    }
+}
+
+/// A thousand saves in a row, round and round both boards' ranges: the last one is loaded back,
+/// with its count.
+#[test]
+fn a_thousand_saves_then_a_load() {
+    fn check<const P: usize, const W: usize, const N: usize>(empty: MockFlashBase<P, W, N>) {
+        let mut s = store(empty);
+        for i in 0..1000u16 {
+            block_on(s.save(&settings(100 + i, 1 + (i % 16) as u8).encode())).unwrap();
+        }
+        let mut s = store(s.into_flash());
+        let loaded = block_on(s.load());
+        assert_eq!(loaded.settings, Some(settings(1099, 1 + (999 % 16) as u8)));
+        assert_eq!(loaded.boot.source, ConfigSource::Flash);
+        assert_eq!((loaded.boot.save_count, loaded.boot.load_errors), (1000, 0));
+    }
+    check(l4());
+    check(F1::new(WriteCountCheck::OnceOnly, None, true));
+}
+
+/// Power lost while a save erases the page it needs (the page of the oldest records), at
+/// several points of the erase, on both boards' geometries: the old settings stay, nothing is
+/// counted as unreadable, and the next save works.
+#[test]
+fn power_loss_during_the_erase_a_save_needs() {
+    fn check<const P: usize, const W: usize, const N: usize>(empty: MockFlashBase<P, W, N>) {
+        let page = (W * N) as u32;
+        let old = settings(500, 2);
+        let new = settings(900, 5);
+        // Saves until the next one must erase a page that holds records: the range's pages
+        // have all been written, the next save's erase is the P-th.
+        let (mut flash, mut saves, mut erasing) = (empty, 0u32, 0);
+        loop {
+            let mut s = store(flash);
+            block_on(s.save(&old.encode())).unwrap();
+            saves += 1;
+            flash = s.into_flash();
+            let counting = Counting {
+                flash: flash.clone(),
+                erases: vec![0; P],
+                page,
+            };
+            let mut trial =
+                Store::new(counting, MockFlashBase::<P, W, N>::FULL_FLASH_RANGE).unwrap();
+            block_on(trial.save(&new.encode())).unwrap();
+            if trial.into_flash().erases.iter().sum::<u32>() > 0 {
+                erasing += 1;
+                if erasing == P {
+                    break;
+                }
+            }
+        }
+        let base = flash;
+        for cut in [0, 1, W as u32, page / 2, page - 1] {
+            let mut flash = base.clone();
+            flash.bytes_until_shutoff = Some(cut);
+            let mut s = store(flash);
+            assert!(
+                block_on(s.save(&new.encode())).is_err(),
+                "cut after {cut} bytes"
+            );
+            let mut flash = s.into_flash();
+            flash.bytes_until_shutoff = None;
+            let mut s = store(flash);
+            let loaded = block_on(s.load());
+            assert_eq!(loaded.settings, Some(old), "cut after {cut} bytes");
+            assert_eq!(loaded.boot.load_errors, 0, "cut after {cut} bytes");
+            assert_eq!(block_on(s.save(&new.encode())), Ok(saves + 1));
+            let mut s = store(s.into_flash());
+            assert_eq!(
+                block_on(s.load()).settings,
+                Some(new),
+                "cut after {cut} bytes"
+            );
+        }
+    }
+    check(l4());
+    check(F1::new(WriteCountCheck::OnceOnly, None, true));
 }
 
 /// Power lost after every possible number of bytes written during a save: the next start finds
@@ -217,7 +373,8 @@ fn cut_every_byte_of_a_save<const P: usize, const W: usize, const N: usize>(
             other => panic!("cut after {cut} bytes: {other:?} ({:?})", loaded.boot),
         }
         // And a save after the power comes back works.
-        block_on(s.save(&new.encode())).expect("the store recovers");
+        block_on(s.save(&new.encode()))
+            .unwrap_or_else(|e| panic!("the store recovers: {e:?}, cut after {cut} bytes"));
         let mut s = store(s.into_flash());
         assert_eq!(
             block_on(s.load()).settings,
@@ -303,4 +460,59 @@ fn wear_spreads_over_the_pages() {
     let loaded = block_on(s.load());
     assert_eq!(loaded.settings, Some(last));
     assert_eq!(loaded.boot.save_count, SAVES);
+}
+
+/// Power lost during the very first save of a new board: nothing readable is in the range, but
+/// it is not erased either. That start runs the defaults and counts it (unless nothing was
+/// written at all), once; then saves work. (Cut after the record's CRC, in its padding, the
+/// record is whole: the new settings.)
+#[test]
+fn power_loss_during_the_first_save_is_counted_once() {
+    let new = settings(900, 5);
+    let mut whole = 0;
+    for cut in 0..4 * RECORD_LEN as u32 {
+        let mut flash = l4();
+        flash.bytes_until_shutoff = Some(cut);
+        let mut s = store(flash);
+        let _ = block_on(s.save(&new.encode()));
+        let mut flash = s.into_flash();
+        flash.bytes_until_shutoff = None;
+        let mut s = store(flash);
+        let loaded = block_on(s.load());
+        if loaded.settings == Some(new) {
+            // Header (6 bytes), item and CRC written.
+            assert!(
+                cut >= 6 + settings_store::ITEM_LEN as u32 + 2,
+                "cut after {cut} bytes"
+            );
+            whole += 1;
+            continue;
+        }
+        let counted = u16::from(cut > 0);
+        assert_eq!(loaded.settings, None, "cut after {cut} bytes");
+        assert_eq!(loaded.boot.load_errors, counted, "cut after {cut} bytes");
+        let mut s = store(s.into_flash());
+        let again = block_on(s.load());
+        assert_eq!(
+            again.boot.source,
+            ConfigSource::Defaults,
+            "cut after {cut} bytes"
+        );
+        assert_eq!(
+            again.boot.load_errors, counted,
+            "counted once: cut after {cut} bytes"
+        );
+        assert_eq!(
+            block_on(s.save(&new.encode())),
+            Ok(1),
+            "cut after {cut} bytes"
+        );
+        let mut s = store(s.into_flash());
+        assert_eq!(
+            block_on(s.load()).settings,
+            Some(new),
+            "cut after {cut} bytes"
+        );
+    }
+    assert!(whole > 0, "some cuts left the record whole");
 }
