@@ -7,7 +7,7 @@
 //! acceleration and deceleration), so DCMD reads as ACMD; it has no per-point zones, load
 //! threshold or control flags, so those read 0 and must be written 0. Push points (PPOW) are
 //! not exposed here (the command channel writes any field; it converts and checks a field with
-//! a unit as this table does: [`field_to_plc`], [`field_from_plc`]).
+//! a unit as this table does: `field_to_plc`, `field_from_plc`).
 
 use super::config::AxisConfig;
 use super::refused::Refused;
