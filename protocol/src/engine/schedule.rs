@@ -48,9 +48,10 @@ use super::approach::{Approach, SETTLE_GAP};
 use super::{timing, Engine, Link, Next, Origin, FIRST_PROBE};
 use crate::axes::{least, AxisMap, AxisSet};
 use crate::div::{div, divisor};
+use crate::line::Baud;
 use crate::memory::PNOW;
 use crate::time::{earliest, Duration, Instant};
-use crate::{Axis, Command, Request};
+use crate::{Axis, Command, Request, Rtim};
 
 /// An idle axis is due this many all-axes cycles after its last poll (as a fraction: 5/4); once
 /// due, it goes before every other poll and read. The three quarters of a cycle left to its
@@ -111,10 +112,10 @@ pub(super) struct Schedule {
     /// Polls of idle axes that were due, in a row.
     idle_run: u8,
     /// What an answered transaction takes on this bus, measured ([`MEASURE_SHIFT`]), and the
-    /// nominal time it was measured against: a pseudo-terminal or a USB adapter answers faster
+    /// line (rate, RTIM) it was measured on: a pseudo-terminal or a USB adapter answers faster
     /// than the wire's time, a slow converter slower, and a cycle is what the bus really does.
     transaction: Duration,
-    measured_against: Duration,
+    measured_on: Option<(Baud, Rtim)>,
 }
 
 /// A new transaction time counts for 1/2^3 = 1/8 of the measured one (an average over about the
@@ -139,16 +140,16 @@ impl Schedule {
             arrival_run: 0,
             idle_run: 0,
             transaction: Duration::ZERO,
-            measured_against: Duration::ZERO,
+            measured_on: None,
         }
     }
 
     /// An answered transaction took `took` (command handed over to answer in, plus the host
-    /// gap) on a bus whose nominal transaction is `nominal`. A new nominal time (another rate or
-    /// RTIM) starts the measurement again.
-    pub(super) fn transaction_measured(&mut self, nominal: Duration, took: Duration) {
-        if self.measured_against != nominal {
-            self.measured_against = nominal;
+    /// gap) on the line `on` (rate, RTIM). Another line starts the measurement again. (The line,
+    /// not its nominal time, is compared: that takes two 64-bit divisions, on every answer.)
+    pub(super) fn transaction_measured(&mut self, on: (Baud, Rtim), took: Duration) {
+        if self.measured_on != Some(on) {
+            self.measured_on = Some(on);
             self.transaction = took;
             return;
         }
@@ -156,13 +157,13 @@ impl Schedule {
         self.transaction = Duration(was - (was >> MEASURE_SHIFT) + (took.0 >> MEASURE_SHIFT));
     }
 
-    /// One transaction on this bus: as measured, or `nominal` until one is (or after the rate
-    /// changed).
-    fn transaction(&self, nominal: Duration) -> Duration {
-        if self.measured_against == nominal {
+    /// One transaction on the line `on`: as measured, or its nominal time until one is (or
+    /// after the line changed).
+    fn transaction(&self, on: (Baud, Rtim)) -> Duration {
+        if self.measured_on == Some(on) {
             self.transaction
         } else {
-            nominal
+            timing::transaction_time(on.0, on.1)
         }
     }
 
@@ -224,8 +225,9 @@ impl Engine {
             .filter(|&a| self.axes[a].link != Link::Offline)
             .count()
             .max(1);
-        let nominal = timing::transaction_time(self.config.baud, self.config.rtim);
-        let transaction = self.schedule.transaction(nominal);
+        let transaction = self
+            .schedule
+            .transaction((self.config.baud, self.config.rtim));
         Duration(transaction.0.saturating_mul(polled as u64))
     }
 

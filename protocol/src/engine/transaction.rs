@@ -59,9 +59,9 @@ impl Engine {
         let typical = !matches!(flight.request.command, Command::StoreFromEdit(_))
             && !matches!(flight.origin, Origin::Rejoin | Origin::Establish);
         if typical {
-            let nominal = timing::transaction_time(self.config.baud, self.config.rtim);
             let took = Duration(now.0.saturating_sub(flight.sent.0)).plus(timing::HOST_GAP);
-            self.schedule.transaction_measured(nominal, took);
+            let on = (self.config.baud, self.config.rtim);
+            self.schedule.transaction_measured(on, took);
         }
         self.complete(now, flight, reply);
     }
