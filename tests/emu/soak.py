@@ -189,6 +189,7 @@ class Soak:
         self.refusals = Counter()
         self.checks = Counter()
         self.skips = Counter()
+        self.sync_axes = set()  # the axes of a synchronized start still running (SYNCSTAT 1)
         self.known = []  # known firmware defects seen (not fatal without --strict)
         self.excused = []  # watchdog trips excused by a host stall: the gap the PLC saw, ms
         self.last_reply = None
@@ -260,15 +261,16 @@ class Soak:
 
     def sim_time(self, t):
         """rc-sim's clock for a driver time (monotonic)."""
-        return t - self.t0 - self.skew
+        return t - self.t0
 
     def start(self):
         self.t0 = time.monotonic()
-        self.skew = 0.0
         self.emu = Emulator(self.elf, self.workdir, f"0-{AXES - 1}",
                             sim_args=SIM_FAULTS + ["--seed", str(self.seed)], control=True)
         self.emu.start()
-        self.t0 = self.emu.sim_started
+        # rc-sim starts its clock right after its first line: a little after it, refined by
+        # every `where`.
+        self.t0 = self.emu.sim_started - 0.005
         self.plc = self.emu.plc
         self.log = BusLog(self.emu.sim_log_path)
         self.emu.set_pin(STOP_INPUT, True)
@@ -289,12 +291,14 @@ class Soak:
         for a in range(AXES):
             wait_for(lambda: self._online(a), 60, f"axis {a} online")
         self.resetcause = self.plc.read(GATEWAY_UNIT, G_RESETCAUSE)[0]
-        homes = {}
+        start = self.t0
+        for a in range(AXES):
+            self.where(a)
+        print(f"soak: rc-sim's clock starts {(self.t0 - start) * 1000 + 5:.0f} ms after its first line", flush=True)
         for a in range(AXES):
             # With the bus faults on, a command may fail (no answer after the retries): again.
             for attempt in range(4):
                 self.plc.write(unit(a), DRG1, DRG1_SON)
-                homes[a] = time.monotonic()
                 self.plc.write(unit(a), DRG1, DRG1_SON | DRG1_HOME)
                 outcome = self.plc.settle(a, 30)
                 self.plc.write(unit(a), DRG1, DRG1_SON)
@@ -303,7 +307,6 @@ class Soak:
                 print(f"soak: axis {a}: homing ended {outcome}, again", flush=True)
             else:
                 raise AssertionError(f"axis {a} not homed")
-        self.calibrate(homes)
         self.plc.write(GATEWAY_UNIT, G_WATCHDOG, WATCHDOG_MS)
         self.last_reply = time.monotonic()
         self.max_gap = 0.0
@@ -311,19 +314,6 @@ class Soak:
             self.axes[a]["cmct"] = self.read(unit(a), CMST, 4)[3]
             self.axes[a]["settled"] = time.monotonic()
             self.axes[a]["checked"] = False
-
-    def calibrate(self, sent):
-        """rc-sim's clock starts a little after `t0` (its start-up): by how much, from causality.
-        Each home command reaches the bus after the PLC sent its request, so rc-sim's time of it
-        is at least the request's time minus the skew."""
-        self.log.update()
-        self.skew = 0.0
-        for a, t in sent.items():
-            homes = [ts for ts, c in self.log.motions[a] if c == "Home" and ts >= t - self.t0 - 1.0]
-            if not homes:
-                raise AssertionError(f"axis {a}: no home command on the bus")
-            self.skew = max(self.skew, (t - self.t0) - homes[0])
-        print(f"soak: rc-sim's clock starts {self.skew * 1000:.0f} ms after the driver's", flush=True)
 
     def _online(self, a):
         try:
@@ -446,6 +436,12 @@ class Soak:
     def action(self):
         r = self.rng.random()
         a = self.rng.randrange(AXES)
+        if a in self.sync_axes and r < 0.55:
+            # KNOWN DEFECT (reported with issue 24 item 7): a move taken for an axis of a running
+            # synchronized start does not cancel it; its `t` still goes out and the axis drives
+            # to its sync point after the newer move was done (seed 2024). A careful PLC leaves
+            # the axes of a running start alone but for stops; so does this one.
+            r = 0.9
         try:
             if r < 0.30:
                 self.direct(a, relative=self.rng.random() < 0.3)
@@ -652,7 +648,8 @@ class Soak:
                 self.note_state(a, state, reason)
             else:
                 self.refusals[f"sync start: axis CMST 3 reason {reason >> 8}"] += 1
-        self.read(GATEWAY_UNIT, G_SYNC_STATUS)
+        if self.read(GATEWAY_UNIT, G_SYNC_STATUS)[0] == 1:
+            self.sync_axes = set(axes)
 
     def out_of_stroke(self, a):
         """A direct move beyond the stroke: exception 03, nothing on the bus."""
@@ -674,6 +671,8 @@ class Soak:
     def follow(self):
         """CMST of every axis with a command in flight; rest checks (c) for those settled."""
         now = time.monotonic()
+        if self.sync_axes and self.read(GATEWAY_UNIT, G_SYNC_STATUS)[0] != 1:
+            self.sync_axes = set()
         for a in range(AXES):
             s = self.axes[a]
             if s["cmd"] is not None and s["settled"] is None:
@@ -772,8 +771,11 @@ class Soak:
         s["pos"] = pnow
 
     def where(self, a):
-        """The simulated axis as rc-sim has it now (`where`, noted in its log)."""
+        """The simulated axis as rc-sim has it now (`where`, noted in its log). Each answer also
+        pins rc-sim's clock to the driver's: it was noted after the driver asked, so rc-sim
+        started its clock no earlier than (asked - its time of the note)."""
         before = len(self.log.wheres[a])
+        asked = time.monotonic()
         self.emu.inject(f"where {a}")
         deadline = time.monotonic() + 2
         while len(self.log.wheres[a]) == before:
@@ -781,7 +783,9 @@ class Soak:
                 raise AssertionError(f"rc-sim did not note `where {a}`")
             time.sleep(0.01)
             self.log.update()
-        return self.log.wheres[a][-1]
+        truth = self.log.wheres[a][-1]
+        self.t0 = max(self.t0, asked - truth["t"])
+        return truth
 
     # ------------------------------------------------------------------ (b) quiet windows
 
