@@ -263,6 +263,8 @@ class Emulator:
                 stdout=subprocess.PIPE, stderr=sim_log,
             )
         first = self.sim.stdout.readline().decode().split()
+        # rc-sim's log times count from about now (it starts its clock right after this line).
+        self.sim_started = time.monotonic()
         if len(first) != 2 or first[0] != "PTY":
             raise EmulatorError(f"rc-sim did not start: {first} {self.sim_log()}")
         bus_path = first[1]
@@ -301,7 +303,8 @@ class Emulator:
         self.wait_log("INFO  ready", 20)
 
     def inject(self, line):
-        """A fault for rc-sim (`silent 2 on`, `alarm 2 E0`, `power 2 500`; rc-sim --help)."""
+        """A fault for rc-sim (`silent 2 on`, `alarm 2 E0`, `power 2 500`), or `where 2` (its log notes
+        the axis' position: the simulator's truth); rc-sim --help."""
         if not self.with_control:
             raise EmulatorError("started without control=True")
         self.sim.stdin.write(line.encode() + b"\n")

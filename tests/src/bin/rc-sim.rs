@@ -121,8 +121,8 @@ struct Cli {
     #[arg(long, value_name = "N", default_value_t = 3)]
     noise_max: u8,
     /// Read faults to inject from standard input, one per line: `silent AXIS on|off`,
-    /// `alarm AXIS CODE` (hex, 80-FF), `power AXIS MS`; each is answered `OK` or `ERR why` on
-    /// standard output.
+    /// `alarm AXIS CODE` (hex, 80-FF), `power AXIS MS`, `where AXIS` (the log notes the axis'
+    /// position); each is answered `OK` or `ERR why` on standard output.
     #[arg(long)]
     control: bool,
     /// Exit after this many seconds.

@@ -8,6 +8,8 @@
 //! silent 2 off       it answers again
 //! alarm 2 E0         axis 2 raises error E0 (80-FF only: 01-7F are warnings, not alarms)
 //! power 2 500        axis 2 loses power now, for 500 ms
+//! where 2            the log (`--log`) notes axis 2's position, target and motion: the truth a
+//!                    test checks the master's view against (nothing changes)
 //! ```
 
 use protocol::alarm::{AlarmCode, Level};
@@ -24,6 +26,8 @@ pub enum Control {
     Alarm(Axis, AlarmCode),
     /// The axis loses power now for this many milliseconds.
     PowerCycle(Axis, u32),
+    /// Nothing changes: the log notes where the axis is ([`Control::report`]).
+    Where(Axis),
 }
 
 impl Control {
@@ -63,8 +67,10 @@ impl Control {
                     .ok_or_else(|| format!("{line:?}: power AXIS MILLISECONDS"))?;
                 Ok(Control::PowerCycle(axis(words.get(1))?, ms))
             }
+            Some("where") if words.len() == 2 => Ok(Control::Where(axis(words.get(1))?)),
             _ => Err(format!(
-                "{line:?}: expected `silent AXIS on|off`, `alarm AXIS CODE` or `power AXIS MS`"
+                "{line:?}: expected `silent AXIS on|off`, `alarm AXIS CODE`, `power AXIS MS` or \
+                 `where AXIS`"
             )),
         }
     }
@@ -72,9 +78,10 @@ impl Control {
     /// The axis it changes.
     pub fn axis(self) -> Axis {
         match self {
-            Control::Silent(axis, _) | Control::Alarm(axis, _) | Control::PowerCycle(axis, _) => {
-                axis
-            }
+            Control::Silent(axis, _)
+            | Control::Alarm(axis, _)
+            | Control::PowerCycle(axis, _)
+            | Control::Where(axis) => axis,
         }
     }
 
@@ -93,8 +100,30 @@ impl Control {
                 let now = bus.now();
                 bus.schedule_power_cycle(axis, now, u64::from(ms) * 1_000);
             }
+            Control::Where(_) => {}
         }
         Ok(())
+    }
+
+    /// What the log notes for it once applied: for [`Control::Where`], the controller's present
+    /// position and target (pulses, as PNOW and PCMD read), whether a move or homing runs
+    /// and PFIN.
+    pub fn report(self, bus: &Bus) -> String {
+        match self {
+            Control::Where(axis) => match bus.controller(axis) {
+                Some(c) => format!(
+                    "where: axis {} position {} target {} moving {} homing {} pfin {}",
+                    axis.get(),
+                    c.position(),
+                    c.target(),
+                    c.moving(),
+                    c.homing(),
+                    c.pfin()
+                ),
+                None => format!("where: axis {} not on the bus", axis.get()),
+            },
+            other => format!("control: {other:?}"),
+        }
     }
 }
 
@@ -118,6 +147,7 @@ mod tests {
             Control::parse("power 2 500"),
             Ok(Control::PowerCycle(a2, 500))
         );
+        assert_eq!(Control::parse("where 2"), Ok(Control::Where(a2)));
         for bad in [
             "",
             "silent 16 on",
@@ -126,6 +156,8 @@ mod tests {
             "alarm 2 zz",
             "power 2 0",
             "fly 2",
+            "where",
+            "where 2 3",
         ] {
             assert!(Control::parse(bad).is_err(), "{bad:?}");
         }

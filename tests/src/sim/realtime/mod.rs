@@ -396,7 +396,7 @@ impl RealTime {
         let controls: Vec<Control> = receiver.try_iter().collect();
         for control in controls {
             match control.apply(&mut self.bus) {
-                Ok(()) => self.note(now, &format!("control: {control:?}")),
+                Ok(()) => self.note(now, &control.report(&self.bus)),
                 Err(why) => self.note(now, &format!("control refused: {why}")),
             }
         }
