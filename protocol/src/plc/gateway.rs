@@ -277,6 +277,15 @@ impl Gateway {
         // (A stop does not move the axis: it is never blocked.)
         let motion = Motion::of(&kind);
         let blocked = motion != Motion::None && self.blocked().contains(axis);
+        if motion != Motion::None && !blocked && self.sync.involves(axis) {
+            // A move of its own supersedes the synchronized start the axis is in, as a stop
+            // does: the start is given up and what it buffered cancelled first, else its `t`
+            // would take the axis to the start's point after this move (found by the soak,
+            // `scripts/soak.sh`).
+            if let Some(end) = self.sync.fail(&mut self.engine) {
+                self.sync_ended(end);
+            }
+        }
         let result = if blocked {
             // The fail-safe's own reason, so that the PLC knows an acknowledgement is due.
             Err(if self.failsafe_holds() && !self.failsafe.stop_input() {

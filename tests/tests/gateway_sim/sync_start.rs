@@ -117,3 +117,39 @@ fn a_sync_restart_waits_for_the_old_attempt() {
     );
     assert_eq!(pnow_mm100(&mut h, 2), 40_00);
 }
+
+/// A move of its own for an axis in a running synchronized start gives the start up (as a stop
+/// does) and cancels what it buffered: the start's `t` must not take the axis to the start's
+/// point after the newer move (the soak found it doing so).
+#[test]
+fn a_move_of_its_own_gives_a_running_sync_start_up() {
+    let mut h = gateway(2);
+    home(&mut h, 0);
+    home(&mut h, 1);
+    write(&mut h, unit(0), POSR, &[3]).unwrap();
+    write(&mut h, unit(1), POSR, &[3]).unwrap();
+    write(&mut h, 63, G_SYNC_MASK, &[0b11]).unwrap();
+    write(&mut h, 63, G_SYNC_START, &[1]).unwrap();
+    // Until axis 0's `h` is on the wire.
+    let until = h.now + S;
+    while h.now < until {
+        h.step(until);
+        if h.sent.last().is_some_and(|(_, r)| {
+            r.axis == axis(0) && matches!(r.command, protocol::Command::Buffer(_))
+        }) {
+            break;
+        }
+    }
+    write(&mut h, unit(0), DIRECT, &[0, 10_00, 0, 10, 0, 20_00, 30]).unwrap();
+    for _ in 0..100 {
+        h.run_until(h.now + 20 * MS);
+        let _ = read(&mut h, 63, G_SYNC_STATUS, 1);
+    }
+    assert_eq!(read(&mut h, 63, G_SYNC_STATUS, 1).unwrap(), [3], "given up");
+    assert_eq!(
+        pnow_mm100(&mut h, 0),
+        10_00,
+        "at the direct move's target, not point 3"
+    );
+    assert!(h.bus.controller(axis(0)).unwrap().buffered().is_none());
+}
