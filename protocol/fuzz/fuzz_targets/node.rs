@@ -12,6 +12,8 @@
 //! - every frame for the bus is a valid frame (BCC) of a command to an axis on the bus;
 //! - once the stop input goes active, nothing that moves an axis goes out until every axis on
 //!   the bus has had its stop (`d`);
+//! - and every one of them does get it: after the input's end, time passes with a silent bus
+//!   until no stop is owed (to an axis still on the bus), at most a minute;
 //! - a reply for the PLC only follows bytes from the PLC (none unasked), and is a whole Modbus
 //!   frame with a valid CRC.
 #![no_main]
@@ -79,48 +81,75 @@ fuzz_target!(|data: &[u8]| {
                 now += step * 50;
             }
         }
-        for _ in 0..256 {
-            let bus_axes = node.gateway().config().bus.axes;
-            let Some(action) = node.poll(Instant(now)) else {
-                break;
-            };
-            match action {
-                Action::Bus(bytes) => {
-                    let frame = Frame::new_checked(&bytes).expect("a valid frame");
-                    let request = Request::parse(&frame).expect("a command frame");
-                    assert!(
-                        bus_axes.contains(request.axis),
-                        "a frame to axis {:?}, not on the bus {:?}",
-                        request.axis,
-                        bus_axes
-                    );
-                    if owed != AxisSet::EMPTY {
-                        // Nothing that moves an axis until every axis has had its stop. (Not
-                        // "nothing but stops": a stop that got no answer is resent before the
-                        // next axis' first one, and an establishment or a rejoin that is under
-                        // way sends its frames first; this target found both.)
-                        assert!(
-                            !request.command.moves(),
-                            "{:?} before the stops still owed to {:?}",
-                            request,
-                            owed
-                        );
-                        if request.command == Command::CancelMotion {
-                            owed = owed.without(request.axis);
-                        }
-                    }
-                }
-                Action::Reply(reply) => {
-                    assert!(asked, "a reply nobody asked for");
-                    assert!(reply.len() >= 4 && reply.len() <= 256, "reply length");
-                    assert!(crc::is_valid(reply), "reply CRC");
-                    asked = false;
-                }
-                Action::Store(Store::Save(_)) => node.stored(Ok(1)),
-                // The board restarts.
-                Action::Store(Store::FactoryReset | Store::Restart) => return,
-                Action::Line(_) | Action::PlcLine(_) => {}
-            }
+        if !drain(&mut node, now, &mut owed, &mut asked) {
+            return;
+        }
+    }
+    // Every axis gets its stop: with no more input but time passing (the bus silent, so every
+    // stop ends by its time-out), every stop still owed goes out within a minute.
+    // (Only to the axes still on the bus: a PLC may have taken one off since.)
+    let end = now + 60_000_000;
+    loop {
+        let still = AxisSet(owed.0 & node.gateway().config().bus.axes.0);
+        if still.is_empty() {
+            break;
+        }
+        assert!(
+            now < end,
+            "stops still owed to {still:?} a minute after the input ended"
+        );
+        now = node.poll_at().map_or(end, |at| at.0.clamp(now + 1, end));
+        if !drain(&mut node, now, &mut owed, &mut asked) {
+            return;
         }
     }
 });
+
+/// Poll the node at `now` until it has nothing to do, checking each action; `false` when the
+/// board restarts.
+fn drain(node: &mut Node, now: u64, owed: &mut AxisSet, asked: &mut bool) -> bool {
+    for _ in 0..256 {
+        let bus_axes = node.gateway().config().bus.axes;
+        let Some(action) = node.poll(Instant(now)) else {
+            break;
+        };
+        match action {
+            Action::Bus(bytes) => {
+                let frame = Frame::new_checked(&bytes).expect("a valid frame");
+                let request = Request::parse(&frame).expect("a command frame");
+                assert!(
+                    bus_axes.contains(request.axis),
+                    "a frame to axis {:?}, not on the bus {:?}",
+                    request.axis,
+                    bus_axes
+                );
+                if *owed != AxisSet::EMPTY {
+                    // Nothing that moves an axis until every axis has had its stop. (Not
+                    // "nothing but stops": a stop that got no answer is resent before the
+                    // next axis' first one, and an establishment or a rejoin that is under
+                    // way sends its frames first; this target found both.)
+                    assert!(
+                        !request.command.moves(),
+                        "{:?} before the stops still owed to {:?}",
+                        request,
+                        owed
+                    );
+                    if request.command == Command::CancelMotion {
+                        *owed = owed.without(request.axis);
+                    }
+                }
+            }
+            Action::Reply(reply) => {
+                assert!(*asked, "a reply nobody asked for");
+                assert!(reply.len() >= 4 && reply.len() <= 256, "reply length");
+                assert!(crc::is_valid(reply), "reply CRC");
+                *asked = false;
+            }
+            Action::Store(Store::Save(_)) => node.stored(Ok(1)),
+            // The board restarts.
+            Action::Store(Store::FactoryReset | Store::Restart) => return false,
+            Action::Line(_) | Action::PlcLine(_) => {}
+        }
+    }
+    true
+}
