@@ -156,6 +156,15 @@ impl Approach {
     }
 
     /// A status report came in: from now on it says whether the axis moves.
+    /// A `t` started the move this axis had buffered, at `now`: it moves, although its last
+    /// status (from before the `t`) says it stands, until a status says otherwise. Without
+    /// this a buffered move that ended between two polls, or was stopped before one, was never
+    /// seen to stop, and its position never read (found by the firmware soak).
+    pub(super) fn started(&mut self, now: Instant) {
+        self.since = now;
+        self.unseen = true;
+    }
+
     pub(super) fn status_seen(&mut self) {
         self.unseen = false;
     }

@@ -396,10 +396,16 @@ impl Engine {
         }
         if flight.origin == Origin::Job && reply.rejection().is_none() {
             let at = self.axes[axis].position;
-            // A point's position is not in its Q3: the job may know it.
-            let point_at = match self.active[axis].as_ref().map(|a| a.job.kind) {
-                Some(JobKind::MoveToPoint(_, target)) => target,
-                _ => None,
+            // A point's position is not in its Q3: the job may know it. A `t` starts the moves
+            // its axes buffered.
+            let (point_at, started) = match self.active[axis].as_ref().map(|a| a.job.kind) {
+                Some(JobKind::MoveToPoint(_, target)) => (target, AxisSet::EMPTY),
+                Some(JobKind::StartBuffered(axes))
+                    if flight.request.command == Command::ExecuteBuffered =>
+                {
+                    (None, axes.with(axis))
+                }
+                _ => (None, AxisSet::EMPTY),
             };
             self.schedule.approach(axis).command_accepted(
                 now,
@@ -407,6 +413,9 @@ impl Engine {
                 at,
                 point_at,
             );
+            for a in started.iter() {
+                self.schedule.approach(a).started(now);
+            }
         }
         match flight.origin {
             Origin::Poll | Origin::Probe | Origin::Position | Origin::Cancelled => {}

@@ -584,3 +584,56 @@ fn a_stopped_axis_position_is_read_again_until_it_rests() {
         "read once it rests"
     );
 }
+
+/// A short buffered move, started by a `t` and over before a status poll of its axis shows it
+/// moving (the answers in between lost), still has its position read: each axis a `t` starts counts as moving until a status
+/// says otherwise (the firmware soak found PNOW left where the axis stood before the move).
+#[test]
+fn a_synchronized_start_reads_where_its_axes_came_to_rest() {
+    let mut h = established(2);
+    for a in 0..2 {
+        let home = Job {
+            axis: axis(a),
+            kind: JobKind::Home(HomeDirection::MotorEnd),
+        };
+        run_job(&mut h, home, 10 * S).unwrap();
+    }
+    // Axis 1 a few pulses only: its move is over within a millisecond or two.
+    for (a, target) in [(0, -8_000), (1, -20)] {
+        let buffered = Buffered::new(&Command::MoveAbsolute(Pulses(target))).unwrap();
+        let job = Job {
+            axis: axis(a),
+            kind: JobKind::Command(Command::Buffer(buffered)),
+        };
+        run_job(&mut h, job, S).unwrap();
+    }
+    h.run_until(h.now + 200 * MS);
+    let set = AxisSet::default().with(axis(0)).with(axis(1));
+    let start = Job {
+        axis: axis(0),
+        kind: JobKind::StartBuffered(set),
+    };
+    h.engine.submit(start).unwrap();
+    // Axis 1's answers lost while its move runs (as a noisy bus does): the next status it
+    // answers shows it standing.
+    let until = h.now + S;
+    while h.now < until
+        && !h
+            .sent
+            .iter()
+            .any(|(_, r)| r.command == Command::ExecuteBuffered)
+    {
+        h.step(until);
+    }
+    h.bus.set_silent(axis(1), true);
+    h.run_until(h.now + 30 * MS);
+    h.bus.set_silent(axis(1), false);
+    h.run_until(h.now + 2 * S);
+    let c = h.bus.controller(axis(1)).unwrap();
+    assert_eq!(c.position(), -20, "axis 1 moved");
+    assert_eq!(
+        h.engine.axis(axis(1)).position,
+        Some(Pulses(-20)),
+        "its position read after the move"
+    );
+}
