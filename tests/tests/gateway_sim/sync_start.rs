@@ -7,26 +7,33 @@ use protocol::plc::map::*;
 
 use crate::{axis, coil, gateway, gateway_with, home, pnow_mm100, read, unit, write, MS, S};
 
-/// G3: STP on axis 0 after its `h` was accepted but before the `t`: axis 0 still starts.
-#[test]
-fn g3_sync_start_moves_a_paused_axis() {
+/// Axes 0 and 1 homed, both POSR 3, a synchronized start of both written, and run until the
+/// `h` of axis `a` is on the wire.
+fn sync_start_until_h_of(a: u8) -> rc_host::node_harness::NodeHarness {
     let mut h = gateway(2);
-    home(&mut h, 0);
-    home(&mut h, 1);
-    write(&mut h, unit(0), POSR, &[3]).unwrap();
-    write(&mut h, unit(1), POSR, &[3]).unwrap();
+    for n in 0..2 {
+        home(&mut h, n);
+        write(&mut h, unit(n), POSR, &[3]).unwrap();
+    }
     write(&mut h, 63, G_SYNC_MASK, &[0b11]).unwrap();
     write(&mut h, 63, G_SYNC_START, &[1]).unwrap();
-    // run until the `h` of axis 1 is on the wire (axis 0's `h` is answered by then)
     let until = h.now + S;
     while h.now < until {
         h.step(until);
         if h.sent.last().is_some_and(|(_, r)| {
-            r.axis == axis(1) && matches!(r.command, protocol::Command::Buffer(_))
+            r.axis == axis(a) && matches!(r.command, protocol::Command::Buffer(_))
         }) {
             break;
         }
     }
+    h
+}
+
+/// G3: STP on axis 0 after its `h` was accepted but before the `t`: axis 0 still starts.
+#[test]
+fn g3_sync_start_moves_a_paused_axis() {
+    // Until the `h` of axis 1 is on the wire (axis 0's `h` is answered by then).
+    let mut h = sync_start_until_h_of(1);
     coil(&mut h, unit(0), COIL_STP, true).unwrap();
     for _ in 0..50 {
         h.run_until(h.now + 20 * MS);
@@ -123,23 +130,7 @@ fn a_sync_restart_waits_for_the_old_attempt() {
 /// point after the newer move (the soak found it doing so).
 #[test]
 fn a_move_of_its_own_gives_a_running_sync_start_up() {
-    let mut h = gateway(2);
-    home(&mut h, 0);
-    home(&mut h, 1);
-    write(&mut h, unit(0), POSR, &[3]).unwrap();
-    write(&mut h, unit(1), POSR, &[3]).unwrap();
-    write(&mut h, 63, G_SYNC_MASK, &[0b11]).unwrap();
-    write(&mut h, 63, G_SYNC_START, &[1]).unwrap();
-    // Until axis 0's `h` is on the wire.
-    let until = h.now + S;
-    while h.now < until {
-        h.step(until);
-        if h.sent.last().is_some_and(|(_, r)| {
-            r.axis == axis(0) && matches!(r.command, protocol::Command::Buffer(_))
-        }) {
-            break;
-        }
-    }
+    let mut h = sync_start_until_h_of(0);
     write(&mut h, unit(0), DIRECT, &[0, 10_00, 0, 10, 0, 20_00, 30]).unwrap();
     for _ in 0..100 {
         h.run_until(h.now + 20 * MS);
