@@ -155,7 +155,6 @@ impl Approach {
         self.target.is_some()
     }
 
-    /// A status report came in: from now on it says whether the axis moves.
     /// A `t` started the move this axis had buffered, at `now`: it moves, although its last
     /// status (from before the `t`) says it stands, until a status says otherwise. Without
     /// this a buffered move that ended between two polls, or was stopped before one, was never
@@ -165,6 +164,7 @@ impl Approach {
         self.unseen = true;
     }
 
+    /// A status report came in: from now on it says whether the axis moves.
     pub(super) fn status_seen(&mut self) {
         self.unseen = false;
     }

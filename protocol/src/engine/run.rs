@@ -265,20 +265,17 @@ impl Engine {
                 return;
             }
         }
-        if let (Some(error), None) = (active.failing, program(&active.job, cursor)) {
-            // The position is read: now the failure.
-            self.finish(axis, Err(error));
-            return;
-        }
         match program(&active.job, cursor) {
             Some(Op::Await(_)) => active.wait_deadline = Some(now + motion_timeout),
             Some(Op::Send(_)) => {}
             None => {
-                let result = match (written(&active.job), active.job.kind) {
-                    (Some(data), _) if !active.readback.matches(data) => {
+                let result = match (active.failing, written(&active.job), active.job.kind) {
+                    // The position is read: now the failure.
+                    (Some(error), _, _) => Err(error),
+                    (None, Some(data), _) if !active.readback.matches(data) => {
                         Err(JobError::VerifyFailed)
                     }
-                    (Some(_), _) | (None, JobKind::ReadPoint(_)) => {
+                    (None, Some(_), _) | (None, None, JobKind::ReadPoint(_)) => {
                         Ok(JobOutput::Point(active.readback))
                     }
                     _ => Ok(match active.last {
@@ -325,17 +322,21 @@ impl Engine {
                 self.finish(axis, Err(first));
                 return;
             }
-            let read = (usize::from(active.cursor) + 1..usize::from(u8::MAX))
-                .take(8)
-                .find(|&i| reads_position(&active.job, i))
-                .and_then(|i| u8::try_from(i).ok());
-            if let (true, true, Some(read)) = (online, error.position_unknown(), read) {
-                active.failing = Some(error);
-                active.cursor = read;
-                active.high_water = read;
-                active.attempt = 0;
-                active.wait_deadline = None;
-                return;
+            if online && error.position_unknown() {
+                // Its read of the position, further on in its program (a move's or homing's
+                // last op).
+                let read = (usize::from(active.cursor) + 1..)
+                    .take_while(|&i| program(&active.job, i).is_some())
+                    .find(|&i| reads_position(&active.job, i))
+                    .and_then(|i| u8::try_from(i).ok());
+                if let Some(read) = read {
+                    active.failing = Some(error);
+                    active.cursor = read;
+                    active.high_water = read;
+                    active.attempt = 0;
+                    active.wait_deadline = None;
+                    return;
+                }
             }
         }
         self.finish(axis, Err(error));

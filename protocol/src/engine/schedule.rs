@@ -33,9 +33,8 @@
 //!    whose arrival is estimated but not near, is due [`IDLE_PERIOD_CYCLES`] cycles after its
 //!    last poll; a mover whose estimate is a read away twice a cycle; one whose arrival cannot
 //!    be estimated (a home, a point whose position its job does not carry, a job without a
-//!    move) or is overdue as soon as
-//!    it has been polled. Ties go to the one polled longest ago, then in axis order from a
-//!    rotating cursor. Work-conserving: when all are idle nobody waits for a deadline, so the
+//!    move) or is overdue as soon as it has been polled. Ties go to the one polled longest
+//!    ago, then in axis order from a rotating cursor. Work-conserving: when all are idle nobody waits for a deadline, so the
 //!    axes are polled round robin at the wire limit.
 //!
 //! Measured by `scripts/bench.sh` (scenario 5: four of 16 axes moving at 115.2 kbit/s).

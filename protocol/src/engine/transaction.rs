@@ -59,7 +59,7 @@ impl Engine {
         let typical = !matches!(flight.request.command, Command::StoreFromEdit(_))
             && !matches!(flight.origin, Origin::Rejoin | Origin::Establish);
         if typical {
-            let took = Duration(now.0.saturating_sub(flight.sent.0)).plus(timing::HOST_GAP);
+            let took = now.since(flight.sent).plus(timing::HOST_GAP);
             let on = (self.config.baud, self.config.rtim);
             self.schedule.transaction_measured(on, took);
         }

@@ -480,6 +480,11 @@ impl Pio {
         }
     }
 
+    /// A stop drops the wait for a move or home the PIO returned: that one is cut short.
+    fn cut_short(&mut self) {
+        self.short |= self.waiting.take().is_some();
+    }
+
     /// Whether RES rose while the axis showed no alarm since the last call: the gateway's
     /// fail-safe acknowledgement by wire (see RES in the [module documentation](self)).
     pub fn take_acknowledge(&mut self) -> bool {
@@ -519,8 +524,7 @@ impl Pio {
         // *STP: the fail-safe path first.
         if changed & PioInputs::STP_N.bits() != 0 && !may_run {
             self.stop_due = true;
-            self.short |= self.waiting.is_some();
-            self.waiting = None;
+            self.cut_short();
         }
         if stp_known
             && !may_run
@@ -608,8 +612,7 @@ impl Pio {
             self.strobe = false;
             self.pending_move = None;
             self.pending_home = false;
-            self.short |= self.waiting.is_some();
-            self.waiting = None;
+            self.cut_short();
             return Some(JobKind::Stop);
         }
         let report = report?;

@@ -226,6 +226,11 @@ impl Gateway {
             });
             self.handle_events();
         }
+        self.give_up_sync();
+    }
+
+    /// Give up the synchronized start in progress, if any, and cancel what it buffered.
+    fn give_up_sync(&mut self) {
         if let Some(end) = self.sync.fail(&mut self.engine) {
             self.sync_ended(end);
         }
@@ -282,9 +287,7 @@ impl Gateway {
             // does: the start is given up and what it buffered cancelled first, else its `t`
             // would take the axis to the start's point after this move (found by the soak,
             // `scripts/soak.sh`).
-            if let Some(end) = self.sync.fail(&mut self.engine) {
-                self.sync_ended(end);
-            }
+            self.give_up_sync();
         }
         let result = if blocked {
             // The fail-safe's own reason, so that the PLC knows an acknowledgement is due.
@@ -305,9 +308,7 @@ impl Gateway {
             // After the stop (which cancels the axis' queued jobs): give the synchronized start
             // up and cancel what it buffered.
             if self.sync.involves(axis) {
-                if let Some(end) = self.sync.fail(&mut self.engine) {
-                    self.sync_ended(end);
-                }
+                self.give_up_sync();
             }
             return result.map(|_| ()).map_err(|_| Refused::QueueFull);
         }

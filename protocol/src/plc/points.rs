@@ -19,6 +19,7 @@ use super::refused::Refused;
 use crate::axes::AxisMap;
 use crate::engine::{Engine, Job, JobError, JobId, JobKind, JobOutput};
 use crate::jobs::{PointData, PointReadback};
+use crate::memory::PointField;
 use crate::{Axis, PositionNo, Pulses};
 
 /// Rows kept, for all axes together.
@@ -85,8 +86,7 @@ impl PointCache {
     /// marked as used: a move is not a use of the table).
     pub(super) fn position(&self, axis: Axis, point: PositionNo) -> Option<Pulses> {
         let row = self.rows.get(self.slot(axis, point)?)?.as_ref()?;
-        // PointField::ALL starts with the position.
-        row.data.0.first().map(|&wire| Pulses::from_wire(wire))
+        Some(Pulses::from_wire(row.data.get(PointField::Position)))
     }
 
     fn put(&mut self, axis: Axis, point: PositionNo, data: PointReadback) {
