@@ -296,13 +296,7 @@ band_mm = 0.1
         "bad.csv",
         "point,position_mm,speed_mm_s,accel_g,band_mm\n1,10,x,0.3,0.1\n",
     );
-    let out = sim.run(&with_axis(&[
-        "points",
-        "write",
-        "0",
-        "--file",
-        bad.to_str().expect("path"),
-    ]));
+    let out = points_write(&sim, &bad, &[]);
     assert_eq!(out.status.code(), Some(1));
     assert!(stderr(&out).contains("bad.csv:2"), "{}", stderr(&out));
 }
@@ -348,11 +342,16 @@ fn an_absent_axis_is_a_clear_error() {
 }
 
 /// `points write` with `file`, failing: standard error.
-fn refused(sim: &Sim, file: &std::path::Path, extra: &[&str]) -> String {
+/// `points write 0 --file FILE EXTRA...` on axis 0 of `sim`.
+fn points_write(sim: &Sim, file: &std::path::Path, extra: &[&str]) -> Output {
     let file = file.to_str().expect("path");
-    let out = sim.run(&with_axis(
+    sim.run(&with_axis(
         &[&["points", "write", "0", "--file", file][..], extra].concat(),
-    ));
+    ))
+}
+
+fn refused(sim: &Sim, file: &std::path::Path, extra: &[&str]) -> String {
+    let out = points_write(sim, file, extra);
     assert_eq!(out.status.code(), Some(1), "{}", stdout(&out));
     stderr(&out)
 }
@@ -410,30 +409,14 @@ fn rows_the_controller_would_lose_or_clamp_are_refused_and_nothing_is_written() 
         err.contains("short.toml:8: point 2: position 60.00 mm: beyond the stroke, 50.00 mm"),
         "{err}"
     );
-    let negative = sim.run(&with_axis(&[
-        "points",
-        "write",
-        "0",
-        "--file",
-        short.to_str().expect("path"),
-        "--stroke",
-        "-3",
-    ]));
+    let negative = points_write(&sim, &short, &["--stroke", "-3"]);
     assert_eq!(negative.status.code(), Some(2), "bad input");
     assert!(
         stderr(&negative).contains("`-3`: a stroke is a length, more than 0 mm"),
         "{}",
         stderr(&negative)
     );
-    let fine = ok(sim.run(&with_axis(&[
-        "points",
-        "write",
-        "0",
-        "--file",
-        short.to_str().expect("path"),
-        "--stroke",
-        "100",
-    ])));
+    let fine = ok(points_write(&sim, &short, &["--stroke", "100"]));
     assert!(fine.contains("2 of 2 points stored and verified"), "{fine}");
 }
 
@@ -462,13 +445,7 @@ fn csv_columns_are_read_by_their_header_in_any_order() {
         "reordered.csv",
         "speed_mm_s, point ,band_mm,position_mm,accel_g\n100,4,0.1,12.5,0.3\n",
     );
-    let written = ok(sim.run(&with_axis(&[
-        "points",
-        "write",
-        "0",
-        "--file",
-        table.to_str().expect("path"),
-    ])));
+    let written = ok(points_write(&sim, &table, &[]));
     assert!(
         written.contains("~ point  4: empty -> 12.50 mm at 100.00 mm/s, 0.30 G, band 0.10 mm"),
         "{written}"

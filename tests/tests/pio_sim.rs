@@ -56,11 +56,14 @@ impl Rig {
     /// Run `ms` milliseconds: the node samples the inputs every millisecond, as the firmware
     /// does. *STP is wired to the gateway's stop input too (one PLC output to both terminals).
     fn run(&mut self, ms: u64) {
+        self.run_stop_input(ms, !self.inputs.stp_n());
+    }
+
+    /// Run `ms` milliseconds with the stop input `active` whatever *STP is (two terminals).
+    fn run_stop_input(&mut self, ms: u64, active: bool) {
         for _ in 0..ms {
             self.h.inputs = Some(self.inputs);
-            self.h
-                .node
-                .set_stop_input(Instant(self.h.now), !self.inputs.stp_n());
+            self.h.node.set_stop_input(Instant(self.h.now), active);
             self.h.run_for(MS);
             self.outputs = self.h.outputs;
         }
@@ -182,21 +185,13 @@ fn a_refused_strobe_shows_pend_at_the_point_the_axis_is_at() {
     let mut r = homed();
     let at = r.h.bus.controller(axis0()).unwrap().position();
     // The stop input opens; *STP stays ON.
-    let step = |r: &mut Rig, ms: u64| {
-        for _ in 0..ms {
-            r.h.inputs = Some(r.inputs);
-            r.h.node.set_stop_input(Instant(r.h.now), true);
-            r.h.run_for(MS);
-            r.outputs = r.h.outputs;
-        }
-    };
-    step(&mut r, 50);
+    r.run_stop_input(50, true);
     r.inputs = r.inputs.with_position(PositionNo::new(5).unwrap());
-    step(&mut r, 10);
+    r.run_stop_input(10, true);
     r.set(PioInputs::CSTR, true);
-    step(&mut r, 30);
+    r.run_stop_input(30, true);
     r.set(PioInputs::CSTR, false);
-    step(&mut r, 200);
+    r.run_stop_input(200, true);
     assert_eq!(
         r.h.bus.controller(axis0()).unwrap().position(),
         at,
@@ -223,12 +218,7 @@ fn a_res_pulse_acknowledges_the_fail_safe_once_the_stop_input_is_closed() {
     let pulse = |r: &mut Rig, input: PioInputs, stop: bool| {
         for on in [true, false] {
             r.set(input, on);
-            for _ in 0..30 {
-                r.h.inputs = Some(r.inputs);
-                r.h.node.set_stop_input(Instant(r.h.now), stop);
-                r.h.run_for(MS);
-                r.outputs = r.h.outputs;
-            }
+            r.run_stop_input(30, stop);
         }
     };
     // The stop input opens (*STP stays ON) and latches FAILSAFE bit 1.
