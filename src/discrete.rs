@@ -48,6 +48,11 @@ impl Inputs {
         PioInputs::from_bits(bits)
     }
 
+    /// The ports these pins are (bit n = INn): the PIO patterns the board can run.
+    pub fn ports(&self) -> u16 {
+        ports(&self.pins)
+    }
+
     /// Whether the stop is requested: the stop input is OFF (so a broken wire stops too).
     pub fn stop_active(&self) -> bool {
         self.stop.get_level() != self.on
@@ -71,6 +76,11 @@ impl Outputs {
         }
     }
 
+    /// The ports these pins are (bit n = OUTn).
+    pub fn ports(&self) -> u16 {
+        ports(&self.pins)
+    }
+
     /// Drives the pins to `outputs` (bit n = port OUTn).
     pub fn write(&mut self, outputs: PioOutputs) {
         if self.shown == Some(outputs) {
@@ -82,6 +92,11 @@ impl Outputs {
         }
         self.shown = Some(outputs);
     }
+}
+
+/// Bit n set for each pin of port n.
+fn ports<T>(pins: &[(u8, T)]) -> u16 {
+    pins.iter().fold(0, |bits, (bit, _)| bits | 1 << (bit & 15))
 }
 
 /// The other level.

@@ -95,7 +95,18 @@ struct Parts {
 fn start() -> Started {
     let mut config = node::default_config();
     let mut parts = bring_up(config.plc);
-    if let Some(Parts { settings, boot, .. }) = parts.as_deref_mut() {
+    if let Some(Parts {
+        settings,
+        boot,
+        pins,
+        ..
+    }) = parts.as_deref_mut()
+    {
+        // Before the settings: a stored pattern this board lacks ports for is not taken.
+        config.pio_ports = protocol::pio::Ports {
+            inputs: pins.inputs.ports(),
+            outputs: pins.outputs.ports(),
+        };
         settings.load(boot.inputs, &mut config);
     }
     Started {

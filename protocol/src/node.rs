@@ -120,12 +120,14 @@
 use crate::engine::Output;
 use crate::frame::FRAME_LEN;
 use crate::line::{Baud, LineAction};
+use crate::memory::PointField;
 use crate::modbus::{
     chars_time, Handled, Receiver, ReceiverCounters, ReplyBuffer, Slave, SlaveCounters,
 };
-use crate::pio::{self, Pio, PioInputs, PioOutputs};
+use crate::pio::{self, Band, Pattern, Pio, PioInputs, PioOutputs};
 use crate::plc::{Gateway, GatewayConfig, PlcLine, Store};
 use crate::time::{earliest, Duration, Instant};
+use crate::{Axis, PositionNo, Pulses};
 
 /// The most the whole node may take on a microcontroller: 12 KiB for 16 axes (an STM32F103C8
 /// has 20 KiB of RAM in all). Checked at compile time on the firmware's targets; the host test
@@ -232,11 +234,29 @@ impl Node {
             self.outputs = PioOutputs::SAFE;
             return;
         };
+        let config = self.gateway.config();
+        let (pattern, start) = (config.pio_pattern, config.pio_start);
+        if (pattern, start) != (self.pio.config().pattern, self.pio.config().start) {
+            // Another pattern: the inputs mean other things, so they start over (each must be
+            // seen OFF and ON again before its edge counts, *STP ON before anything moves).
+            self.pio = Pio::new(pio::Config {
+                pattern,
+                start,
+                ..*self.pio.config()
+            });
+        }
+        if pattern == Pattern::Solenoid3 {
+            let reeds = self.reeds(axis);
+            self.pio.set_reeds(reeds);
+        }
         let state = *self.gateway.engine().axis(axis);
         let link_ok = !self.gateway.engine().establishing();
         let home = self.gateway.config().axes[axis].scale.home;
         let (outputs, job) = self.pio.sample(now, inputs, &state, link_ok, home);
         self.outputs = outputs;
+        if let Some(inputs) = self.pio.take_refused() {
+            self.gateway.pio_refused(axis, inputs);
+        }
         if self.pio.take_acknowledge() {
             self.gateway.acknowledge_by_wire();
             self.dirty = true;
@@ -249,6 +269,22 @@ impl Node {
             }
             self.dirty = true;
         }
+    }
+
+    /// Pattern 5's points 0-2 as the controller holds them (fetched while not cached): a
+    /// point with no speed is empty, and has no reed switch.
+    fn reeds(&mut self, axis: Axis) -> [Option<Band>; 3] {
+        let mut reeds = [None; 3];
+        for (n, reed) in (0..).zip(reeds.iter_mut()) {
+            let row = PositionNo::new(n).and_then(|p| self.gateway.point_row(axis, p));
+            *reed = row
+                .filter(|row| row.get(PointField::Velocity) != 0)
+                .map(|row| Band {
+                    position: Pulses::from_wire(row.get(PointField::Position)),
+                    band: row.get(PointField::Band),
+                });
+        }
+        reeds
     }
 
     /// The stop input at `now`: `active` when it is OFF (a safety input).
@@ -343,7 +379,8 @@ impl Node {
         if self.gateway.config().pio_axis.is_none() {
             return PioOutputs::SAFE;
         }
-        self.outputs.with_failsafe(self.gateway.failsafe())
+        self.outputs
+            .with_failsafe(self.gateway.failsafe(), self.pio.config().pattern)
     }
 
     /// The rate the bus line is to run at: the UART starts at it (the node asks for every

@@ -7,8 +7,9 @@ mod support;
 
 use proptest::prelude::*;
 use protocol::modbus::Exception;
+use protocol::pio::{Pattern, Ports, StartMode};
 use protocol::plc::map::*;
-use protocol::plc::settings::{Settings, SettingsError, RECORD_LEN};
+use protocol::plc::settings::{Settings, SettingsError, FORMAT_1, RECORD_LEN, RECORD_LEN_1};
 use protocol::plc::{Boot, ConfigSource, GatewayConfig, Parity, ResetCause, Store};
 use protocol::units::Lead;
 use protocol::AxisSet;
@@ -19,7 +20,52 @@ fn config() -> GatewayConfig {
     c.axes[axis(2)].scale.lead = Lead::from_hundredths(1200).unwrap();
     c.axes[axis(2)].stroke = protocol::units::Length(350_00);
     c.pio_axis = Some(axis(1));
+    c.pio_pattern = Pattern::Solenoid3;
+    c.pio_start = StartMode::Edge;
     c
+}
+
+/// A record of format 1 (before the PIO patterns), as the firmware before them stored it, is
+/// read: pattern 0, level mode, everything else as stored.
+#[test]
+fn a_format_1_record_is_read() {
+    let mut old = config();
+    old.pio_pattern = Pattern::Positioning;
+    old.pio_start = StartMode::Level;
+    let record = Settings::of(&old).encode();
+    let mut v1 = record[..RECORD_LEN_1].to_vec();
+    v1[0] = FORMAT_1;
+    let sum = protocol::modbus::crc::checksum(&v1[..RECORD_LEN_1 - 2]);
+    v1[RECORD_LEN_1 - 2..].copy_from_slice(&sum.to_le_bytes());
+    assert_eq!(Settings::decode(&v1), Ok(Settings::of(&old)));
+    // Its length and its version go together.
+    assert_eq!(
+        Settings::decode(&v1[..RECORD_LEN_1 - 1]),
+        Err(SettingsError::Length)
+    );
+    let mut long = record;
+    long[0] = FORMAT_1;
+    assert_eq!(Settings::decode(&long), Err(SettingsError::Length));
+}
+
+/// A pattern the board lacks ports for is not applied from a record (settings carried over
+/// from another board): the gateway keeps pattern 0.
+#[test]
+fn a_pattern_the_board_cannot_run_is_not_applied() {
+    let mut seven = config();
+    seven.pio_pattern = Pattern::Solenoid7;
+    let settings = Settings::of(&seven);
+    let mut small = GatewayConfig::new(AxisSet::EMPTY);
+    small.pio_ports = Ports {
+        inputs: Pattern::Positioning.inputs(),
+        outputs: Pattern::Positioning.outputs(),
+    };
+    settings.apply_to(&mut small);
+    assert_eq!(small.pio_pattern, Pattern::Positioning);
+    assert_eq!(small.pio_axis, Some(axis(1)));
+    // Pattern 5 needs no port pattern 0 lacks.
+    Settings::of(&config()).apply_to(&mut small);
+    assert_eq!(small.pio_pattern, Pattern::Solenoid3);
 }
 
 #[test]
@@ -51,7 +97,7 @@ fn a_damaged_record_is_refused_whole() {
         Err(SettingsError::Length)
     );
     let mut other = record;
-    other[0] = 2;
+    other[0] = 3;
     assert_eq!(Settings::decode(&other), Err(SettingsError::Version));
     assert_eq!(
         Settings::decode(&[0xFF; RECORD_LEN]),
@@ -71,7 +117,7 @@ fn a_field_out_of_range_is_refused() {
         r[RECORD_LEN - 2..].copy_from_slice(&sum.to_le_bytes());
         Settings::decode(&r)
     };
-    let cases: [(usize, &[u8]); 13] = [
+    let cases: [(usize, &[u8]); 15] = [
         (1, &[0]),                        // unit 0
         (1, &[248]),                      // unit past 247
         (1, &[2]),                        // unit 2 = axis 1's, which is on the bus
@@ -85,6 +131,8 @@ fn a_field_out_of_range_is_refused() {
         (16, &0u16.to_le_bytes()),        // axis 0 lead 0
         (16 + 4, &[9]),                   // axis 0 home end
         (16 + 6, &(-1i32).to_le_bytes()), // axis 0 stroke below 0
+        (176, &[1]),                      // PIO pattern 1 (teaching: not the gateway's)
+        (177, &[2]),                      // PIO start mode
     ];
     for (at, bytes) in cases {
         assert_eq!(

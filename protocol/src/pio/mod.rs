@@ -143,11 +143,14 @@
 //! engine will run.
 
 mod debounce;
+mod pattern;
+
+pub use pattern::{Pattern, Ports, StartMode};
 
 use crate::bits::bit_flags;
 use crate::engine::{AxisState, JobKind, Link};
 use crate::time::{Duration, Instant};
-use crate::{HomeDirection, PositionNo, StatusReport};
+use crate::{HomeDirection, PositionNo, Pulses, StatusReport};
 use debounce::Debouncer;
 
 /// The inputs are sampled this often (about: every time in this module is only as fine as
@@ -177,6 +180,8 @@ bit_flags! {
         4 => PC16, pc16, "PC16";
         /// IN5: PCON's position number bit 5; the RC has none, so a strobe with it ON is refused.
         5 => PC32, pc32, "PC32";
+        /// IN6: ST6 of pattern 4 (unused in pattern 0: PCON's IN6 is PC64 there).
+        6 => ST6, st6, "ST6";
         /// IN11: home, on the rising edge.
         11 => HOME, home, "HOME";
         /// IN12: *STP, negative logic: ON = may run, OFF = stop.
@@ -202,6 +207,10 @@ bit_flags! {
         2 => PM4, pm4, "PM4";
         /// OUT3: PM8.
         3 => PM8, pm8, "PM8";
+        /// OUT4: PE4 of pattern 4 (pattern 0's PM16: always OFF, the RC has 16 positions).
+        4 => PE4, pe4, "PE4";
+        /// OUT5: PE5 of pattern 4 (pattern 0's PM32: always OFF).
+        5 => PE5, pe5, "PE5";
         /// OUT6: MOVE, the axis is moving.
         6 => MOVE, moving, "MOVE";
         /// OUT7: ZONE1, the controller's ZONE output.
@@ -262,14 +271,22 @@ impl PioOutputs {
     /// *ALM OFF and PM1-PM8 = FAILSAFE (PM1 the PLC watchdog, PM2 the stop input). These codes
     /// (1-3) are none of the controller's abbreviated alarm codes (complete edition §8-1-1: 6
     /// and up), and the axis' own alarm, or a link down, is shown first.
+    ///
+    /// In the solenoid patterns, whose OUT0-OUT3 are no position number, *ALM alone shows it:
+    /// pattern 4's PE outputs go OFF with it (as with any alarm), pattern 5's reed switches
+    /// keep showing where the axis is.
     #[must_use]
-    pub const fn with_failsafe(self, failsafe: u16) -> PioOutputs {
+    pub const fn with_failsafe(self, failsafe: u16, pattern: Pattern) -> PioOutputs {
         if failsafe == 0 || self.alarm() {
             return self;
         }
-        // FAILSAFE's two causes are bits 0 and 1: the cast keeps them.
-        self.with(PioOutputs::ALM_N, false)
-            .with_pm((failsafe & 0x3) as u8)
+        let alarmed = self.with(PioOutputs::ALM_N, false);
+        match pattern {
+            // FAILSAFE's two causes are bits 0 and 1: the cast keeps them.
+            Pattern::Positioning => alarmed.with_pm((failsafe & 0x3) as u8),
+            Pattern::Solenoid7 => PioOutputs(alarmed.0 & !pattern.st_inputs()),
+            Pattern::Solenoid3 => alarmed,
+        }
     }
 
     /// The value with PM8..PM1 set to `pm` (its low 4 bits).
@@ -292,6 +309,10 @@ pub struct Config {
     /// While the reported servo state differs from SON, the servo job is repeated this often
     /// (at least [`SERVO_RETRY_MIN`]). Default 1 s.
     pub servo_retry: Duration,
+    /// The signals' ports, by IAI's pattern number. Default 0, positioning.
+    pub pattern: Pattern,
+    /// How the solenoid patterns' ST inputs start a move. Default level, as PCON.
+    pub start: StartMode,
 }
 
 impl Config {
@@ -300,6 +321,8 @@ impl Config {
         debounce: Duration::from_millis(6),
         settle: Duration::from_millis(6),
         servo_retry: Duration::from_millis(1000),
+        pattern: Pattern::Positioning,
+        start: StartMode::Level,
     };
 }
 
@@ -335,6 +358,24 @@ enum End {
     Short,
     /// An alarm or a rejected command: the outputs follow the status.
     Other,
+}
+
+/// Where a point of pattern 5 is, for its reed switch LSn: the row's position and band as
+/// the controller holds them (pulses).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Band {
+    /// The point's position (PCMD).
+    pub position: Pulses,
+    /// Its positioning band (INP), pulses.
+    pub band: u32,
+}
+
+impl Band {
+    /// Whether `position` is within the band of the point (both ends included, as PFIN).
+    pub fn holds(&self, position: Pulses) -> bool {
+        position.0.abs_diff(self.position.0) <= self.band
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -401,10 +442,26 @@ impl Await {
 pub struct Pio {
     config: Config,
     inputs: Debouncer,
-    /// When PC1-PC32 last changed (recognised levels).
+    /// When the inputs that select a point (PC1-PC32, or the ST inputs) last changed
+    /// (recognised levels).
     pc_since: Instant,
-    /// A CSTR edge waiting for PC1-PC8 to settle.
+    /// A CSTR edge (or an ST edge) waiting for the inputs that select the point to settle.
     strobe: bool,
+    /// The ST inputs that rose since the last strobe was taken (edge mode takes a pulse shorter
+    /// than the settle time from these).
+    st_rose: u16,
+    /// Level mode: the ST input of the move under way; releasing it stops the move.
+    held: Option<PositionNo>,
+    /// The point the PIO's last move reached, while the axis has not moved since: pattern 4's
+    /// PE output (the controller's PM reads 0 after a home or a direct move, as after a move
+    /// to point 0).
+    at: Option<PositionNo>,
+    /// Two or more ST inputs at once were refused: *ALM OFF until RES (IAI's alarm 085).
+    refusal: bool,
+    /// The inputs of a refused strobe, not yet taken by the gateway (CMST/CMER shows them).
+    refused_inputs: Option<u8>,
+    /// Pattern 5: points 0-2, where known.
+    reeds: [Option<Band>; 3],
     /// A latched move not yet returned.
     pending_move: Option<PositionNo>,
     pending_home: bool,
@@ -439,6 +496,12 @@ impl Pio {
             inputs: Debouncer::new(),
             pc_since: Instant(0),
             strobe: false,
+            st_rose: 0,
+            held: None,
+            at: None,
+            refusal: false,
+            refused_inputs: None,
+            reeds: [None; 3],
             pending_move: None,
             pending_home: false,
             pending_reset: false,
@@ -477,7 +540,21 @@ impl Pio {
     pub fn refused(&mut self, job: &JobKind) {
         if matches!(job, JobKind::Home(_) | JobKind::MoveToPoint(..)) {
             self.waiting = None;
+            self.held = None;
         }
+    }
+
+    /// The inputs of a strobe the PIO refused since the last call, for CMST/CMER: PC1-PC32
+    /// with PC16 or PC32 ON (pattern 0), or the ST inputs when more than one was ON (patterns
+    /// 4 and 5; bit n = STn).
+    pub fn take_refused(&mut self) -> Option<u8> {
+        self.refused_inputs.take()
+    }
+
+    /// Pattern 5: where points 0-2 are (`None`: not known, or the controller holds no such
+    /// point). LSn is OFF for a point not known.
+    pub fn set_reeds(&mut self, reeds: [Option<Band>; 3]) {
+        self.reeds = reeds;
     }
 
     /// A stop drops the wait for a move or home the PIO returned: that one is cut short.
@@ -514,8 +591,13 @@ impl Pio {
 
         let known_before = self.inputs.known;
         let changed = self.inputs.update(now, inputs.bits(), self.config.debounce);
-        let pc_bits = PioInputs::MASK & 0x3F;
-        if changed & pc_bits != 0 {
+        let pattern = self.config.pattern;
+        let select = if pattern.solenoid() {
+            pattern.st_inputs()
+        } else {
+            PioInputs::MASK & 0x3F
+        };
+        if changed & select != 0 {
             self.pc_since = now;
         }
         let may_run = self.inputs.on(PioInputs::STP_N);
@@ -553,11 +635,20 @@ impl Pio {
                 if report.outputs.alarm_active() {
                     self.pending_reset = true;
                 } else {
+                    self.refusal = false;
                     self.acknowledge = true;
                 }
             }
-            if may_run && self.inputs.rose(PioInputs::CSTR, changed, known_before) {
+            let st_rose = changed & known_before & self.inputs.stable & pattern.st_inputs();
+            let start = if pattern.solenoid() {
+                // A refused strobe holds the ST inputs until RES, as IAI's alarm 085.
+                st_rose != 0 && !self.refusal
+            } else {
+                self.inputs.rose(PioInputs::CSTR, changed, known_before)
+            };
+            if may_run && start {
                 self.strobe = true;
+                self.st_rose |= st_rose;
                 self.pending_home = false;
             }
             if may_run && self.inputs.rose(PioInputs::HOME, changed, known_before) {
@@ -570,32 +661,93 @@ impl Pio {
             self.pending_servo = None;
             self.pending_reset = false;
             self.waiting = None;
+            self.at = None;
         }
         if report.is_none() || !may_run {
             self.strobe = false;
+            self.st_rose = 0;
             self.pending_move = None;
             self.pending_home = false;
+            self.held = None;
         }
         if self.strobe && now.since(self.pc_since) >= self.config.settle {
             self.strobe = false;
-            // PC16/PC32 ON: refused (the RC has 16 positions).
-            self.pending_move = self.inputs().position();
+            self.pending_move = self.strobe_point();
+        }
+        // Level mode: the ST input released before its point is reached stops the move.
+        if let Some(point) = self.held {
+            if self.inputs.stable & 1 << point.get() == 0 {
+                self.held = None;
+                if self.waiting.is_some() || self.pending_move.is_some() {
+                    self.stop_due = true;
+                }
+            }
         }
 
         let job = self.next_job(now, axis, report, home);
 
         if let (Some(waiting), Some(report)) = (self.waiting.as_mut(), report.as_ref()) {
+            let target = waiting.target;
             if let Some(end) = waiting.update(axis, report) {
                 self.waiting = None;
+                self.held = None;
                 match end {
-                    End::Reached => self.short = false,
+                    End::Reached => {
+                        self.short = false;
+                        if let Target::Point(point) = target {
+                            self.at = Some(point);
+                        }
+                    }
                     End::Short => self.short = true,
                     End::Other => {}
                 }
             }
         }
+        if self.waiting.is_none() && axis.moving() {
+            // Moved by something else than the PIO's move: not at the PIO's point any more.
+            self.at = None;
+        }
         self.outputs = self.outputs_for(axis, report);
         (self.outputs, job)
+    }
+
+    /// The point a strobe selects, taken once the inputs that select it have settled: `None`,
+    /// and the inputs kept for CMST, for a selection the gateway refuses.
+    fn strobe_point(&mut self) -> Option<PositionNo> {
+        let pattern = self.config.pattern;
+        let rose = core::mem::take(&mut self.st_rose);
+        let word = if pattern.solenoid() {
+            let on = self.inputs.stable & pattern.st_inputs();
+            match self.config.start {
+                // A pulse shorter than the settle time is still a start.
+                StartMode::Edge if on == 0 => rose,
+                _ => on,
+            }
+        } else {
+            self.inputs.stable & 0x3F
+        };
+        let point = if pattern.solenoid() {
+            // Exactly one ST input (none: released before it was taken, in level mode).
+            match word.count_ones() {
+                0 => return None,
+                1 => u8::try_from(word.trailing_zeros()).ok(),
+                _ => {
+                    self.refusal = true;
+                    None
+                }
+            }
+        } else {
+            // PC16/PC32 ON: refused (the RC has 16 positions).
+            self.inputs().position().map(PositionNo::get)
+        };
+        let point = point.and_then(PositionNo::new);
+        if point.is_none() {
+            self.refused_inputs = u8::try_from(word).ok();
+        }
+        if self.config.start == StartMode::Level && pattern.solenoid() {
+            self.held = point;
+        }
+        point
     }
 
     /// The most urgent job due, if any; the others stay pending.
@@ -632,10 +784,12 @@ impl Pio {
         }
         if self.pending_home {
             self.pending_home = false;
+            self.at = None;
             self.waiting = Some(Await::new(Target::Home, now, axis, &report));
             return Some(JobKind::Home(home));
         }
         if let Some(point) = self.pending_move.take() {
+            self.at = None;
             self.waiting = Some(Await::new(Target::Point(point), now, axis, &report));
             return Some(JobKind::MoveToPoint(point, None));
         }
@@ -653,17 +807,35 @@ impl Pio {
             .waiting
             .is_some_and(|w| matches!(w.target, Target::Home));
         let pm = if alarm || !masked { out.pm() } else { 0 };
-        PioOutputs::NONE
+        let pattern = self.config.pattern;
+        let cstr_held = !pattern.solenoid() && self.inputs.on(PioInputs::CSTR);
+        let word = PioOutputs::NONE
             .with_pm(pm)
             .with(PioOutputs::MOVE, axis.moving())
             .with(PioOutputs::ZONE1, out.zone())
             .with(PioOutputs::HEND, out.zfin() && !homing)
-            .with(
-                PioOutputs::PEND,
-                out.pfin() && !masked && !self.inputs.on(PioInputs::CSTR),
-            )
+            .with(PioOutputs::PEND, out.pfin() && !masked && !cstr_held)
             .with(PioOutputs::SV, report.status.servo())
             .with(PioOutputs::LINK, true)
-            .with(PioOutputs::ALM_N, !alarm)
+            .with(PioOutputs::ALM_N, !alarm && !self.refusal);
+        // The pattern's own outputs on OUT0-OUT6.
+        let own = match pattern {
+            Pattern::Positioning => return word,
+            // PEn: point n complete, reached by the PIO's move; OFF with *ALM.
+            Pattern::Solenoid7 => match self.at {
+                Some(point) if word.pend() && word.alm_n() => 1 << point.get(),
+                _ => 0,
+            },
+            // LSn: within point n's band, however the axis got there.
+            Pattern::Solenoid3 => axis.position.map_or(0, |position| {
+                self.reeds
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, band)| band.is_some_and(|b| b.holds(position)))
+                    .fold(0, |bits, (n, _)| bits | 1 << n)
+            }),
+        };
+        let own = own & pattern.st_inputs();
+        PioOutputs::from_bits(word.bits() & pattern.outputs() & !pattern.st_inputs() | own)
     }
 }

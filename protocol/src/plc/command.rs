@@ -53,6 +53,10 @@ pub enum Reason {
     Offline = 11,
     /// Refused: FAILSAFE is latched; no motion starts until it is acknowledged.
     Failsafe = 12,
+    /// The discrete inputs selected no point the gateway can move to: PC16 or PC32 ON at a
+    /// CSTR (pattern 0), or more than one ST input ON (patterns 4 and 5). Low byte: those
+    /// inputs (PC1-PC32, or bit n = STn).
+    PioInput = 13,
 }
 
 impl Reason {

@@ -4,6 +4,7 @@ use super::boot::Boot;
 use crate::axes::{AxisMap, AxisSet};
 use crate::engine::Config;
 use crate::modbus::Identity;
+use crate::pio::{Pattern, Ports, StartMode};
 use crate::time::Duration;
 use crate::units::{Complement, Lead, Length, Scale};
 use crate::{Axis, HomeDirection};
@@ -199,6 +200,12 @@ pub struct GatewayConfig {
     pub watchdog_action: WatchdogAction,
     /// The axis the discrete I/O (PIO) drives, if any.
     pub pio_axis: Option<Axis>,
+    /// The PIO's pattern (IAI's number: which port carries which signal).
+    pub pio_pattern: Pattern,
+    /// How the solenoid patterns' ST inputs start a move (PCON parameter No. 27).
+    pub pio_start: StartMode,
+    /// The PIO ports the board has: a pattern needing others is refused.
+    pub pio_ports: Ports,
     /// Who the gateway is (FC2B/0E, FC11), and its firmware version (VERSION).
     pub identity: Identity,
     /// What the firmware knows about this start (settings source, saves, reset cause).
@@ -220,6 +227,9 @@ impl GatewayConfig {
             watchdog: Duration::from_millis(DEFAULT_WATCHDOG_MS as u64),
             watchdog_action: WatchdogAction::StopAll,
             pio_axis: None,
+            pio_pattern: Pattern::Positioning,
+            pio_start: StartMode::Level,
+            pio_ports: Ports::ALL,
             identity: IDENTITY,
             boot: Boot::DEFAULT,
         }

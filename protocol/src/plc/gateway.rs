@@ -20,8 +20,9 @@ use crate::axes::{AxisMap, AxisSet};
 use crate::engine::{
     Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Link, Output, SubmitError,
 };
+use crate::jobs::PointReadback;
 use crate::time::{earliest, Duration, Instant};
-use crate::Axis;
+use crate::{Axis, PositionNo};
 
 /// While SON is held ON and the servo is off, it is turned on again at most this often.
 const SON_RETRY: Duration = Duration::from_millis(2000);
@@ -259,6 +260,28 @@ impl Gateway {
     /// acknowledgement by wire, refused (nothing changes) while a cause is present.
     pub fn acknowledge_by_wire(&mut self) {
         self.failsafe.acknowledge(false);
+    }
+
+    /// The PIO refused a strobe: its inputs selected no point (`inputs`: what they were). CMST
+    /// shows it as a refused command (3, reason 13, the inputs in CMER's low byte), as it does
+    /// a refused register write; nothing is sent.
+    pub fn pio_refused(&mut self, axis: Axis, inputs: u8) {
+        let plc = &mut self.axes[axis];
+        plc.job = None;
+        plc.sync = false;
+        plc.state = CommandState::Failed;
+        plc.reason = Reason::PioInput.code(inputs);
+    }
+
+    /// Point `point` of `axis` as the controller holds it, if the gateway has it cached; else
+    /// fetched (the PIO's reed switches of pattern 5 ask for theirs on every sample: used,
+    /// they stay cached).
+    pub fn point_row(&mut self, axis: Axis, point: PositionNo) -> Option<PointReadback> {
+        let row = self.points.get(axis, point);
+        if row.is_none() {
+            self.points.fetch(axis, point, &mut self.engine);
+        }
+        row
     }
 
     /// Submit a command for the PLC (a register write, or the PIO logic's strobe) and record its

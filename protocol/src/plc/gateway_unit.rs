@@ -68,6 +68,8 @@ impl Gateway {
             G_APPLY | G_SYNC_START => 0,
             G_WD_ACTION => self.config.watchdog_action as u16,
             G_PIO_AXIS => self.config.pio_axis.map_or(0xFFFF, |a| u16::from(a.get())),
+            G_PIO_PATTERN => self.config.pio_pattern.code(),
+            G_PIO_START => self.config.pio_start as u16,
             G_SYNC_MASK => self.sync.mask().0,
             G_SYNC_STATUS => self.sync.status() as u16,
             a => {
@@ -179,6 +181,7 @@ impl Gateway {
                 axis.get() + 1 != self.persist.unit
             }
             GatewayWrite::SyncMask(mask) => mask.0 & !self.config.bus.axes.0 == 0,
+            GatewayWrite::PioPattern(pattern) => self.config.pio_ports.run(pattern),
             _ => true,
         };
         if admitted {
@@ -220,6 +223,8 @@ impl Gateway {
             GatewayWrite::Restart => self.persist.request = Some(Store::Restart),
             GatewayWrite::FactoryReset => self.persist.request = Some(Store::FactoryReset),
             GatewayWrite::PioAxis(axis) => self.config.pio_axis = axis,
+            GatewayWrite::PioPattern(pattern) => self.config.pio_pattern = pattern,
+            GatewayWrite::PioStart(start) => self.config.pio_start = start,
             GatewayWrite::SyncMask(mask) => self.sync.set_mask(mask),
             GatewayWrite::Axis(axis, setting) => self.apply_axis_setting(axis, setting),
         }

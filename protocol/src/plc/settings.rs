@@ -22,11 +22,15 @@
 //! | 13 | PIO axis (0xFF: none) |
 //! | 14-15 | axes on the bus (bit n = axis n) |
 //! | 16 + 10 n | axis n: lead (0.01 mm, 2), pulses/rev (2), home end (1: 7 or 8), complement (1: 1 or 2), stroke (0.01 mm, 4) |
-//! | 176-177 | CRC-16/MODBUS of bytes 0-175 |
+//! | 176 | PIO pattern (IAI's number: 0, 4 or 5) |
+//! | 177 | PIO start mode: 0 level, 1 edge |
+//! | 178-179 | CRC-16/MODBUS of bytes 0-177 |
 //!
 //! [`Settings::decode`] accepts a record only if its version, length, CRC and every field's
 //! range are right: a record that is not exactly what [`Settings::encode`] writes is refused
-//! as a whole, never applied in part.
+//! as a whole, never applied in part. It also reads format 1, the record before the PIO
+//! patterns (176 bytes and the CRC): pattern 0, level mode; so the settings a gateway stored
+//! before an update survive it.
 
 use super::config::{
     axis_of, complement_code, complement_of, home_of, stroke_of, unit_ok, watchdog_ok, AxisConfig,
@@ -36,18 +40,25 @@ use crate::axes::AxisSet;
 use crate::engine::MAX_RETRIES;
 use crate::line::Baud;
 use crate::modbus::crc;
+use crate::pio::{Pattern, StartMode};
 use crate::time::Duration;
 use crate::units::Lead;
 use crate::{Axis, Rtim};
 
-/// The format version this code writes and reads.
-pub const FORMAT: u8 = 1;
+/// The format version this code writes (it reads [`FORMAT_1`] too).
+pub const FORMAT: u8 = 2;
+/// The format before the PIO patterns: [`RECORD_LEN_1`] bytes.
+pub const FORMAT_1: u8 = 1;
 /// Bytes of one axis' configuration.
 const AXIS_LEN: usize = 10;
 /// Where the axes start.
 const AXES_AT: usize = 16;
+/// Where the PIO's pattern and start mode are.
+const PIO_AT: usize = AXES_AT + 16 * AXIS_LEN;
 /// The record's length, CRC included.
-pub const RECORD_LEN: usize = AXES_AT + 16 * AXIS_LEN + 2;
+pub const RECORD_LEN: usize = PIO_AT + 2 + 2;
+/// A format 1 record's length, CRC included.
+pub const RECORD_LEN_1: usize = PIO_AT + 2;
 
 /// PLC line rates the gateway accepts, bit/s.
 pub const PLC_BAUDS: [u32; 8] = [1_200, 2_400, 4_800, 9_600, 19_200, 38_400, 57_600, 115_200];
@@ -86,6 +97,10 @@ pub struct Settings {
     pub retries: u8,
     /// PIO axis.
     pub pio_axis: Option<Axis>,
+    /// PIO pattern.
+    pub pio_pattern: Pattern,
+    /// PIO start mode (patterns 4 and 5).
+    pub pio_start: StartMode,
     /// Axes on the bus.
     pub axes: AxisSet,
     /// Every axis' configuration.
@@ -104,6 +119,8 @@ impl Settings {
             rtim: config.bus.rtim,
             retries: config.bus.retries,
             pio_axis: config.pio_axis,
+            pio_pattern: config.pio_pattern,
+            pio_start: config.pio_start,
             axes: config.bus.axes,
             axis_config: config.axes,
         }
@@ -126,6 +143,11 @@ impl Settings {
         config.bus.rtim = self.rtim;
         config.bus.retries = self.retries;
         config.pio_axis = self.pio_axis;
+        // A pattern the board cannot run (settings from another board) stays at the default.
+        if config.pio_ports.run(self.pio_pattern) {
+            config.pio_pattern = self.pio_pattern;
+        }
+        config.pio_start = self.pio_start;
         config.bus.axes = self.axes;
         config.axes = self.axis_config;
     }
@@ -153,6 +175,9 @@ impl Settings {
             w.u8(complement_code(c.scale.complement));
             w.bytes(&c.stroke.0.to_le_bytes());
         }
+        // Both codes are below 256.
+        w.u8(self.pio_pattern.code() as u8);
+        w.u8(self.pio_start as u8);
         let sum = crc::checksum(out.get(..RECORD_LEN - 2).unwrap_or(&[]));
         if let Some(tail) = out.get_mut(RECORD_LEN - 2..) {
             tail.copy_from_slice(&sum.to_le_bytes());
@@ -162,13 +187,16 @@ impl Settings {
 
     /// The settings of a stored record, if it is a whole, valid one.
     pub fn decode(record: &[u8]) -> Result<Settings, SettingsError> {
-        if record.len() != RECORD_LEN {
+        let len = match record.first() {
+            Some(&FORMAT) => RECORD_LEN,
+            Some(&FORMAT_1) => RECORD_LEN_1,
+            _ if record.len() != RECORD_LEN => return Err(SettingsError::Length),
+            _ => return Err(SettingsError::Version),
+        };
+        if record.len() != len {
             return Err(SettingsError::Length);
         }
-        if record.first() != Some(&FORMAT) {
-            return Err(SettingsError::Version);
-        }
-        let (body, tail) = record.split_at(RECORD_LEN - 2);
+        let (body, tail) = record.split_at(len - 2);
         if tail != crc::checksum(body).to_le_bytes() {
             return Err(SettingsError::Crc);
         }
@@ -220,6 +248,19 @@ impl Settings {
             slot.scale.complement = complement;
             slot.stroke = stroke;
         }
+        let (pio_pattern, pio_start) = if len == RECORD_LEN_1 {
+            (Pattern::Positioning, StartMode::Level)
+        } else {
+            let pattern = r
+                .u8(PIO_AT)
+                .and_then(|c| Pattern::from_code(c.into()))
+                .ok_or(bad(PIO_AT))?;
+            let start = r
+                .u8(PIO_AT + 1)
+                .and_then(|c| StartMode::from_code(c.into()))
+                .ok_or(bad(PIO_AT + 1))?;
+            (pattern, start)
+        };
         let settings = Settings {
             unit,
             plc: PlcLine { baud, parity },
@@ -229,6 +270,8 @@ impl Settings {
             rtim,
             retries,
             pio_axis,
+            pio_pattern,
+            pio_start,
             axes,
             axis_config,
         };

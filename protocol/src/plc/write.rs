@@ -20,6 +20,7 @@ use crate::axes::AxisSet;
 use crate::engine::MAX_RETRIES;
 use crate::line::Baud;
 use crate::modbus::Bits;
+use crate::pio::{Pattern, StartMode};
 use crate::units::{Complement, Lead};
 use crate::{Axis, HomeDirection, PositionNo, Rtim};
 
@@ -295,6 +296,10 @@ pub enum GatewayWrite {
     FactoryReset,
     /// PIOAXIS (`None`: no axis).
     PioAxis(Option<Axis>),
+    /// PIOPAT.
+    PioPattern(Pattern),
+    /// PIOSTART.
+    PioStart(StartMode),
     /// SYNCMASK.
     SyncMask(AxisSet),
     /// SYNCSTART = 1 (started after the write's other registers, with its mask).
@@ -356,6 +361,8 @@ impl GatewayWrite {
                     .and_then(Axis::new)
                     .map(|axis| GatewayWrite::PioAxis(Some(axis))),
             },
+            G_PIO_PATTERN => Pattern::from_code(value).map(GatewayWrite::PioPattern),
+            G_PIO_START => StartMode::from_code(value).map(GatewayWrite::PioStart),
             G_SYNC_MASK => Some(GatewayWrite::SyncMask(AxisSet(value))),
             a if a.checked_sub(G_REQUEST).is_some_and(|i| i < G_REQUEST_LEN) => {
                 Some(GatewayWrite::ChannelRequest)

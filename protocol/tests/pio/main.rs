@@ -6,6 +6,7 @@
 
 mod inputs;
 mod outputs;
+mod patterns;
 mod properties;
 
 use protocol::engine::{AxisState, Counters, JobKind, Link};
@@ -72,6 +73,11 @@ impl Rig {
     }
 
     fn with_axis(config: Config, axis: AxisState) -> Rig {
+        Rig::with_inputs(config, axis, base())
+    }
+
+    /// A rig whose warm-up holds `inputs`.
+    fn with_inputs(config: Config, axis: AxisState, inputs: In) -> Rig {
         let mut rig = Rig {
             pio: Pio::new(config),
             now: 0,
@@ -79,7 +85,7 @@ impl Rig {
             axis,
             link_ok: true,
             home: HomeDirection::MotorEnd,
-            inputs: base(),
+            inputs,
             out: Out::SAFE,
         };
         let jobs = rig.run(30);

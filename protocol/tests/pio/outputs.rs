@@ -224,6 +224,7 @@ fn input_bits_follow_pcon_pattern_0() {
         (In::PC8, 3),
         (In::PC16, 4),
         (In::PC32, 5),
+        (In::ST6, 6),
         (In::HOME, 11),
         (In::STP_N, 12),
         (In::CSTR, 13),
@@ -233,7 +234,7 @@ fn input_bits_follow_pcon_pattern_0() {
     for (flag, bit) in ports {
         assert_eq!(flag.bits(), 1 << bit, "{flag:?}");
     }
-    assert_eq!(In::MASK, 0xF83F);
+    assert_eq!(In::MASK, 0xF87F);
     assert_eq!(In::from_bits(0b1010).position(), Some(p(10)));
     assert_eq!(In::from_bits(0b10_1010).position(), None);
     assert_eq!(In::NONE.with_position(p(13)).pc(), 13);
@@ -246,6 +247,8 @@ fn output_bits_follow_pcon_pattern_0() {
         (Out::PM2, 1),
         (Out::PM4, 2),
         (Out::PM8, 3),
+        (Out::PE4, 4),
+        (Out::PE5, 5),
         (Out::MOVE, 6),
         (Out::ZONE1, 7),
         (Out::HEND, 10),
@@ -257,7 +260,7 @@ fn output_bits_follow_pcon_pattern_0() {
     for (flag, bit) in ports {
         assert_eq!(flag.bits(), 1 << bit, "{flag:?}");
     }
-    assert_eq!(Out::MASK, 0x7CCF);
+    assert_eq!(Out::MASK, 0x7CFF);
     assert_eq!(Out::NONE.with_pm(0x1B).pm(), 0x0B);
     assert_eq!(
         format!("{:?}", Out::PEND | Out::ALM_N),

@@ -53,6 +53,7 @@ fn config() -> impl Strategy<Value = Config> {
         debounce: Duration::from_micros(debounce),
         settle: Duration::from_micros(settle),
         servo_retry: Duration::from_micros(retry),
+        ..Config::DEFAULT
     })
 }
 
