@@ -8,22 +8,37 @@ use embassy_time::{Duration, Instant};
 
 use protocol::pio::{PioInputs, PioOutputs};
 
-/// The PIO inputs (bit number, pin) and the stop input, which can wake a task when it changes
-/// (its EXTI line).
+/// The PIO inputs (the pin of port INn at index n, if the board has it) and the stop input,
+/// which can wake a task when it changes (its EXTI line).
 pub struct Inputs {
-    pins: [(u8, Input<'static>); 11],
+    pins: [Option<Input<'static>>; 16],
     stop: ExtiInput<'static, Async>,
     on: Level,
 }
 
 impl Inputs {
-    /// `on` is the pin level of a signal that is ON.
-    pub fn new(
-        pins: [(u8, Input<'static>); 11],
+    /// `pins` are (port number, pin); `on` is the pin level of a signal that is ON.
+    pub fn new<const N: usize>(
+        pins: [(u8, Input<'static>); N],
         stop: ExtiInput<'static, Async>,
         on: Level,
     ) -> Inputs {
-        Inputs { pins, stop, on }
+        let mut inputs = Inputs {
+            pins: [const { None }; 16],
+            stop,
+            on,
+        };
+        for (port, pin) in pins {
+            inputs.add(port, pin);
+        }
+        inputs
+    }
+
+    /// Port INn on `pin`.
+    pub fn add(&mut self, port: u8, pin: Input<'static>) {
+        if let Some(slot) = self.pins.get_mut(usize::from(port)) {
+            *slot = Some(pin);
+        }
     }
 
     /// Until the stop input is no longer as sampled (`stop_active`, [`Inputs::stop_active`]).
@@ -40,11 +55,10 @@ impl Inputs {
 
     /// The inputs now, bit n = port INn.
     pub fn sample(&self) -> PioInputs {
-        let bits = self
-            .pins
-            .iter()
-            .filter(|(_, pin)| pin.get_level() == self.on)
-            .fold(0u16, |bits, (bit, _)| bits | 1 << (bit & 15));
+        let bits = (0..)
+            .zip(&self.pins)
+            .filter(|(_, pin)| pin.as_ref().is_some_and(|p| p.get_level() == self.on))
+            .fold(0u16, |bits, (bit, _)| bits | 1 << bit);
         PioInputs::from_bits(bits)
     }
 
@@ -59,20 +73,32 @@ impl Inputs {
     }
 }
 
-/// The PIO outputs (bit number, pin).
+/// The PIO outputs (the pin of port OUTn at index n, if the board has it).
 pub struct Outputs {
-    pins: [(u8, Output<'static>); 11],
+    pins: [Option<Output<'static>>; 16],
     on: Level,
     shown: Option<PioOutputs>,
 }
 
 impl Outputs {
-    /// `on` is the pin level of a signal that is ON. The pins must be OFF already.
-    pub fn new(pins: [(u8, Output<'static>); 11], on: Level) -> Outputs {
-        Outputs {
-            pins,
+    /// `pins` are (port number, pin); `on` is the pin level of a signal that is ON. The pins
+    /// must be OFF already.
+    pub fn new<const N: usize>(pins: [(u8, Output<'static>); N], on: Level) -> Outputs {
+        let mut outputs = Outputs {
+            pins: [const { None }; 16],
             on,
             shown: Some(PioOutputs::SAFE),
+        };
+        for (port, pin) in pins {
+            outputs.add(port, pin);
+        }
+        outputs
+    }
+
+    /// Port OUTn on `pin` (OFF already).
+    pub fn add(&mut self, port: u8, pin: Output<'static>) {
+        if let Some(slot) = self.pins.get_mut(usize::from(port)) {
+            *slot = Some(pin);
         }
     }
 
@@ -86,17 +112,22 @@ impl Outputs {
         if self.shown == Some(outputs) {
             return;
         }
-        for (bit, pin) in &mut self.pins {
-            let on = outputs.bits() & (1 << (*bit & 15)) != 0;
-            pin.set_level(if on { self.on } else { opposite(self.on) });
+        for (bit, pin) in (0..).zip(&mut self.pins) {
+            if let Some(pin) = pin {
+                let on = outputs.bits() & 1 << bit != 0;
+                pin.set_level(if on { self.on } else { opposite(self.on) });
+            }
         }
         self.shown = Some(outputs);
     }
 }
 
-/// Bit n set for each pin of port n.
-fn ports<T>(pins: &[(u8, T)]) -> u16 {
-    pins.iter().fold(0, |bits, (bit, _)| bits | 1 << (bit & 15))
+/// Bit n set for each port n that has a pin.
+fn ports<T>(pins: &[Option<T>; 16]) -> u16 {
+    (0..)
+        .zip(pins)
+        .filter(|(_, pin)| pin.is_some())
+        .fold(0, |bits, (bit, _)| bits | 1 << bit)
 }
 
 /// The other level.

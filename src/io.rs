@@ -202,12 +202,19 @@ pub struct Pins {
 #[used]
 static EMU_STOP_WAKES: AtomicU32 = AtomicU32::new(0);
 
-/// The emulator build only: the span between the first and the last sample that read CSTR ON
-/// in its latest pulse, µs, read by the emulator tests (qtest, by its symbol): what the firmware
-/// saw of a pulse the harness timed on the host, whose own timing QEMU does not keep under load.
+/// The emulator build only: the span between the first and the last sample that read an input
+/// of [`EMU_PULSE_MASK`] ON in its latest pulse, µs, read by the emulator tests (qtest, by its
+/// symbol): what the firmware saw of a pulse the harness timed on the host, whose own timing
+/// QEMU does not keep under load.
 #[cfg(feature = "emulator")]
 #[used]
 static EMU_CSTR_SPAN_US: AtomicU32 = AtomicU32::new(0);
+
+/// The emulator build only: the inputs whose pulses [`EMU_CSTR_SPAN_US`] times (bit n = INn;
+/// CSTR until a test writes another mask, such as an ST input's).
+#[cfg(feature = "emulator")]
+#[used]
+static EMU_PULSE_MASK: AtomicU32 = AtomicU32::new(PioInputs::CSTR.bits() as u32);
 
 /// Samples the inputs and drives the outputs and LEDs, forever: every millisecond while a PIO
 /// axis is configured, else on a change of the stop input and every [`INDICATORS_PERIOD`].
@@ -230,7 +237,9 @@ pub async fn run(pins: &'static mut Pins) -> ! {
         #[cfg(feature = "emulator")]
         {
             let us = now.as_micros() as u32;
-            cstr_on = sample.inputs.cstr().then(|| cstr_on.unwrap_or(us));
+            let mask = EMU_PULSE_MASK.load(Ordering::Relaxed);
+            let on = u32::from(sample.inputs.bits()) & mask != 0;
+            cstr_on = on.then(|| cstr_on.unwrap_or(us));
             if let Some(first) = cstr_on {
                 EMU_CSTR_SPAN_US.store(us.wrapping_sub(first), Ordering::Relaxed);
             }

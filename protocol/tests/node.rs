@@ -10,7 +10,7 @@ use protocol::engine::Link;
 use protocol::line::LineAction;
 use protocol::modbus::{Exception, Request as Modbus};
 use protocol::node::Node;
-use protocol::pio::{PioInputs, PioOutputs};
+use protocol::pio::{Pattern, PioInputs, PioOutputs, Ports};
 use protocol::plc::map::*;
 use protocol::plc::{GatewayConfig, Reason};
 use protocol::time::{Duration, Instant};
@@ -469,4 +469,51 @@ fn a_frame_gap_longer_than_t3_5_keeps_a_request_read_in_two_bursts_whole() {
             "gap {gap:?}"
         );
     }
+}
+
+/// PIOPAT: a pattern whose ports the board lacks is refused (03) and PIOPAT stays; one it has
+/// is in force at once, and a strobe the PIO refuses shows in CMST (3, reason 13, the inputs).
+#[test]
+fn a_pio_pattern_needs_the_boards_ports_and_a_refused_strobe_shows_in_cmst() {
+    let mut rig = Rig::ready(1, |c| {
+        c.pio_axis = Some(axis(0));
+        c.watchdog = Duration::ZERO;
+        c.pio_ports = Ports {
+            inputs: Pattern::Positioning.inputs(),
+            outputs: Pattern::Positioning.outputs(),
+        };
+    });
+    let run = |rig: &mut Rig, inputs: PioInputs, ms: u64| {
+        for _ in 0..ms {
+            rig.node.sample_inputs(Instant(rig.now), inputs);
+            rig.run_for(MS);
+        }
+    };
+    assert_eq!(
+        rig.write(63, G_PIO_PATTERN, &[4]),
+        Err(Exception::IllegalDataValue),
+        "no IN6, OUT4, OUT5"
+    );
+    assert_eq!(rig.read(63, G_PIO_PATTERN, 1), Ok(vec![0]));
+    // Pattern 0: CSTR with PC16 ON selects no point of the RC's 16.
+    let base = PioInputs::STP_N | PioInputs::SON;
+    run(&mut rig, base, 50);
+    let pc = base.with_position(point(3)) | PioInputs::PC16;
+    run(&mut rig, pc, 20);
+    run(&mut rig, pc | PioInputs::CSTR, 20);
+    assert_eq!(rig.read(1, CMST, 2), Ok(vec![3, 13 << 8 | 0x13]));
+    // Pattern 5 runs on pattern 0's pins: two ST inputs at once are refused.
+    assert_eq!(rig.write(63, G_PIO_PATTERN, &[5]), Ok(()));
+    assert_eq!(rig.read(63, G_PIO_PATTERN, 1), Ok(vec![5]));
+    run(&mut rig, base, 50);
+    let two = base | PioInputs::PC1 | PioInputs::PC4;
+    run(&mut rig, two, 30);
+    assert_eq!(rig.read(1, CMST, 2), Ok(vec![3, 13 << 8 | 0b101]));
+    assert!(rig.node.outputs().alarm(), "*ALM OFF until RES");
+    assert!(
+        !rig.commands_to(0, 0)
+            .iter()
+            .any(|c| matches!(c, Command::MoveToPoint(_))),
+        "nothing moved"
+    );
 }

@@ -56,6 +56,13 @@
 //! input pins with qtest `set_irq_in /machine/soc/gpioX unnamed-gpio-in N level` and reads
 //! outputs from the GPIO registers. QEMU ignores DE (CR3.DEM) and does not wire USART TX to
 //! its GPIO pin, so a break shows only as the pins' mode and output registers.
+//!
+//! The table's 30 signals take every pin of the board's Arduino and PMOD connectors, so the
+//! ports PIO patterns 4 and 1 add to pattern 0's (IN6-IN9, OUT4, OUT5, OUT9) have no pin on
+//! this board: it runs patterns 0 and 5, and refuses PIOPAT 4 (exception 03). The emulator
+//! build puts them on port E (IN6-IN9 on PE7-PE10, OUT4 PE11, OUT5 PE12, OUT9 PE13: pins the
+//! board routes to no connector) so that the emulator suite runs those patterns on the real
+//! firmware; a board with those terminals adds them to its table the same way.
 
 use embassy_stm32::exti::{self, ExtiInput};
 use embassy_stm32::peripherals::{UART4, USART2};
@@ -220,7 +227,8 @@ pub fn board(
     plc_line: protocol::plc::PlcLine,
 ) -> Result<(Board, Pins), ConfigError> {
     // Outputs first, driven OFF, so that nothing is ever ON before the gateway says so.
-    let outputs = Outputs::new(
+    #[cfg_attr(not(feature = "emulator"), allow(unused_mut))]
+    let mut outputs = Outputs::new(
         [
             (0, output(p.PB2)),
             (1, output(p.PA2)),
@@ -237,7 +245,8 @@ pub fn board(
         OUTPUT_ON,
     );
     let leds = Leds::new(led(p.PB14), led(p.PA5), indicator_on_fault(p.PC9), LED_ON);
-    let inputs = Inputs::new(
+    #[cfg_attr(not(feature = "emulator"), allow(unused_mut))]
+    let mut inputs = Inputs::new(
         [
             (0, input(p.PC5)),
             (1, input(p.PC4)),
@@ -254,6 +263,19 @@ pub fn board(
         ExtiInput::from_input(input(p.PA4), p.EXTI4, Irqs),
         INPUT_ON,
     );
+
+    // The ports of PIO patterns 4 and 1 that no connector of the board has left (see
+    // "Emulator" above): on port E in the emulator build only.
+    #[cfg(feature = "emulator")]
+    {
+        inputs.add(6, input(p.PE7));
+        inputs.add(7, input(p.PE8));
+        inputs.add(8, input(p.PE9));
+        inputs.add(9, input(p.PE10));
+        outputs.add(4, output(p.PE11));
+        outputs.add(5, output(p.PE12));
+        outputs.add(9, output(p.PE13));
+    }
 
     let line_break = LineBreak::new(PinId::of(&*p.PA0), Some(PinId::of(&*p.PA15)));
     pins::on_fault_release(PinId::of(&*p.PA15));

@@ -73,14 +73,15 @@ MODER, IDR, ODR = 0x00, 0x10, 0x14
 MODE_INPUT, MODE_OUTPUT, MODE_AF, MODE_ANALOG = 0, 1, 2, 3
 
 # The board's pin table (src/board/l475.rs), as (port letter, pin).
-INPUTS = {  # PIO bit -> pin
+INPUTS = {  # PIO bit -> pin (IN6-IN9 on port E: the emulator build's only, src/board/l475.rs)
     0: ("c", 5), 1: ("c", 4), 2: ("c", 3), 3: ("c", 2), 4: ("c", 1), 5: ("c", 0),
+    6: ("e", 7), 7: ("e", 8), 8: ("e", 9), 9: ("e", 10),
     11: ("d", 14), 12: ("b", 0), 13: ("a", 3), 14: ("b", 4), 15: ("b", 1),
 }
 STOP_INPUT = ("a", 4)
-OUTPUTS = {  # PIO bit -> pin
-    0: ("b", 2), 1: ("a", 2), 2: ("a", 7), 3: ("a", 6), 6: ("b", 9), 7: ("b", 8),
-    10: ("d", 0), 11: ("d", 1), 12: ("d", 2), 13: ("d", 7), 14: ("d", 3),
+OUTPUTS = {  # PIO bit -> pin (OUT4, OUT5, OUT9 on port E: the emulator build's only)
+    0: ("b", 2), 1: ("a", 2), 2: ("a", 7), 3: ("a", 6), 4: ("e", 11), 5: ("e", 12), 6: ("b", 9),
+    7: ("b", 8), 9: ("e", 13), 10: ("d", 0), 11: ("d", 1), 12: ("d", 2), 13: ("d", 7), 14: ("d", 3),
 }
 LED_RUN, LED_LINK, LED_ALARM = ("b", 14), ("a", 5), ("c", 9)
 # PIO bits (src/board: the PCON pattern-0 signals): inputs, then outputs.
@@ -526,7 +527,7 @@ def elf_symbols(path):
                 found[symbol.name] = symbol["st_value"]
             else:  # mangled: rc_gateway::gateway::EMU_PANIC, rc_gateway::rt::load::EMU_BUSY_US
                 for name in ("EMU_PANIC", "EMU_STALL", "EMU_OVERFLOW", "EMU_BUSY_US", "EMU_CLOCK_US",
-                             "EMU_STOP_WAKES", "EMU_CSTR_SPAN_US"):
+                             "EMU_STOP_WAKES", "EMU_CSTR_SPAN_US", "EMU_PULSE_MASK"):
                     if name in symbol.name:
                         found[name] = symbol["st_value"]
         return found
