@@ -124,9 +124,10 @@ use crate::memory::PointField;
 use crate::modbus::{
     chars_time, Handled, Receiver, ReceiverCounters, ReplyBuffer, Slave, SlaveCounters,
 };
-use crate::pio::{self, Band, Pattern, Pio, PioInputs, PioOutputs};
-use crate::plc::{Gateway, GatewayConfig, PlcLine, Store};
+use crate::pio::{self, Band, Jog, Pattern, Pio, PioInputs, PioOutputs};
+use crate::plc::{Gateway, GatewayConfig, PlcLine, Store, PIO_ACCEL};
 use crate::time::{earliest, Duration, Instant};
+use crate::units::{Accel, Length, Speed};
 use crate::{Axis, PositionNo, Pulses};
 
 /// The most the whole node may take on a microcontroller: 12 KiB for 16 axes (an STM32F103C8
@@ -245,9 +246,18 @@ impl Node {
                 ..*self.pio.config()
             });
         }
-        if pattern == Pattern::Solenoid3 {
-            let reeds = self.reeds(axis);
-            self.pio.set_reeds(reeds);
+        match pattern {
+            Pattern::Solenoid3 => {
+                let reeds = self.reeds(axis);
+                self.pio.set_reeds(reeds);
+            }
+            Pattern::Teaching => {
+                self.pio.set_jog(self.jog(axis));
+                if let Some(stored) = self.gateway.take_taught() {
+                    self.pio.taught(stored);
+                }
+            }
+            _ => {}
         }
         let state = *self.gateway.engine().axis(axis);
         let link_ok = !self.gateway.engine().establishing();
@@ -256,6 +266,13 @@ impl Node {
         self.outputs = outputs;
         if let Some(inputs) = self.pio.take_refused() {
             self.gateway.pio_refused(axis, inputs);
+        }
+        if let Some(point) = self.pio.take_teach() {
+            // Refused (offline, another PWRT running): CMST shows it, WEND stays OFF.
+            if self.gateway.teach(axis, point).is_err() {
+                self.pio.taught(false);
+            }
+            self.dirty = true;
         }
         if self.pio.take_acknowledge() {
             self.gateway.acknowledge_by_wire();
@@ -285,6 +302,26 @@ impl Node {
                 });
         }
         reeds
+    }
+
+    /// Pattern 1's jog of `axis` in its units: to 0 mm and to the stroke, one PIOINCH step, at
+    /// PIOJOG and [`PIO_ACCEL`]; `None` if the axis' scale cannot express them.
+    fn jog(&self, axis: Axis) -> Option<Jog> {
+        let config = self.gateway.config();
+        let axis = &config.axes[axis];
+        let scale = &axis.scale;
+        let wire = |at: i32| scale.position_to_wire(Length(at)).ok();
+        let minus_end = wire(0)?;
+        let step = wire(i32::from(config.pio_inch))?
+            .0
+            .checked_sub(minus_end.0)?;
+        Some(Jog {
+            plus_end: wire(axis.stroke.0)?,
+            minus_end,
+            step: Pulses(step),
+            velocity: scale.velocity(Speed(u32::from(config.pio_jog))).ok()?,
+            acceleration: scale.acceleration(Accel(u32::from(PIO_ACCEL))).ok()?,
+        })
     }
 
     /// The stop input at `now`: `active` when it is OFF (a safety input).

@@ -22,6 +22,8 @@ fn config() -> GatewayConfig {
     c.pio_axis = Some(axis(1));
     c.pio_pattern = Pattern::Solenoid3;
     c.pio_start = StartMode::Edge;
+    c.pio_jog = 25_00;
+    c.pio_inch = 5;
     c
 }
 
@@ -32,6 +34,8 @@ fn a_format_1_record_is_read() {
     let mut old = config();
     old.pio_pattern = Pattern::Positioning;
     old.pio_start = StartMode::Level;
+    old.pio_jog = protocol::plc::DEFAULT_PIO_JOG;
+    old.pio_inch = protocol::plc::DEFAULT_PIO_INCH;
     let record = Settings::of(&old).encode();
     let mut v1 = record[..RECORD_LEN_1].to_vec();
     v1[0] = FORMAT_1;
@@ -117,7 +121,7 @@ fn a_field_out_of_range_is_refused() {
         r[RECORD_LEN - 2..].copy_from_slice(&sum.to_le_bytes());
         Settings::decode(&r)
     };
-    let cases: [(usize, &[u8]); 15] = [
+    let cases: [(usize, &[u8]); 17] = [
         (1, &[0]),                        // unit 0
         (1, &[248]),                      // unit past 247
         (1, &[2]),                        // unit 2 = axis 1's, which is on the bus
@@ -131,8 +135,10 @@ fn a_field_out_of_range_is_refused() {
         (16, &0u16.to_le_bytes()),        // axis 0 lead 0
         (16 + 4, &[9]),                   // axis 0 home end
         (16 + 6, &(-1i32).to_le_bytes()), // axis 0 stroke below 0
-        (176, &[1]),                      // PIO pattern 1 (teaching: not the gateway's)
+        (176, &[2]),                      // PIO pattern 2 (256 points: not the gateway's)
         (177, &[2]),                      // PIO start mode
+        (178, &[0, 0]),                   // jog speed 0
+        (180, &[101, 0]),                 // inching step past 1.00 mm
     ];
     for (at, bytes) in cases {
         assert_eq!(

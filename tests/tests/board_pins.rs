@@ -42,13 +42,18 @@ const JTAG: [&str; 4] = ["PA13", "PA14", "PA15", "PB4"];
 #[test]
 fn the_reader_finds_the_boards_pins() {
     // A reader that finds nothing would pass the checks below vacuously.
-    for board in ["f103", "l475"] {
+    // The L475 file also holds the emulator build's IN6-IN9, OUT4, OUT5 and OUT9 (port E).
+    for (board, emulator_inputs, emulator_outputs) in [("f103", 0, 0), ("l475", 4, 3)] {
         assert_eq!(
             pins(board, "input").len(),
-            12,
+            12 + emulator_inputs,
             "{board}: 11 PIO inputs and the stop input"
         );
-        assert_eq!(pins(board, "output").len(), 11, "{board}: 11 PIO outputs");
+        assert_eq!(
+            pins(board, "output").len(),
+            11 + emulator_outputs,
+            "{board}: 11 PIO outputs"
+        );
         let leds = pins(board, "led").len() + pins(board, "indicator_on_fault").len();
         assert_eq!(leds, 3, "{board}: three LEDs");
     }

@@ -3,13 +3,15 @@
 #![allow(clippy::inconsistent_digit_grouping)]
 
 use protocol::line::Baud;
+use protocol::memory::PointField;
 use protocol::node::Node;
-use protocol::pio::{PioInputs, PioOutputs};
-use protocol::plc::{AxisConfig, GatewayConfig};
+use protocol::pio::{Pattern, PioInputs, PioOutputs};
+use protocol::plc::{AxisConfig, CommandState, GatewayConfig};
 use protocol::time::{Duration, Instant};
 use protocol::units::{Lead, Length, Scale};
 use protocol::{Axis, AxisSet, HomeDirection, PositionNo, Rtim};
 use rc_host::node_harness::NodeHarness;
+use rc_host::sim::memory::pi;
 use rc_host::sim::realtime::bus_at_line;
 use rc_host::sim::{BusConfig, ControllerConfig};
 
@@ -26,6 +28,11 @@ fn axis0() -> Axis {
 }
 
 fn rig() -> Rig {
+    rig_with(|_| {})
+}
+
+/// [`rig`] with its configuration changed by `change` first.
+fn rig_with(change: impl FnOnce(&mut GatewayConfig)) -> Rig {
     let scale = Scale::new(Lead::from_hundredths(800).unwrap(), HomeDirection::MotorEnd);
     let mut bus = bus_at_line(BusConfig::default(), &[], Baud::B115200, Rtim::MIN);
     let mut row = [0u32; 10];
@@ -44,6 +51,7 @@ fn rig() -> Rig {
         scale,
         stroke: Length(100_00),
     };
+    change(&mut config);
     Rig {
         h: NodeHarness::new(Node::new(config), bus),
         // *STP is negative logic: ON means "run".
@@ -259,4 +267,88 @@ fn a_res_pulse_acknowledges_the_fail_safe_once_the_stop_input_is_closed() {
     );
     pulse(&mut r, PioInputs::CSTR, false);
     r.until(5_000, |o| o.pend() && o.pm() == 5);
+}
+
+/// Pattern 1 against the simulated controller: a held jog and an inching step move the axis,
+/// and PWRT stores where it is into the point PC1-PC8 select (the row the controller then
+/// holds, read from its memory), compared first: a PWRT at the same place writes nothing.
+#[test]
+fn teaching_jogs_and_pwrt_stores_the_position_into_the_selected_point() {
+    let mut r = rig_with(|c| c.pio_pattern = Pattern::Teaching);
+    r.run(100);
+    r.set(PioInputs::SON, true);
+    r.until(500, |o| o.sv());
+    r.set(PioInputs::HOME, true);
+    r.run(20);
+    r.set(PioInputs::HOME, false);
+    r.until(5_000, |o| o.hend() && o.pend());
+    r.set(PioInputs::ST6, true); // MODE
+    r.until(100, |o| o.modes());
+    // JOG+ held for 300 ms at 100 mm/s (PIOJOG's default), then released.
+    r.set(PioInputs::JOG_PLUS, true);
+    r.run(300);
+    assert!(r.h.bus.controller(axis0()).unwrap().moving(), "jogging");
+    r.set(PioInputs::JOG_PLUS, false);
+    r.run(500);
+    let c = r.h.bus.controller(axis0()).unwrap();
+    assert!(!c.moving(), "stopped on release");
+    let scale = r.h.node.gateway().config().axes[axis0()].scale;
+    let at = scale.position_from_wire(protocol::Pulses(c.position() as i32));
+    assert!(
+        at.0 > 10_00 && at.0 < 50_00,
+        "jogged toward the stroke end: {at:?}"
+    );
+    // PWRT into point 9, which holds nothing.
+    let nine = PositionNo::new(9).unwrap();
+    r.inputs = r.inputs.with_position(nine);
+    r.run(10);
+    r.set(PioInputs::CSTR, true); // PWRT
+    r.until(2_000, |o| o.pend()); // WEND
+    let stored = |r: &Rig| {
+        let c = r.h.bus.controller(axis0()).unwrap();
+        let nv = &c.memory().nv;
+        (nv.points[9], nv.point_writes[9])
+    };
+    let (row, writes) = stored(&r);
+    assert_eq!(row[0], c_position(&r), "the position the axis is at");
+    assert_ne!(row[pi(PointField::Velocity)], 0, "a speed: the jog speed");
+    assert_eq!(writes, 1);
+    r.set(PioInputs::CSTR, false);
+    r.run(10);
+    assert!(!r.outputs.pend(), "WEND OFF with PWRT");
+    // One inching step toward home (JISL), PWRT again: the row follows.
+    r.set(PioInputs::JISL, true);
+    r.set(PioInputs::JOG_MINUS, true);
+    r.run(300);
+    r.set(PioInputs::JOG_MINUS, false);
+    let step = scale.position_from_wire(protocol::Pulses(c_position(&r) as i32));
+    assert_eq!(at.0 - step.0, 10, "one 0.10 mm step");
+    r.set(PioInputs::CSTR, true);
+    r.until(2_000, |o| o.pend());
+    assert_eq!(
+        stored(&r),
+        (
+            {
+                let mut row = row;
+                row[0] = c_position(&r);
+                row
+            },
+            2
+        )
+    );
+    // Again, without moving: compared, nothing written, WEND all the same.
+    r.set(PioInputs::CSTR, false);
+    r.run(10);
+    r.set(PioInputs::CSTR, true);
+    r.until(2_000, |o| o.pend());
+    assert_eq!(stored(&r).1, 2, "no V5 for the same position");
+    assert_eq!(
+        r.h.node.gateway().command_state(axis0()).0,
+        CommandState::Done
+    );
+}
+
+/// The simulated axis' position as the controller stores it (the wire's 32 bits).
+fn c_position(r: &Rig) -> u32 {
+    r.h.bus.controller(axis0()).unwrap().position() as i32 as u32
 }

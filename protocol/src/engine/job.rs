@@ -47,8 +47,16 @@ pub enum JobKind {
         /// Acceleration.
         acceleration: Acceleration,
     },
-    /// Start a jog: `a` to the given stroke end; done when accepted. End it with [`JobKind::Stop`].
-    Jog(Pulses),
+    /// Start a jog: `v2`, then `a` to the given stroke end; done when accepted (a jog ends when
+    /// it is stopped, so its end is no outcome of its own). End it with [`JobKind::Stop`].
+    Jog {
+        /// The stroke end it runs toward.
+        end: Pulses,
+        /// Velocity.
+        velocity: Velocity,
+        /// Acceleration.
+        acceleration: Acceleration,
+    },
     /// `d`: cancel the remaining motion. Goes before every other frame and cancels the axis'
     /// running and queued jobs.
     Stop,
@@ -253,7 +261,7 @@ pub(crate) fn program(job: &Job, index: usize) -> Option<Op> {
         (JobKind::Home(direction), 1) => return send(Command::Home(direction)),
         (JobKind::Home(_), 2) => Op::Await(Condition::Homed),
         (JobKind::Home(_), 3) => read_position(axis),
-        (JobKind::Jog(end), 0) => return send(Command::MoveAbsolute(end)),
+        (JobKind::Jog { end, .. }, 1) => return send(Command::MoveAbsolute(end)),
         (JobKind::Stop, 0) => return send(Command::CancelMotion),
         (JobKind::AlarmReset, 0) => return send(Command::Servo(false)),
         (JobKind::AlarmReset, 1) => return send(Command::Reset(ResetKind::AlarmReset)),
@@ -263,6 +271,11 @@ pub(crate) fn program(job: &Job, index: usize) -> Option<Op> {
                 acceleration,
             }
             | JobKind::DirectMove {
+                velocity,
+                acceleration,
+                ..
+            }
+            | JobKind::Jog {
                 velocity,
                 acceleration,
                 ..

@@ -144,8 +144,11 @@
 
 mod debounce;
 mod pattern;
+mod teach;
 
 pub use pattern::{Pattern, Ports, StartMode};
+pub use teach::Jog;
+use teach::{JogInputs, Teach};
 
 use crate::bits::bit_flags;
 use crate::engine::{AxisState, JobKind, Link};
@@ -180,8 +183,15 @@ bit_flags! {
         4 => PC16, pc16, "PC16";
         /// IN5: PCON's position number bit 5; the RC has none, so a strobe with it ON is refused.
         5 => PC32, pc32, "PC32";
-        /// IN6: ST6 of pattern 4 (unused in pattern 0: PCON's IN6 is PC64 there).
+        /// IN6: ST6 of pattern 4, MODE of pattern 1 (unused in pattern 0: PCON's IN6 is PC64
+        /// there).
         6 => ST6, st6, "ST6";
+        /// IN7: JISL of pattern 1: OFF jog while JOG+/JOG- is held, ON inch one step per edge.
+        7 => JISL, jisl, "JISL";
+        /// IN8: JOG+ of pattern 1.
+        8 => JOG_PLUS, jog_plus, "JOG+";
+        /// IN9: JOG- of pattern 1.
+        9 => JOG_MINUS, jog_minus, "JOG-";
         /// IN11: home, on the rising edge.
         11 => HOME, home, "HOME";
         /// IN12: *STP, negative logic: ON = may run, OFF = stop.
@@ -215,6 +225,8 @@ bit_flags! {
         6 => MOVE, moving, "MOVE";
         /// OUT7: ZONE1, the controller's ZONE output.
         7 => ZONE1, zone1, "ZONE1";
+        /// OUT9: MODES of pattern 1, teaching mode in force.
+        9 => MODES, modes, "MODES";
         /// OUT10: HEND, home complete (ZFIN).
         10 => HEND, hend, "HEND";
         /// OUT11: PEND, positioning complete (PFIN).
@@ -283,7 +295,7 @@ impl PioOutputs {
         let alarmed = self.with(PioOutputs::ALM_N, false);
         match pattern {
             // FAILSAFE's two causes are bits 0 and 1: the cast keeps them.
-            Pattern::Positioning => alarmed.with_pm((failsafe & 0x3) as u8),
+            Pattern::Positioning | Pattern::Teaching => alarmed.with_pm((failsafe & 0x3) as u8),
             Pattern::Solenoid7 => PioOutputs(alarmed.0 & !pattern.st_inputs()),
             Pattern::Solenoid3 => alarmed,
         }
@@ -462,6 +474,8 @@ pub struct Pio {
     refused_inputs: Option<u8>,
     /// Pattern 5: points 0-2, where known.
     reeds: [Option<Band>; 3],
+    /// Pattern 1: teaching mode.
+    teach: Teach,
     /// A latched move not yet returned.
     pending_move: Option<PositionNo>,
     pending_home: bool,
@@ -502,6 +516,7 @@ impl Pio {
             refusal: false,
             refused_inputs: None,
             reeds: [None; 3],
+            teach: Teach::new(),
             pending_move: None,
             pending_home: false,
             pending_reset: false,
@@ -549,6 +564,23 @@ impl Pio {
     /// 4 and 5; bit n = STn).
     pub fn take_refused(&mut self) -> Option<u8> {
         self.refused_inputs.take()
+    }
+
+    /// Pattern 1: where and how fast the JOG inputs move the axis (`None`: not known; the JOG
+    /// inputs then do nothing).
+    pub fn set_jog(&mut self, jog: Option<Jog>) {
+        self.teach.jog = jog;
+    }
+
+    /// Pattern 1: the point a PWRT asks the gateway to store the axis' position into, once.
+    pub fn take_teach(&mut self) -> Option<PositionNo> {
+        self.teach.take_request()
+    }
+
+    /// Pattern 1: how the store [`take_teach`](Pio::take_teach) asked for ended: WEND turns ON
+    /// if it was stored (until PWRT turns OFF).
+    pub fn taught(&mut self, stored: bool) {
+        self.teach.wend = stored && self.inputs.on(PioInputs::CSTR);
     }
 
     /// Pattern 5: where points 0-2 are (`None`: not known, or the controller holds no such
@@ -670,9 +702,17 @@ impl Pio {
             self.pending_home = false;
             self.held = None;
         }
+        if pattern == Pattern::Teaching {
+            self.teaching(changed, known_before, may_run, report.is_some(), axis);
+        }
         if self.strobe && now.since(self.pc_since) >= self.config.settle {
             self.strobe = false;
-            self.pending_move = self.strobe_point();
+            let point = self.strobe_point();
+            match point {
+                // In teaching mode, CSTR's port is PWRT.
+                Some(point) if self.teach.active => self.teach.write(point),
+                _ => self.pending_move = point,
+            }
         }
         // Level mode: the ST input released before its point is reached stops the move.
         if let Some(point) = self.held {
@@ -709,6 +749,51 @@ impl Pio {
         }
         self.outputs = self.outputs_for(axis, report);
         (self.outputs, job)
+    }
+
+    /// Pattern 1: MODE enters and leaves teaching mode, the JOG inputs jog (see
+    /// [`teach`](teach)).
+    fn teaching(
+        &mut self,
+        changed: u16,
+        known_before: u16,
+        may_run: bool,
+        heard: bool,
+        axis: &AxisState,
+    ) {
+        let mode = self.inputs.on(PioInputs::ST6);
+        if !mode && self.teach.active {
+            // Leaving stops a jog under way.
+            self.stop_due |= self.teach.leave();
+        } else if mode
+            && !self.teach.active
+            && heard
+            && !axis.moving()
+            && self.waiting.is_none()
+            && !self.motion_pending()
+        {
+            self.teach.active = true;
+        }
+        if !self.inputs.on(PioInputs::CSTR) {
+            self.teach.wend = false;
+        }
+        if !self.teach.active {
+            return;
+        }
+        if !may_run || !heard {
+            // *STP's own rule stops the axis.
+            self.teach.drop_motion();
+            return;
+        }
+        let rose = |flag| self.inputs.rose(flag, changed, known_before);
+        let jog = JogInputs {
+            plus: self.inputs.on(PioInputs::JOG_PLUS),
+            minus: self.inputs.on(PioInputs::JOG_MINUS),
+            plus_rose: rose(PioInputs::JOG_PLUS),
+            minus_rose: rose(PioInputs::JOG_MINUS),
+            inch: self.inputs.on(PioInputs::JISL),
+        };
+        self.stop_due |= self.teach.jog_inputs(jog);
     }
 
     /// The point a strobe selects, taken once the inputs that select it have settled: `None`,
@@ -793,7 +878,7 @@ impl Pio {
             self.waiting = Some(Await::new(Target::Point(point), now, axis, &report));
             return Some(JobKind::MoveToPoint(point, None));
         }
-        None
+        self.teach.take_job()
     }
 
     fn outputs_for(&self, axis: &AxisState, report: Option<StatusReport>) -> PioOutputs {
@@ -821,6 +906,13 @@ impl Pio {
         // The pattern's own outputs on OUT0-OUT6.
         let own = match pattern {
             Pattern::Positioning => return word,
+            // Teaching mode: MODES, and WEND on PEND's port.
+            Pattern::Teaching if self.teach.active => {
+                return word
+                    .with(PioOutputs::MODES, true)
+                    .with(PioOutputs::PEND, self.teach.wend)
+            }
+            Pattern::Teaching => return word,
             // PEn: point n complete, reached by the PIO's move; OFF with *ALM.
             Pattern::Solenoid7 => match self.at {
                 Some(point) if word.pend() && word.alm_n() => 1 << point.get(),

@@ -16,6 +16,11 @@ pub enum Pattern {
     /// 0, positioning: PC1-PC8 select a point, CSTR starts the move, PM1-PM8 show the point
     /// reached.
     Positioning = 0,
+    /// 1, teaching: pattern 0 while MODE (IN6) is OFF; while it is ON, JOG+/JOG- (IN8, IN9)
+    /// jog the axis (JISL, IN7: OFF while held, ON one inching step per edge) and PWRT (IN13,
+    /// CSTR's port) stores the axis' position into the point PC1-PC8 select; MODES (OUT9) shows
+    /// teaching mode, WEND (OUT11, PEND's port) the store done.
+    Teaching = 1,
     /// 4, solenoid valve mode 1: STn (IN0-IN6) moves to point n, PEn (OUT0-OUT6) is ON when
     /// point n is complete. An actuator replaces a seven-position air cylinder and its valve.
     Solenoid7 = 4,
@@ -74,6 +79,12 @@ const COMMON_OUTPUTS: u16 = PioOutputs::ZONE1.bits()
     | PioOutputs::LINK.bits()
     | PioOutputs::ALM_N.bits();
 
+/// Pattern 0's inputs: PC1-PC32, HOME, *STP, CSTR, RES, SON.
+const POSITIONING_INPUTS: u16 = COMMON_INPUTS | 0x3F | PioInputs::CSTR.bits();
+
+/// Pattern 0's outputs: PM1-PM8, MOVE and the common ones.
+const POSITIONING_OUTPUTS: u16 = COMMON_OUTPUTS | 0x0F | PioOutputs::MOVE.bits();
+
 impl StartMode {
     /// The mode of PCON parameter No. 27's value `code`.
     pub const fn from_code(code: u16) -> Option<StartMode> {
@@ -87,7 +98,12 @@ impl StartMode {
 
 impl Pattern {
     /// Every pattern the gateway has.
-    pub const ALL: [Pattern; 3] = [Pattern::Positioning, Pattern::Solenoid7, Pattern::Solenoid3];
+    pub const ALL: [Pattern; 4] = [
+        Pattern::Positioning,
+        Pattern::Teaching,
+        Pattern::Solenoid7,
+        Pattern::Solenoid3,
+    ];
 
     /// IAI's number.
     pub const fn code(self) -> u16 {
@@ -98,6 +114,7 @@ impl Pattern {
     pub const fn from_code(code: u16) -> Option<Pattern> {
         match code {
             0 => Some(Pattern::Positioning),
+            1 => Some(Pattern::Teaching),
             4 => Some(Pattern::Solenoid7),
             5 => Some(Pattern::Solenoid3),
             _ => None,
@@ -107,7 +124,7 @@ impl Pattern {
     /// The ST inputs (bit n = STn on INn); none for positioning.
     pub const fn st_inputs(self) -> u16 {
         match self {
-            Pattern::Positioning => 0,
+            Pattern::Positioning | Pattern::Teaching => 0,
             Pattern::Solenoid7 => 0x7F,
             Pattern::Solenoid3 => 0x07,
         }
@@ -121,7 +138,8 @@ impl Pattern {
     /// The input ports the pattern reads (bit n = INn): a board must have them all to run it.
     pub const fn inputs(self) -> u16 {
         match self {
-            Pattern::Positioning => PioInputs::MASK & !PioInputs::ST6.bits(),
+            Pattern::Positioning => POSITIONING_INPUTS,
+            Pattern::Teaching => PioInputs::MASK,
             _ => COMMON_INPUTS | self.st_inputs(),
         }
     }
@@ -130,7 +148,8 @@ impl Pattern {
     /// it.
     pub const fn outputs(self) -> u16 {
         match self {
-            Pattern::Positioning => COMMON_OUTPUTS | 0x0F | PioOutputs::MOVE.bits(),
+            Pattern::Positioning => POSITIONING_OUTPUTS,
+            Pattern::Teaching => POSITIONING_OUTPUTS | PioOutputs::MODES.bits(),
             // OUT6 is PE6: no MOVE.
             Pattern::Solenoid7 => COMMON_OUTPUTS | 0x7F,
             Pattern::Solenoid3 => COMMON_OUTPUTS | 0x07 | PioOutputs::MOVE.bits(),

@@ -101,7 +101,7 @@ impl Motion {
             JobKind::Home(_) => Motion::Home,
             JobKind::MoveToPoint(..)
             | JobKind::DirectMove { .. }
-            | JobKind::Jog(_)
+            | JobKind::Jog { .. }
             | JobKind::MoveAbsolute(_)
             | JobKind::MoveRelative(_) => Motion::Move,
             _ => Motion::None,

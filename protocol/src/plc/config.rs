@@ -177,6 +177,21 @@ impl PlcLine {
     };
 }
 
+/// Pattern 1's jog speed unless set: 100 mm/s (0.01 mm/s), PCON's factory value.
+pub const DEFAULT_PIO_JOG: u16 = 10_000;
+/// Pattern 1's inching step unless set: 0.10 mm (0.01 mm), PCON's factory value.
+pub const DEFAULT_PIO_INCH: u16 = 10;
+/// Pattern 1's acceleration, of its jogs and of a point a PWRT fills that held nothing: 0.30 G
+/// (0.01 G), PCON's default acceleration (its parameter No. 9, factory value).
+pub const PIO_ACCEL: u16 = 30;
+/// The longest inching step: 1.00 mm (0.01 mm), PCON's range.
+pub const MAX_PIO_INCH: u16 = 100;
+
+/// Whether `inch` (0.01 mm) is an inching step PIOINCH takes: 0.01-1.00 mm.
+pub(crate) const fn pio_inch_ok(inch: u16) -> bool {
+    inch != 0 && inch <= MAX_PIO_INCH
+}
+
 /// Everything the gateway is set up with.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -206,6 +221,10 @@ pub struct GatewayConfig {
     pub pio_start: StartMode,
     /// The PIO ports the board has: a pattern needing others is refused.
     pub pio_ports: Ports,
+    /// Pattern 1's jog speed, 0.01 mm/s (PIOJOG; PCON parameter No. 26).
+    pub pio_jog: u16,
+    /// Pattern 1's inching step, 0.01 mm (PIOINCH; PCON parameter No. 48).
+    pub pio_inch: u16,
     /// Who the gateway is (FC2B/0E, FC11), and its firmware version (VERSION).
     pub identity: Identity,
     /// What the firmware knows about this start (settings source, saves, reset cause).
@@ -230,6 +249,8 @@ impl GatewayConfig {
             pio_pattern: Pattern::Positioning,
             pio_start: StartMode::Level,
             pio_ports: Ports::ALL,
+            pio_jog: DEFAULT_PIO_JOG,
+            pio_inch: DEFAULT_PIO_INCH,
             identity: IDENTITY,
             boot: Boot::DEFAULT,
         }

@@ -16,6 +16,7 @@ use super::persist::{Persist, Store};
 use super::points::PointCache;
 use super::refused::Refused;
 use super::sync::{SyncEnd, SyncStart};
+use super::teach::{Step, Teach};
 use crate::axes::{AxisMap, AxisSet};
 use crate::engine::{
     Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Link, Output, SubmitError,
@@ -36,6 +37,10 @@ pub struct Gateway {
     pub(super) sync: SyncStart,
     pub(super) channel: Channel,
     pub(super) points: PointCache,
+    /// Pattern 1's PWRT under way.
+    teach: Teach,
+    /// How the last PWRT ended (stored or not), not yet taken by the PIO.
+    taught: Option<bool>,
     /// The settings taken on APPLY or at the next start, and SAVE.
     pub(super) persist: Persist,
     /// APPLY changed the PLC line: the firmware switches after the reply.
@@ -61,6 +66,8 @@ impl Gateway {
             sync: SyncStart::new(),
             channel: Channel::new(),
             points: PointCache::new(),
+            teach: Teach::new(),
+            taught: None,
             persist: Persist::new(&config),
             plc_line_changed: false,
             now: Instant::ZERO,
@@ -273,6 +280,30 @@ impl Gateway {
         plc.reason = Reason::PioInput.code(inputs);
     }
 
+    /// Pattern 1's PWRT: store the present position of `axis` into `point` (see
+    /// [`teach`](super::teach)); CMST shows it as one command. Refused while the axis does not
+    /// answer or another PWRT runs.
+    pub fn teach(&mut self, axis: Axis, point: PositionNo) -> Result<(), Refused> {
+        if !self.engine.online(axis) {
+            return Err(Refused::Offline);
+        }
+        match self.teach.start(axis, point, &mut self.engine) {
+            Ok(id) => {
+                self.axes[axis].take(Some(id), Motion::None);
+                Ok(())
+            }
+            Err(reason) => {
+                self.axes[axis].fail(reason.code(0));
+                Err(Refused::QueueFull)
+            }
+        }
+    }
+
+    /// How the last PWRT ended (`true`: stored), once.
+    pub fn take_taught(&mut self) -> Option<bool> {
+        self.taught.take()
+    }
+
     /// Point `point` of `axis` as the controller holds it, if the gateway has it cached; else
     /// fetched (the PIO's reed switches of pattern 5 ask for theirs on every sample: used,
     /// they stay cached).
@@ -391,6 +422,35 @@ impl Gateway {
     }
 
     fn job_done(&mut self, id: JobId, axis: Axis, result: Result<JobOutput, JobError>) {
+        let jog_speed = self.config.pio_jog;
+        let teach = self.teach.job_done(
+            id,
+            &result,
+            &self.config.axes[axis],
+            jog_speed,
+            &mut self.engine,
+        );
+        let plc = &mut self.axes[axis];
+        match teach {
+            // CMST follows the PWRT's next job.
+            Some(Step::Next(next)) if plc.job == Some(id) => plc.job = Some(next),
+            Some(Step::Ended(axis, point, ended)) => {
+                self.points.forget(axis, point);
+                self.taught = Some(ended.is_ok());
+                let plc = &mut self.axes[axis];
+                if plc.job == Some(id) {
+                    match ended {
+                        Ok(()) => {
+                            plc.job = None;
+                            plc.state = CommandState::Done;
+                            plc.reason = 0;
+                        }
+                        Err(cmer) => plc.fail(cmer),
+                    }
+                }
+            }
+            _ => {}
+        }
         let plc = &mut self.axes[axis];
         if plc.job == Some(id) {
             plc.job = None;

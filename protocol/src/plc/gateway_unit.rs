@@ -70,6 +70,8 @@ impl Gateway {
             G_PIO_AXIS => self.config.pio_axis.map_or(0xFFFF, |a| u16::from(a.get())),
             G_PIO_PATTERN => self.config.pio_pattern.code(),
             G_PIO_START => self.config.pio_start as u16,
+            G_PIO_JOG => self.config.pio_jog,
+            G_PIO_INCH => self.config.pio_inch,
             G_SYNC_MASK => self.sync.mask().0,
             G_SYNC_STATUS => self.sync.status() as u16,
             a => {
@@ -225,6 +227,8 @@ impl Gateway {
             GatewayWrite::PioAxis(axis) => self.config.pio_axis = axis,
             GatewayWrite::PioPattern(pattern) => self.config.pio_pattern = pattern,
             GatewayWrite::PioStart(start) => self.config.pio_start = start,
+            GatewayWrite::PioJog(speed) => self.config.pio_jog = speed,
+            GatewayWrite::PioInch(inch) => self.config.pio_inch = inch,
             GatewayWrite::SyncMask(mask) => self.sync.set_mask(mask),
             GatewayWrite::Axis(axis, setting) => self.apply_axis_setting(axis, setting),
         }

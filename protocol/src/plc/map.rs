@@ -173,6 +173,10 @@ pub const G_RESTART: u16 = 0x001B;
 pub const G_PIO_PATTERN: u16 = 0x001C;
 /// PIOSTART: how the solenoid patterns' ST inputs start a move (0 level, 1 edge).
 pub const G_PIO_START: u16 = 0x001D;
+/// PIOJOG: pattern 1's jog speed, 0.01 mm/s.
+pub const G_PIO_JOG: u16 = 0x001E;
+/// PIOINCH: pattern 1's inching step, 0.01 mm.
+pub const G_PIO_INCH: u16 = 0x001F;
 /// The value G_FACTORY wants, so that no stray write erases the settings.
 pub const FACTORY_KEY: u16 = 0xFAC7;
 
@@ -345,8 +349,10 @@ pub const MAP: &[Entry] = &[
     e(Unit::Gateway, Holding, G_APPLY, 1, "APPLY", "", "1", true, "Write 1: the pending settings take effect: PLCBAUD/PLCPARITY/UNITID after the reply, then a break and communication establishment with BUSBAUD/BUSRTIM and the enabled axes (all axes stop answering for about 1 s per axis); refused (03) unless nothing moves, runs or waits", Gateway),
     e(Unit::Gateway, Holding, G_WD_ACTION, 1, "WDACTION", "", "0-1", true, "Watchdog action: 0 stop every axis, 1 latch only", Gateway),
     e(Unit::Gateway, Holding, G_PIO_AXIS, 1, "PIOAXIS", "axis", "0-15, 0xFFFF", true, "The axis the discrete I/O drives (0xFFFF: none)", Gateway),
-    e(Unit::Gateway, Holding, G_PIO_PATTERN, 1, "PIOPAT", "", "0 4 5", true, "The discrete I/O's pattern, IAI's number: 0 positioning (PC1-PC8, CSTR), 4 solenoid valve 1 (ST0-ST6, PE0-PE6), 5 solenoid valve 2 (ST0-ST2, LS0-LS2); in force at once (every input must then go OFF and ON again); refused (03) if the board lacks one of its ports", Gateway),
+    e(Unit::Gateway, Holding, G_PIO_PATTERN, 1, "PIOPAT", "", "0 1 4 5", true, "The discrete I/O's pattern, IAI's number: 0 positioning (PC1-PC8, CSTR), 1 teaching (0 plus MODE, JISL, JOG+, JOG-, PWRT; MODES, WEND), 4 solenoid valve 1 (ST0-ST6, PE0-PE6), 5 solenoid valve 2 (ST0-ST2, LS0-LS2); in force at once (every input must then go OFF and ON again); refused (03) if the board lacks one of its ports", Gateway),
     e(Unit::Gateway, Holding, G_PIO_START, 1, "PIOSTART", "", "0-1", true, "Patterns 4 and 5: 0 level (releasing STn stops the move), 1 edge (STn's rising edge starts it); PCON parameter No. 27", Gateway),
+    e(Unit::Gateway, Holding, G_PIO_JOG, 1, "PIOJOG", "0.01 mm/s", "1-65535", true, "Pattern 1: jog speed (JOG+/JOG- held; and the speed a PWRT gives a point that held nothing); PCON parameter No. 26, default 100 mm/s", Gateway),
+    e(Unit::Gateway, Holding, G_PIO_INCH, 1, "PIOINCH", "0.01 mm", "1-100", true, "Pattern 1: inching step (JISL ON, one per JOG edge); PCON parameter No. 48, default 0.10 mm", Gateway),
     e(Unit::Gateway, Holding, G_PLC_BAUD, 1, "PLCBAUD", "100 bit/s", "12 24 48 96 192 384 576 1152", true, "PLC line rate, taken on APPLY or at the next start", Gateway),
     e(Unit::Gateway, Holding, G_PLC_PARITY, 1, "PLCPARITY", "", "0-2", true, "PLC line parity: 0 none, 1 odd, 2 even (8 data bits, 1 stop bit), taken on APPLY or at the next start", Gateway),
     e(Unit::Gateway, Holding, G_UNIT_ID, 1, "UNITID", "unit", "1-247", true, "The gateway's own unit id (not an enabled axis' unit), taken on APPLY or at the next start", Gateway),

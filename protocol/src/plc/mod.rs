@@ -43,13 +43,14 @@ mod registers;
 pub mod settings;
 mod sync;
 pub mod table;
+mod teach;
 pub mod write;
 
 pub use boot::{Boot, ConfigSource, ResetCause};
 pub use command::{CommandState, Reason};
 pub use config::{
     AxisConfig, GatewayConfig, Parity, PlcLine, WatchdogAction, DEFAULT_GATEWAY_UNIT,
-    DEFAULT_WATCHDOG_MS, IDENTITY,
+    DEFAULT_PIO_INCH, DEFAULT_PIO_JOG, DEFAULT_WATCHDOG_MS, IDENTITY, MAX_PIO_INCH, PIO_ACCEL,
 };
 pub use failsafe::{CAUSE_STOP_INPUT, CAUSE_WATCHDOG};
 pub use gateway::Gateway;

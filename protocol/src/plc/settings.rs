@@ -22,19 +22,22 @@
 //! | 13 | PIO axis (0xFF: none) |
 //! | 14-15 | axes on the bus (bit n = axis n) |
 //! | 16 + 10 n | axis n: lead (0.01 mm, 2), pulses/rev (2), home end (1: 7 or 8), complement (1: 1 or 2), stroke (0.01 mm, 4) |
-//! | 176 | PIO pattern (IAI's number: 0, 4 or 5) |
+//! | 176 | PIO pattern (IAI's number: 0, 1, 4 or 5) |
 //! | 177 | PIO start mode: 0 level, 1 edge |
-//! | 178-179 | CRC-16/MODBUS of bytes 0-177 |
+//! | 178-179 | PIO jog speed, 0.01 mm/s (1-65535) |
+//! | 180-181 | PIO inching step, 0.01 mm (1-100) |
+//! | 182-183 | CRC-16/MODBUS of bytes 0-181 |
 //!
 //! [`Settings::decode`] accepts a record only if its version, length, CRC and every field's
 //! range are right: a record that is not exactly what [`Settings::encode`] writes is refused
 //! as a whole, never applied in part. It also reads format 1, the record before the PIO
-//! patterns (176 bytes and the CRC): pattern 0, level mode; so the settings a gateway stored
+//! patterns (176 bytes and the CRC): pattern 0, level mode, the jog's factory values; so the
+//! settings a gateway stored
 //! before an update survive it.
 
 use super::config::{
-    axis_of, complement_code, complement_of, home_of, stroke_of, unit_ok, watchdog_ok, AxisConfig,
-    GatewayConfig, Parity, PlcLine, WatchdogAction,
+    axis_of, complement_code, complement_of, home_of, pio_inch_ok, stroke_of, unit_ok, watchdog_ok,
+    AxisConfig, GatewayConfig, Parity, PlcLine, WatchdogAction, DEFAULT_PIO_INCH, DEFAULT_PIO_JOG,
 };
 use crate::axes::AxisSet;
 use crate::engine::MAX_RETRIES;
@@ -56,7 +59,7 @@ const AXES_AT: usize = 16;
 /// Where the PIO's pattern and start mode are.
 const PIO_AT: usize = AXES_AT + 16 * AXIS_LEN;
 /// The record's length, CRC included.
-pub const RECORD_LEN: usize = PIO_AT + 2 + 2;
+pub const RECORD_LEN: usize = PIO_AT + 6 + 2;
 /// A format 1 record's length, CRC included.
 pub const RECORD_LEN_1: usize = PIO_AT + 2;
 
@@ -101,6 +104,10 @@ pub struct Settings {
     pub pio_pattern: Pattern,
     /// PIO start mode (patterns 4 and 5).
     pub pio_start: StartMode,
+    /// Pattern 1's jog speed, 0.01 mm/s.
+    pub pio_jog: u16,
+    /// Pattern 1's inching step, 0.01 mm.
+    pub pio_inch: u16,
     /// Axes on the bus.
     pub axes: AxisSet,
     /// Every axis' configuration.
@@ -121,6 +128,8 @@ impl Settings {
             pio_axis: config.pio_axis,
             pio_pattern: config.pio_pattern,
             pio_start: config.pio_start,
+            pio_jog: config.pio_jog,
+            pio_inch: config.pio_inch,
             axes: config.bus.axes,
             axis_config: config.axes,
         }
@@ -148,6 +157,8 @@ impl Settings {
             config.pio_pattern = self.pio_pattern;
         }
         config.pio_start = self.pio_start;
+        config.pio_jog = self.pio_jog;
+        config.pio_inch = self.pio_inch;
         config.bus.axes = self.axes;
         config.axes = self.axis_config;
     }
@@ -178,6 +189,8 @@ impl Settings {
         // Both codes are below 256.
         w.u8(self.pio_pattern.code() as u8);
         w.u8(self.pio_start as u8);
+        w.bytes(&self.pio_jog.to_le_bytes());
+        w.bytes(&self.pio_inch.to_le_bytes());
         let sum = crc::checksum(out.get(..RECORD_LEN - 2).unwrap_or(&[]));
         if let Some(tail) = out.get_mut(RECORD_LEN - 2..) {
             tail.copy_from_slice(&sum.to_le_bytes());
@@ -248,8 +261,9 @@ impl Settings {
             slot.scale.complement = complement;
             slot.stroke = stroke;
         }
-        let (pio_pattern, pio_start) = if len == RECORD_LEN_1 {
-            (Pattern::Positioning, StartMode::Level)
+        let (pio_pattern, pio_start, pio_jog, pio_inch) = if len == RECORD_LEN_1 {
+            let jog = (DEFAULT_PIO_JOG, DEFAULT_PIO_INCH);
+            (Pattern::Positioning, StartMode::Level, jog.0, jog.1)
         } else {
             let pattern = r
                 .u8(PIO_AT)
@@ -259,7 +273,15 @@ impl Settings {
                 .u8(PIO_AT + 1)
                 .and_then(|c| StartMode::from_code(c.into()))
                 .ok_or(bad(PIO_AT + 1))?;
-            (pattern, start)
+            let jog = r
+                .u16(PIO_AT + 2)
+                .filter(|&v| v != 0)
+                .ok_or(bad(PIO_AT + 2))?;
+            let inch = r
+                .u16(PIO_AT + 4)
+                .filter(|&v| pio_inch_ok(v))
+                .ok_or(bad(PIO_AT + 4))?;
+            (pattern, start, jog, inch)
         };
         let settings = Settings {
             unit,
@@ -272,6 +294,8 @@ impl Settings {
             pio_axis,
             pio_pattern,
             pio_start,
+            pio_jog,
+            pio_inch,
             axes,
             axis_config,
         };

@@ -11,7 +11,9 @@
 
 use core::num::NonZeroU16;
 
-use super::config::{complement_of, home_of, unit_ok, watchdog_ok, Parity, WatchdogAction};
+use super::config::{
+    complement_of, home_of, pio_inch_ok, unit_ok, watchdog_ok, Parity, WatchdogAction,
+};
 use super::map::{self, *};
 use super::refused::Refused;
 use super::registers::join;
@@ -300,6 +302,10 @@ pub enum GatewayWrite {
     PioPattern(Pattern),
     /// PIOSTART.
     PioStart(StartMode),
+    /// PIOJOG, 0.01 mm/s.
+    PioJog(u16),
+    /// PIOINCH, 0.01 mm.
+    PioInch(u16),
     /// SYNCMASK.
     SyncMask(AxisSet),
     /// SYNCSTART = 1 (started after the write's other registers, with its mask).
@@ -363,6 +369,8 @@ impl GatewayWrite {
             },
             G_PIO_PATTERN => Pattern::from_code(value).map(GatewayWrite::PioPattern),
             G_PIO_START => StartMode::from_code(value).map(GatewayWrite::PioStart),
+            G_PIO_JOG => (value != 0).then_some(GatewayWrite::PioJog(value)),
+            G_PIO_INCH => pio_inch_ok(value).then_some(GatewayWrite::PioInch(value)),
             G_SYNC_MASK => Some(GatewayWrite::SyncMask(AxisSet(value))),
             a if a.checked_sub(G_REQUEST).is_some_and(|i| i < G_REQUEST_LEN) => {
                 Some(GatewayWrite::ChannelRequest)

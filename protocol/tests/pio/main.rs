@@ -8,6 +8,7 @@ mod inputs;
 mod outputs;
 mod patterns;
 mod properties;
+mod teaching;
 
 use protocol::engine::{AxisState, Counters, JobKind, Link};
 use protocol::pio::{Config, Pio, PioInputs as In, PioOutputs as Out};

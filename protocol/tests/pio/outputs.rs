@@ -225,6 +225,9 @@ fn input_bits_follow_pcon_pattern_0() {
         (In::PC16, 4),
         (In::PC32, 5),
         (In::ST6, 6),
+        (In::JISL, 7),
+        (In::JOG_PLUS, 8),
+        (In::JOG_MINUS, 9),
         (In::HOME, 11),
         (In::STP_N, 12),
         (In::CSTR, 13),
@@ -234,7 +237,7 @@ fn input_bits_follow_pcon_pattern_0() {
     for (flag, bit) in ports {
         assert_eq!(flag.bits(), 1 << bit, "{flag:?}");
     }
-    assert_eq!(In::MASK, 0xF87F);
+    assert_eq!(In::MASK, 0xFBFF);
     assert_eq!(In::from_bits(0b1010).position(), Some(p(10)));
     assert_eq!(In::from_bits(0b10_1010).position(), None);
     assert_eq!(In::NONE.with_position(p(13)).pc(), 13);
@@ -251,6 +254,7 @@ fn output_bits_follow_pcon_pattern_0() {
         (Out::PE5, 5),
         (Out::MOVE, 6),
         (Out::ZONE1, 7),
+        (Out::MODES, 9),
         (Out::HEND, 10),
         (Out::PEND, 11),
         (Out::SV, 12),
@@ -260,7 +264,7 @@ fn output_bits_follow_pcon_pattern_0() {
     for (flag, bit) in ports {
         assert_eq!(flag.bits(), 1 << bit, "{flag:?}");
     }
-    assert_eq!(Out::MASK, 0x7CFF);
+    assert_eq!(Out::MASK, 0x7EFF);
     assert_eq!(Out::NONE.with_pm(0x1B).pm(), 0x0B);
     assert_eq!(
         format!("{:?}", Out::PEND | Out::ALM_N),

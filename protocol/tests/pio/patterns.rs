@@ -3,6 +3,7 @@
 
 use protocol::engine::JobKind;
 use protocol::pio::{Band, Config, Pattern, PioInputs as In, PioOutputs as Out, StartMode};
+use protocol::time::Duration;
 use protocol::Pulses;
 
 use crate::{axis, p, report, Rig, DONE_OUT, READY_STATUS};
@@ -174,12 +175,22 @@ fn inputs_that_change_together_within_the_settle_time_are_one_selection() {
 
 #[test]
 fn an_edge_pulse_shorter_than_the_settle_time_is_taken() {
-    let mut rig = rig(Pattern::Solenoid3, StartMode::Edge);
+    // A settle time of 20 ms, an 8 ms pulse: ST2 is recognised OFF again (and the settle time
+    // restarted) before the selection is taken; its edge still is.
+    let mut rig = Rig::with_inputs(
+        Config {
+            settle: Duration::from_millis(20),
+            ..config(Pattern::Solenoid3, StartMode::Edge)
+        },
+        axis(report(READY_STATUS, 0, DONE_OUT | 3), 0),
+        In::STP_N | In::SON,
+    );
     rig.set(st(2), true);
     rig.run(8);
     rig.set(st(2), false);
-    let jobs = rig.run(20);
-    assert_eq!(jobs, vec![(12, JobKind::MoveToPoint(p(2), None))]);
+    let jobs = rig.run(50);
+    // Recognised OFF at 14 ms, taken 20 ms later.
+    assert_eq!(jobs, vec![(34, JobKind::MoveToPoint(p(2), None))]);
 }
 
 #[test]
@@ -262,16 +273,15 @@ fn each_pattern_names_its_ports() {
     assert_eq!(Pattern::Positioning.inputs(), 0xF83F);
     assert_eq!(Pattern::Positioning.outputs(), 0x7CCF);
     assert_eq!(Pattern::Solenoid7.inputs(), 0xD87F);
-    assert_eq!(
-        Pattern::Solenoid7.outputs(),
-        0x7CFF & !Out::MOVE.bits() | Out::MOVE.bits()
-    );
+    assert_eq!(Pattern::Solenoid7.outputs(), 0x7CFF, "PE6 on MOVE's port");
     assert_eq!(Pattern::Solenoid3.inputs(), 0xD807);
     assert_eq!(Pattern::Solenoid3.outputs(), 0x7CC7);
     for pattern in Pattern::ALL {
         assert_eq!(Pattern::from_code(pattern.code()), Some(pattern));
     }
-    for code in [1, 2, 3, 6, 0xFFFF] {
+    assert_eq!(Pattern::Teaching.inputs(), 0xFBFF);
+    assert_eq!(Pattern::Teaching.outputs(), 0x7ECF);
+    for code in [2, 3, 6, 0xFFFF] {
         assert_eq!(Pattern::from_code(code), None);
     }
 }

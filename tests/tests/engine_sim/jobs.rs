@@ -214,7 +214,11 @@ fn jog_runs_toward_the_stroke_end_until_stopped() {
         &mut h,
         Job {
             axis: axis(0),
-            kind: JobKind::Jog(end),
+            kind: JobKind::Jog {
+                end,
+                velocity: Velocity::new(2000).unwrap(),
+                acceleration: Acceleration::new(30).unwrap(),
+            },
         },
         S,
     );

@@ -31,8 +31,22 @@ pub(crate) fn job_requests(job: &Job) -> Vec<Request> {
         JobKind::Servo(on) => one(Command::Servo(on)),
         JobKind::Home(d) => one(Command::Home(d)),
         JobKind::MoveToPoint(p, _) => one(Command::MoveToPoint(p)),
-        JobKind::MoveAbsolute(x) | JobKind::Jog(x) => one(Command::MoveAbsolute(x)),
+        JobKind::MoveAbsolute(x) => one(Command::MoveAbsolute(x)),
         JobKind::MoveRelative(d) => one(Command::MoveRelative(d)),
+        JobKind::Jog {
+            end,
+            velocity,
+            acceleration,
+        } => vec![
+            Request::new(
+                a,
+                Command::SetVelocityAcceleration {
+                    velocity,
+                    acceleration,
+                },
+            ),
+            Request::new(a, Command::MoveAbsolute(end)),
+        ],
         JobKind::DirectMove {
             target,
             relative,
@@ -117,7 +131,7 @@ pub(crate) fn kind_name(kind: &JobKind) -> &'static str {
         JobKind::MoveRelative(_) => "MoveRelative",
         JobKind::DirectMove { relative: true, .. } => "DirectMove (m)",
         JobKind::DirectMove { .. } => "DirectMove (a)",
-        JobKind::Jog(_) => "Jog",
+        JobKind::Jog { .. } => "Jog",
         JobKind::Stop => "Stop",
         JobKind::AlarmReset => "AlarmReset",
         JobKind::SetMotion { .. } => "SetMotion",
