@@ -1,17 +1,17 @@
-"""PIO patterns 4 and 5 (IAI's solenoid valve modes 1 and 2) on the real firmware ELF in QEMU,
-driven through the pins as a PLC wired for an air cylinder drives them: the pattern is chosen
-over Modbus (PIOPAT, PIOSTART) with the point table, then ST inputs move the axis and PE0-PE6 or
-LS0-LS2 answer.
+"""PIO patterns 4 and 5 (IAI's solenoid valve modes 1 and 2) and 1 (teaching) on the real
+firmware ELF in QEMU, driven through the pins as a PLC wired for them drives them: the pattern is
+chosen over Modbus (PIOPAT, PIOSTART) with the point table; then ST inputs move the axis and
+PE0-PE6 or LS0-LS2 answer, or MODE, the JOG inputs and PWRT teach a point.
 
-Pattern 4 needs ports no connector of the L475 board has left (IN6, OUT4, OUT5): the emulator
-build has them on port E (src/board/l475.rs), and these tests use them.
+Patterns 4 and 1 need ports no connector of the L475 board has left (IN6-IN9, OUT4, OUT5,
+OUT9): the emulator build has them on port E (src/board/l475.rs), and these tests use them.
 """
 
 import time
 
 import pytest
 
-from emu import ALM_N, PEND, RES
+from emu import ALM_N, CSTR, MOVE, PEND, RES
 from plc import (
     FAILED, G_PIO_PATTERN, G_PIO_START, GATEWAY_UNIT, LINK, LINK_ONLINE, REASON_PIO_INPUT, unit,
     wait_for,
@@ -104,12 +104,12 @@ def test_pattern_4_level_release_mid_move_stops_and_two_st_inputs_are_refused(em
 
 
 def test_a_pattern_the_gateway_lacks_is_refused(emu):
-    """PIOPAT values other than 0, 4 and 5 answer exception 03, and PIOPAT stays. (A pattern
+    """PIOPAT values other than 0, 1, 4 and 5 answer exception 03, and PIOPAT stays. (A pattern
     whose ports the board lacks is refused the same way: tests/tests/gateway_sim, with the
     board's ports restricted, since the emulator build has them all.)"""
     plc = emu.plc
     wait_for(lambda: plc.read(unit(0), LINK)[0] == LINK_ONLINE, 20, "axis 0 online")
-    for bad in (1, 2, 3, 6):
+    for bad in (2, 3, 6, 0xFFFF):
         assert plc.exception(plc.write, GATEWAY_UNIT, G_PIO_PATTERN, bad) == 3
     assert plc.read(GATEWAY_UNIT, G_PIO_PATTERN) == [0]
 
@@ -129,3 +129,65 @@ def test_an_st_pulse_just_above_the_debounce_is_taken_whatever_the_bus_does(emu)
         return lambda: emu.outputs() & 0x7 == 1 << st
 
     pulses_during_bus_traffic(emu, pins, 0b11, strobe, count=12)
+
+
+MODE, JISL, JOG_PLUS, JOG_MINUS, MODES = 6, 7, 8, 9, 9  # inputs IN6-IN9; MODES is OUT9
+ROW = 0x1000
+
+
+def stored_row(plc, n):
+    """Row n's PCMD (0.01 mm) and VCMD (0.01 mm/s), once readable (04 while it is fetched)."""
+    def read():
+        try:
+            return plc.read(unit(0), ROW + 16 * n, 6)
+        except Exception:
+            return None
+
+    row = wait_for(read, 10, f"row {n} readable")
+    return row[0] << 16 | row[1], row[4] << 16 | row[5]
+
+
+def at_rest(plc):
+    """The position once two reads 0.3 s apart agree (0.01 mm)."""
+    def settled():
+        first = plc.pnow(0)
+        time.sleep(0.3)
+        return first if plc.pnow(0) == first else None
+
+    return wait_for(settled, 10, "the axis at rest")
+
+
+def test_pattern_1_a_jog_and_a_pwrt_whose_row_reads_back(emu):
+    pins = commissioned(emu, {})
+    in_pattern(emu, pins, 1, 0)
+    plc = emu.plc
+    pins.set(MODE, True)
+    wait_output(emu, MODES, 1, 5, "MODES")
+    # JOG+ held 0.4 s at 100 mm/s (PIOJOG's default), released: the axis stops.
+    pins.set(JOG_PLUS, True)
+    wait_output(emu, MOVE, 1, 5, "jogging")
+    time.sleep(0.4)
+    pins.set(JOG_PLUS, False)
+    wait_output(emu, MOVE, 0, 5, "stopped on release")
+    at = at_rest(plc)
+    assert 5_00 < at < 70_00, f"jogged to {at / 100} mm"
+    # PWRT into point 9, which holds nothing: WEND; the row reads back the position, with the
+    # jog speed.
+    pins.select(9)
+    time.sleep(0.05)
+    pins.set(CSTR, True)  # PWRT
+    wait_output(emu, PEND, 1, 10, "WEND")
+    assert stored_row(plc, 9) == (at, 100_00)
+    pins.set(CSTR, False)
+    wait_output(emu, PEND, 0, 5, "WEND OFF with PWRT")
+    # JISL: one 0.10 mm step toward home per JOG- edge.
+    pins.set(JISL, True)
+    pins.pulse(JOG_MINUS, 0.05)
+    stepped = at_rest(plc)
+    assert abs(stepped - (at - 10)) <= 1, f"{at} -> {stepped}: 0.10 mm, to the 0.01 mm shown"
+    # Out of teaching mode, CSTR with PC = 9 moves to the point taught.
+    pins.set(MODE, False)
+    wait_output(emu, MODES, 0, 5, "MODES OFF")
+    pins.pulse(CSTR)
+    wait_for(lambda: output(emu, PEND) == 1 and emu.outputs() & 0xF == 9, 15, "at point 9")
+    assert abs(at_rest(plc) - at) <= 10, "within the point's band (0.10 mm)"
