@@ -37,6 +37,9 @@ RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked -p protocol -p rc-host -
 step "tests: protocol (codec, engine, Modbus, PIO, properties) and host (simulator, gateway, soak)"
 cargo test --locked
 
+step "tests: the protocol crate as the F103 builds it (without pattern 1, the feature \`teaching\`)"
+cargo test --locked -p protocol --no-default-features --features inspect --lib --test settings --test pio
+
 step "end-to-end: pymodbus -> rc-gateway-host (PTY) -> simulated actuators"
 scripts/e2e.sh
 

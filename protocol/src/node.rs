@@ -251,7 +251,7 @@ impl Node {
                 let reeds = self.reeds(axis);
                 self.pio.set_reeds(reeds);
             }
-            Pattern::Teaching => {
+            Pattern::Teaching if pio::TEACHING => {
                 self.pio.set_jog(self.jog(axis));
                 if let Some(stored) = self.gateway.take_taught() {
                     self.pio.taught(stored);
@@ -267,7 +267,7 @@ impl Node {
         if let Some(inputs) = self.pio.take_refused() {
             self.gateway.pio_refused(axis, inputs);
         }
-        if let Some(point) = self.pio.take_teach() {
+        if let Some(point) = self.pio.take_teach().filter(|_| pio::TEACHING) {
             // Refused (offline, another PWRT running): CMST shows it, WEND stays OFF.
             if self.gateway.teach(axis, point).is_err() {
                 self.pio.taught(false);

@@ -146,7 +146,7 @@ mod debounce;
 mod pattern;
 mod teach;
 
-pub use pattern::{Pattern, Ports, StartMode};
+pub use pattern::{Pattern, Ports, StartMode, TEACHING};
 pub use teach::Jog;
 use teach::{JogInputs, Teach};
 
@@ -702,7 +702,7 @@ impl Pio {
             self.pending_home = false;
             self.held = None;
         }
-        if pattern == Pattern::Teaching {
+        if TEACHING && pattern == Pattern::Teaching {
             self.teaching(changed, known_before, may_run, report.is_some(), axis);
         }
         if self.strobe && now.since(self.pc_since) >= self.config.settle {
@@ -710,7 +710,7 @@ impl Pio {
             let point = self.strobe_point();
             match point {
                 // In teaching mode, CSTR's port is PWRT.
-                Some(point) if self.teach.active => self.teach.write(point),
+                Some(point) if TEACHING && self.teach.active => self.teach.write(point),
                 _ => self.pending_move = point,
             }
         }
@@ -878,7 +878,11 @@ impl Pio {
             self.waiting = Some(Await::new(Target::Point(point), now, axis, &report));
             return Some(JobKind::MoveToPoint(point, None));
         }
-        self.teach.take_job()
+        if TEACHING {
+            self.teach.take_job()
+        } else {
+            None
+        }
     }
 
     fn outputs_for(&self, axis: &AxisState, report: Option<StatusReport>) -> PioOutputs {
@@ -907,7 +911,7 @@ impl Pio {
         let own = match pattern {
             Pattern::Positioning => return word,
             // Teaching mode: MODES, and WEND on PEND's port.
-            Pattern::Teaching if self.teach.active => {
+            Pattern::Teaching if TEACHING && self.teach.active => {
                 return word
                     .with(PioOutputs::MODES, true)
                     .with(PioOutputs::PEND, self.teach.wend)

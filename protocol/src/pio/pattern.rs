@@ -9,6 +9,12 @@
 
 use super::{PioInputs, PioOutputs};
 
+/// Whether this build has pattern 1 (teaching): the protocol crate's `teaching` feature, on by
+/// default and on the boards with room for it. Pattern 1 takes about 2 KB of flash, which the
+/// F103 does not have to spare (nor the ports: IN6-IN9, OUT9); without it, PIOPAT 1 is refused
+/// and its code is not linked (every use is behind this constant).
+pub const TEACHING: bool = cfg!(feature = "teaching");
+
 /// The PIO pattern, by IAI's number.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -114,7 +120,7 @@ impl Pattern {
     pub const fn from_code(code: u16) -> Option<Pattern> {
         match code {
             0 => Some(Pattern::Positioning),
-            1 => Some(Pattern::Teaching),
+            1 if TEACHING => Some(Pattern::Teaching),
             4 => Some(Pattern::Solenoid7),
             5 => Some(Pattern::Solenoid3),
             _ => None,
@@ -154,5 +160,18 @@ impl Pattern {
             Pattern::Solenoid7 => COMMON_OUTPUTS | 0x7F,
             Pattern::Solenoid3 => COMMON_OUTPUTS | 0x07 | PioOutputs::MOVE.bits(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Pattern 1 is taken only by a build that has it (PIOPAT and the stored settings both read
+    /// the number through `from_code`).
+    #[test]
+    fn pattern_1_only_where_built() {
+        assert_eq!(Pattern::from_code(1).is_some(), TEACHING);
+        assert_eq!(TEACHING, cfg!(feature = "teaching"));
     }
 }

@@ -22,6 +22,7 @@ use crate::engine::{
     Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Link, Output, SubmitError,
 };
 use crate::jobs::PointReadback;
+use crate::pio::TEACHING;
 use crate::time::{earliest, Duration, Instant};
 use crate::{Axis, PositionNo};
 
@@ -280,11 +281,11 @@ impl Gateway {
         plc.reason = Reason::PioInput.code(inputs);
     }
 
-    /// Pattern 1's PWRT: store the present position of `axis` into `point` (see
-    /// [`teach`](super::teach)); CMST shows it as one command. Refused while the axis does not
-    /// answer or another PWRT runs.
+    /// Pattern 1's PWRT: store the present position of `axis` into `point` (PNOW read, the row
+    /// read, the row stored with the new position: `protocol/src/plc/teach.rs`); CMST shows it
+    /// as one command. Refused while the axis does not answer or another PWRT runs.
     pub fn teach(&mut self, axis: Axis, point: PositionNo) -> Result<(), Refused> {
-        if !self.engine.online(axis) {
+        if !TEACHING || !self.engine.online(axis) {
             return Err(Refused::Offline);
         }
         match self.teach.start(axis, point, &mut self.engine) {
@@ -423,13 +424,13 @@ impl Gateway {
 
     fn job_done(&mut self, id: JobId, axis: Axis, result: Result<JobOutput, JobError>) {
         let jog_speed = self.config.pio_jog;
-        let teach = self.teach.job_done(
-            id,
-            &result,
-            &self.config.axes[axis],
-            jog_speed,
-            &mut self.engine,
-        );
+        let teach = if TEACHING {
+            let config = &self.config.axes[axis];
+            self.teach
+                .job_done(id, &result, config, jog_speed, &mut self.engine)
+        } else {
+            None
+        };
         let plc = &mut self.axes[axis];
         match teach {
             // CMST follows the PWRT's next job.

@@ -8,6 +8,8 @@ mod inputs;
 mod outputs;
 mod patterns;
 mod properties;
+// Pattern 1, in the builds that have it (not the F103's).
+#[cfg(feature = "teaching")]
 mod teaching;
 
 use protocol::engine::{AxisState, Counters, JobKind, Link};

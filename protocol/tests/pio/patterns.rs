@@ -2,7 +2,9 @@
 //! refusal of two ST inputs at once, PE0-PE6 and the reed switches LS0-LS2.
 
 use protocol::engine::JobKind;
-use protocol::pio::{Band, Config, Pattern, PioInputs as In, PioOutputs as Out, StartMode};
+use protocol::pio::{
+    Band, Config, Pattern, PioInputs as In, PioOutputs as Out, StartMode, TEACHING,
+};
 use protocol::time::Duration;
 use protocol::Pulses;
 
@@ -277,7 +279,8 @@ fn each_pattern_names_its_ports() {
     assert_eq!(Pattern::Solenoid3.inputs(), 0xD807);
     assert_eq!(Pattern::Solenoid3.outputs(), 0x7CC7);
     for pattern in Pattern::ALL {
-        assert_eq!(Pattern::from_code(pattern.code()), Some(pattern));
+        let built = pattern != Pattern::Teaching || TEACHING;
+        assert_eq!(Pattern::from_code(pattern.code()), built.then_some(pattern));
     }
     assert_eq!(Pattern::Teaching.inputs(), 0xFBFF);
     assert_eq!(Pattern::Teaching.outputs(), 0x7ECF);
