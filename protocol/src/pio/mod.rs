@@ -1,6 +1,23 @@
-//! Discrete I/O (PIO) for one axis, compatible with IAI PCON PIO pattern 0: the 24 V signals a PLC
-//! wires to an IAI controller, turned into engine jobs, and the axis' status turned back into
-//! output signals.
+//! Discrete I/O (PIO) for one axis, compatible with IAI PCON PIO patterns 0, 1, 4 and 5: the 24 V
+//! signals a PLC wires to an IAI controller, turned into engine jobs, and the axis' status turned
+//! back into output signals.
+//!
+//! # Patterns
+//!
+//! [`Config::pattern`] says which port carries which signal ([`Pattern`], IAI's numbers). This
+//! documentation describes pattern 0; the others share its debounce, *STP, HOME, RES, SON, the
+//! outputs' link and alarm rules, and differ in how a move starts and what OUT0-OUT6 show:
+//!
+//! - **4 and 5** (solenoid valve modes): an ST input (IN0-IN6, or IN0-IN2) takes the place of
+//!   PC1-PC8 and CSTR: its rising edge selects and starts the move, once the ST inputs have been
+//!   stable for [`Config::settle`] (exactly one ON, else refused until RES: *ALM OFF). In level
+//!   mode ([`StartMode`]) releasing it before the point is reached stops the move. Pattern 4's
+//!   PE0-PE6 show the point the PIO's move reached (with PEND); pattern 5's LS0-LS2 are reed
+//!   switches: ON while the position is within a point's band ([`Pio::set_reeds`]). CSTR's mask
+//!   of PEND does not apply.
+//! - **1** (teaching, `pio/teach.rs`, [`Jog`]): pattern 0 while MODE is OFF; with MODE ON, the JOG inputs jog
+//!   and CSTR's port is PWRT, which asks the gateway to store the position
+//!   ([`Pio::take_teach`], [`Pio::taught`]); MODES and WEND show it.
 //!
 //! Sans-IO like the [`engine`](crate::engine): the firmware reads the input pins into a
 //! [`PioInputs`] word, calls [`Pio::sample`] with the time and the engine's
