@@ -2,7 +2,8 @@
 //! the stop input and time steps, interleaved as the input says (issue 24).
 //!
 //! Input: a set-up byte (bits 0-3: the axes on the bus, at least axis 0; bit 4: the §6-1
-//! establishment at start; bit 5: a PIO axis), then operations. An operation byte's low three
+//! establishment at start; bit 5: a PIO axis; bits 6-7: its pattern, 0, 1, 4 or 5), then
+//! operations. An operation byte's low three
 //! bits choose it, its high five bits give a length `n`:
 //! 0 `n` bytes from the bus; 1 `n` bytes from the PLC; 2 an input sample (two bytes);
 //! 3 the stop input active (bit 3 set) or released; 4 time passes (two bytes, x 50 µs).
@@ -23,7 +24,7 @@ use protocol::command::{Command, Request};
 use protocol::frame::Frame;
 use protocol::modbus::crc;
 use protocol::node::{Action, Node};
-use protocol::pio::PioInputs;
+use protocol::pio::{Pattern, PioInputs};
 use protocol::plc::{GatewayConfig, Store};
 use protocol::time::Instant;
 use protocol::{Axis, AxisSet};
@@ -42,6 +43,12 @@ fuzz_target!(|data: &[u8]| {
     let mut config = GatewayConfig::new(AxisSet(u16::from(setup & 0x0F) | 1));
     config.bus.establish = setup & 0x10 != 0;
     config.pio_axis = if setup & 0x20 != 0 { Axis::new(0) } else { None };
+    config.pio_pattern = [
+        Pattern::Positioning,
+        Pattern::Teaching,
+        Pattern::Solenoid7,
+        Pattern::Solenoid3,
+    ][usize::from(setup >> 6)];
     let mut node = Node::new(config);
     let mut now = 0u64;
     let mut stop_active = false;
