@@ -117,7 +117,7 @@
 //! assert!(board.bus_tx.starts_with(b"\x020n"));
 //! ```
 
-use crate::engine::Output;
+use crate::engine::{JobKind, Output};
 use crate::frame::FRAME_LEN;
 use crate::line::{Baud, LineAction};
 use crate::memory::PointField;
@@ -239,7 +239,12 @@ impl Node {
         let (pattern, start) = (config.pio_pattern, config.pio_start);
         if (pattern, start) != (self.pio.config().pattern, self.pio.config().start) {
             // Another pattern: the inputs mean other things, so they start over (each must be
-            // seen OFF and ON again before its edge counts, *STP ON before anything moves).
+            // seen OFF and ON again before its edge counts, *STP ON before anything moves). A
+            // move, jog or hold of the old one is stopped: its release would no longer stop it.
+            if self.pio.in_motion() {
+                // As the PIO's own stops: a refusal (a full queue) is the gateway's to count.
+                let _ = self.gateway.command(axis, JobKind::Stop);
+            }
             self.pio = Pio::new(pio::Config {
                 pattern,
                 start,
@@ -268,7 +273,8 @@ impl Node {
             self.gateway.pio_refused(axis, inputs);
         }
         if let Some(point) = self.pio.take_teach().filter(|_| pio::TEACHING) {
-            // Refused (offline, another PWRT running): CMST shows it, WEND stays OFF.
+            // Refused: WEND stays OFF (another PWRT running: CMST 3, reason 9; an axis that
+            // does not answer: nothing recorded, as for any command then).
             if self.gateway.teach(axis, point).is_err() {
                 self.pio.taught(false);
             }
@@ -311,14 +317,13 @@ impl Node {
         let axis = &config.axes[axis];
         let scale = &axis.scale;
         let wire = |at: i32| scale.position_to_wire(Length(at)).ok();
-        let minus_end = wire(0)?;
-        let step = wire(i32::from(config.pio_inch))?
-            .0
-            .checked_sub(minus_end.0)?;
+        let step = |distance: i32| scale.distance_to_wire(Length(distance)).ok();
+        let inch = i32::from(config.pio_inch);
         Some(Jog {
             plus_end: wire(axis.stroke.0)?,
-            minus_end,
-            step: Pulses(step),
+            minus_end: wire(0)?,
+            plus_step: step(inch)?,
+            minus_step: step(-inch)?,
             velocity: scale.velocity(Speed(u32::from(config.pio_jog))).ok()?,
             acceleration: scale.acceleration(Accel(u32::from(PIO_ACCEL))).ok()?,
         })

@@ -517,3 +517,33 @@ fn a_pio_pattern_needs_the_boards_ports_and_a_refused_strobe_shows_in_cmst() {
         "nothing moved"
     );
 }
+
+/// PIOPAT changed while a move the PIO started runs (level mode, its ST input held): the axis
+/// is stopped, since the input's release would no longer stop it.
+#[test]
+fn a_pattern_change_stops_a_move_the_pio_holds() {
+    let mut rig = Rig::ready(1, |c| {
+        c.pio_axis = Some(axis(0));
+        c.watchdog = Duration::ZERO;
+        c.pio_pattern = Pattern::Solenoid7;
+    });
+    rig.bus.fake(0).homed = true;
+    let run = |rig: &mut Rig, inputs: PioInputs, ms: u64| {
+        for _ in 0..ms {
+            rig.node.sample_inputs(Instant(rig.now), inputs);
+            rig.run_for(MS);
+        }
+    };
+    let base = PioInputs::STP_N | PioInputs::SON;
+    run(&mut rig, base, 300);
+    let st2 = base | PioInputs::PC4;
+    run(&mut rig, st2, 20);
+    assert!(rig
+        .commands_to(0, 0)
+        .contains(&Command::MoveToPoint(point(2))));
+    assert!(!rig.commands_to(0, 0).contains(&Command::CancelMotion));
+    // Mid-move (a move takes 80 ms here): another pattern.
+    assert_eq!(rig.write(63, G_PIO_PATTERN, &[5]), Ok(()));
+    run(&mut rig, st2, 5);
+    assert!(rig.commands_to(0, 0).contains(&Command::CancelMotion));
+}

@@ -59,7 +59,7 @@
 //!
 //! The table's 30 signals take every pin of the board's Arduino and PMOD connectors, so the
 //! ports PIO patterns 4 and 1 add to pattern 0's (IN6-IN9, OUT4, OUT5, OUT9) have no pin on
-//! this board: it runs patterns 0 and 5, and refuses PIOPAT 4 (exception 03). The emulator
+//! this board: it runs patterns 0 and 5, and refuses PIOPAT 4 and 1 (exception 03). The emulator
 //! build puts them on port E (IN6-IN9 on PE7-PE10, OUT4 PE11, OUT5 PE12, OUT9 PE13: pins the
 //! board routes to no connector) so that the emulator suite runs those patterns on the real
 //! firmware; a board with those terminals adds them to its table the same way.

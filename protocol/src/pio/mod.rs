@@ -617,6 +617,16 @@ impl Pio {
         core::mem::take(&mut self.acknowledge)
     }
 
+    /// Whether the PIO has motion of its own under way or coming: a move or home it started and
+    /// waits for, a level-mode hold, a held jog, or a start not yet returned. A PIO replaced
+    /// (another pattern) while it is stops the axis: nothing else would stop it on a release.
+    pub fn in_motion(&self) -> bool {
+        self.waiting.is_some()
+            || self.held.is_some()
+            || self.teach.jogging()
+            || self.motion_pending()
+    }
+
     /// Whether a CSTR strobe waits for PC1-PC8 to settle, or a move or home waits to be returned.
     pub fn motion_pending(&self) -> bool {
         self.strobe || self.pending_move.is_some() || self.pending_home
@@ -681,10 +691,10 @@ impl Pio {
                 self.pending_servo = Some(son);
             }
             if self.inputs.rose(PioInputs::RES, changed, known_before) {
+                self.refusal = false;
                 if report.outputs.alarm_active() {
                     self.pending_reset = true;
                 } else {
-                    self.refusal = false;
                     self.acknowledge = true;
                 }
             }
@@ -700,9 +710,11 @@ impl Pio {
                 self.st_rose |= st_rose;
                 self.pending_home = false;
             }
-            if may_run && self.inputs.rose(PioInputs::HOME, changed, known_before) {
+            if may_run && !self.refusal && self.inputs.rose(PioInputs::HOME, changed, known_before)
+            {
                 self.pending_home = true;
                 self.strobe = false;
+                self.st_rose = 0;
                 self.pending_move = None;
             }
         } else {
@@ -717,6 +729,10 @@ impl Pio {
             self.st_rose = 0;
             self.pending_move = None;
             self.pending_home = false;
+        }
+        if !may_run {
+            // *STP's stop ends a level-mode hold (a hold survives a link down: its release
+            // still stops the axis).
             self.held = None;
         }
         if TEACHING && pattern == Pattern::Teaching {
@@ -731,18 +747,6 @@ impl Pio {
                 _ => self.pending_move = point,
             }
         }
-        // Level mode: the ST input released before its point is reached stops the move.
-        if let Some(point) = self.held {
-            if self.inputs.stable & 1 << point.get() == 0 {
-                self.held = None;
-                if self.waiting.is_some() || self.pending_move.is_some() {
-                    self.stop_due = true;
-                }
-            }
-        }
-
-        let job = self.next_job(now, axis, report, home);
-
         if let (Some(waiting), Some(report)) = (self.waiting.as_mut(), report.as_ref()) {
             let target = waiting.target;
             if let Some(end) = waiting.update(axis, report) {
@@ -764,6 +768,18 @@ impl Pio {
             // Moved by something else than the PIO's move: not at the PIO's point any more.
             self.at = None;
         }
+        // Level mode: the ST input released before its point is reached stops the move (the
+        // wait is updated first: a release on the sample that shows the point reached is after
+        // the arrival). A hold outlives a link down, whose wait is dropped: it stops then too.
+        if let Some(point) = self.held {
+            if self.inputs.stable & 1 << point.get() == 0 {
+                self.held = None;
+                self.stop_due = true;
+            }
+        }
+
+        let job = self.next_job(now, axis, report, home);
+
         self.outputs = self.outputs_for(axis, report);
         (self.outputs, job)
     }
@@ -780,8 +796,10 @@ impl Pio {
     ) {
         let mode = self.inputs.on(PioInputs::ST6);
         if !mode && self.teach.active {
-            // Leaving stops a jog under way.
+            // Leaving stops a jog under way, and drops a PWRT still waiting for PC1-PC8 to
+            // settle (it must not become a CSTR).
             self.stop_due |= self.teach.leave();
+            self.strobe = false;
         } else if mode
             && !self.teach.active
             && heard
@@ -797,12 +815,14 @@ impl Pio {
         if !self.teach.active {
             return;
         }
-        if !may_run || !heard {
+        if !may_run {
             // *STP's own rule stops the axis.
             self.teach.drop_motion();
             return;
         }
-        let rose = |flag| self.inputs.rose(flag, changed, known_before);
+        // No new jog for an axis that does not answer; but a jog outlives a link down, and its
+        // release still stops the axis.
+        let rose = |flag| heard && self.inputs.rose(flag, changed, known_before);
         let jog = JogInputs {
             plus: self.inputs.on(PioInputs::JOG_PLUS),
             minus: self.inputs.on(PioInputs::JOG_MINUS),
@@ -834,22 +854,29 @@ impl Pio {
                 0 => return None,
                 1 => u8::try_from(word.trailing_zeros()).ok(),
                 _ => {
+                    // As IAI's alarm 085: nothing more moves, a move under way stops.
                     self.refusal = true;
-                    None
+                    self.stop_due |= self.held.take().is_some() || self.waiting.is_some();
+                    return self.refuse(word);
                 }
             }
         } else {
             // PC16/PC32 ON: refused (the RC has 16 positions).
             self.inputs().position().map(PositionNo::get)
         };
-        let point = point.and_then(PositionNo::new);
-        if point.is_none() {
-            self.refused_inputs = u8::try_from(word).ok();
-        }
+        let Some(point) = point.and_then(PositionNo::new) else {
+            return self.refuse(word);
+        };
         if self.config.start == StartMode::Level && pattern.solenoid() {
-            self.held = point;
+            self.held = Some(point);
         }
-        point
+        Some(point)
+    }
+
+    /// A strobe refused: its inputs kept for CMST.
+    fn refuse(&mut self, inputs: u16) -> Option<PositionNo> {
+        self.refused_inputs = u8::try_from(inputs).ok();
+        None
     }
 
     /// The most urgent job due, if any; the others stay pending.
@@ -861,11 +888,10 @@ impl Pio {
         home: HomeDirection,
     ) -> Option<JobKind> {
         if self.stop_due {
+            // A start that came with it (a level-mode ST changed for another, a JOG input for
+            // the other) still runs after it: *STP's own rule drops what it must not.
             self.stop_due = false;
             self.last_stop = Some(now);
-            self.strobe = false;
-            self.pending_move = None;
-            self.pending_home = false;
             self.cut_short();
             return Some(JobKind::Stop);
         }

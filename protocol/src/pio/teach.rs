@@ -28,8 +28,11 @@ pub struct Jog {
     pub plus_end: Pulses,
     /// Where JOG- goes: home (0 mm).
     pub minus_end: Pulses,
-    /// One inching step toward JOG+ (toward JOG-: its negative).
-    pub step: Pulses,
+    /// One inching step toward JOG+ (a relative move's distance).
+    pub plus_step: Pulses,
+    /// One inching step toward JOG- (not always `plus_step` negated: an axis in ones'
+    /// complement encodes the distance back one pulse lower).
+    pub minus_step: Pulses,
     /// The jog speed.
     pub velocity: Velocity,
     /// The jog's acceleration.
@@ -106,13 +109,12 @@ impl Teach {
         };
         let (velocity, acceleration) = (jog.velocity, jog.acceleration);
         self.pending = Some(if inputs.inch {
-            let step = if direction {
-                jog.step.0
-            } else {
-                jog.step.0.saturating_neg()
-            };
             JobKind::DirectMove {
-                target: Pulses(step),
+                target: if direction {
+                    jog.plus_step
+                } else {
+                    jog.minus_step
+                },
                 relative: true,
                 velocity,
                 acceleration,
@@ -130,6 +132,11 @@ impl Teach {
             }
         });
         false
+    }
+
+    /// Whether a held jog is under way.
+    pub(super) fn jogging(&self) -> bool {
+        self.jogging.is_some()
     }
 
     /// A PWRT's point: asked of the gateway; WEND OFF until it is stored.

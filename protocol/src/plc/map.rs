@@ -169,7 +169,7 @@ pub const G_CONFIG_ERRORS: u16 = 0x0019;
 pub const G_RESET_CAUSE: u16 = 0x001A;
 /// Write 1: restart the gateway (the saved settings take effect).
 pub const G_RESTART: u16 = 0x001B;
-/// PIOPAT: the PIO's pattern, IAI's number (0, 4, 5).
+/// PIOPAT: the PIO's pattern, IAI's number (0, 1, 4, 5).
 pub const G_PIO_PATTERN: u16 = 0x001C;
 /// PIOSTART: how the solenoid patterns' ST inputs start a move (0 level, 1 edge).
 pub const G_PIO_START: u16 = 0x001D;

@@ -2,7 +2,8 @@
 //!
 //! Three jobs, one after the other: the position is read (R4 PNOW: after a jog stopped by `d`
 //! the last position the gateway polled may be from before the axis came to rest), then the
-//! point's row (Q1 + R4: its speed, acceleration and band are kept), then the row with the new
+//! point's row (Q1 + R4: its speed, acceleration and band are kept; its flags are written as
+//! every table write writes them, `table::point`), then the row with the new
 //! position is stored with [`JobKind::StorePoint`]: compared with what the controller holds, V5
 //! only if it differs, read back and verified. CMST follows the three as one command.
 //!

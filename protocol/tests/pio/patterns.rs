@@ -288,3 +288,129 @@ fn each_pattern_names_its_ports() {
         assert_eq!(Pattern::from_code(code), None);
     }
 }
+
+// ------------------------------------------------------- regressions (review of the patterns)
+
+fn kinds(jobs: Vec<(u64, JobKind)>) -> Vec<JobKind> {
+    jobs.into_iter().map(|(_, j)| j).collect()
+}
+
+/// A level-mode hold outlives a link down: its release still stops the axis (the wait for the
+/// move was dropped with the link; the controller may still be running it).
+#[test]
+fn a_level_hold_outlives_a_link_down() {
+    let mut rig = rig(Pattern::Solenoid7, StartMode::Level);
+    rig.set(st(2), true);
+    assert_eq!(kinds(rig.run(13)), vec![JobKind::MoveToPoint(p(2), None)]);
+    rig.status(MOVING_STATUS, 0, MOVING_OUT);
+    rig.run(3);
+    rig.link_ok = false;
+    rig.run(20);
+    rig.set(st(2), false);
+    assert_eq!(kinds(rig.run(10)), vec![JobKind::Stop]);
+}
+
+/// Two ST inputs while a level-mode move runs: refused, and the running move stops (its hold is
+/// gone: nothing else would stop it).
+#[test]
+fn a_refusal_during_a_level_move_stops_it() {
+    let mut rig = rig(Pattern::Solenoid7, StartMode::Level);
+    rig.set(st(0), true);
+    assert_eq!(kinds(rig.run(13)), vec![JobKind::MoveToPoint(p(0), None)]);
+    rig.status(MOVING_STATUS, 0, MOVING_OUT);
+    rig.set(st(1), true);
+    assert_eq!(kinds(rig.run(20)), vec![JobKind::Stop]);
+    assert!(!rig.out.alm_n());
+    // HOME is refused too until RES (the PLC sees *ALM OFF: nothing moves).
+    rig.set(In::HOME, true);
+    assert_eq!(rig.run(20), vec![]);
+    rig.set(In::HOME, false);
+    rig.set(st(0), false);
+    rig.set(st(1), false);
+    assert_eq!(rig.run(20), vec![]);
+}
+
+/// Level mode, ST0 released and ST1 pressed in the same scan mid-move: the stop, then the move
+/// to point 1 (the stop does not drop the new start).
+#[test]
+fn switching_st_inputs_mid_move_stops_then_starts_the_new_one() {
+    let mut rig = rig(Pattern::Solenoid7, StartMode::Level);
+    rig.set(st(0), true);
+    assert_eq!(kinds(rig.run(13)), vec![JobKind::MoveToPoint(p(0), None)]);
+    rig.status(MOVING_STATUS, 0, MOVING_OUT);
+    rig.run(3);
+    rig.set(st(0), false);
+    rig.set(st(1), true);
+    assert_eq!(
+        kinds(rig.run(20)),
+        vec![JobKind::Stop, JobKind::MoveToPoint(p(1), None)]
+    );
+}
+
+/// A release on the very sample whose status shows the point reached: the move is done, not
+/// cut short (no stop, PE on).
+#[test]
+fn a_release_on_arrival_is_after_the_arrival() {
+    let mut rig = rig(Pattern::Solenoid7, StartMode::Level);
+    rig.set(st(4), true);
+    assert_eq!(kinds(rig.run(13)), vec![JobKind::MoveToPoint(p(4), None)]);
+    rig.status(MOVING_STATUS, 0, MOVING_OUT);
+    rig.run(3);
+    rig.set(st(4), false);
+    // The release is recognised 6 ms later: let the status show the arrival on that sample.
+    assert_eq!(rig.run(5), vec![]);
+    rig.status(READY_STATUS, 0, DONE_OUT | 4);
+    assert_eq!(rig.run(10), vec![], "no stop");
+    assert_eq!(rig.out.bits() & 0x7F, 1 << 4);
+}
+
+/// RES while the controller is in alarm resets the alarm and the refusal together.
+#[test]
+fn res_during_an_alarm_also_clears_a_refusal() {
+    let mut rig = rig(Pattern::Solenoid3, StartMode::Edge);
+    rig.set(st(0), true);
+    rig.set(st(2), true);
+    rig.run(20);
+    rig.set(st(0), false);
+    rig.set(st(2), false);
+    rig.status(0x03, 0x61, 0x03);
+    rig.run(10);
+    rig.set(In::RES, true);
+    assert_eq!(kinds(rig.run(10)), vec![JobKind::AlarmReset]);
+    rig.set(In::RES, false);
+    rig.status(READY_STATUS, 0, DONE_OUT);
+    rig.run(10);
+    assert!(rig.out.alm_n(), "no refusal left");
+    rig.set(st(2), true);
+    assert_eq!(kinds(rig.run(20)), vec![JobKind::MoveToPoint(p(2), None)]);
+}
+
+/// An edge-mode ST pulse that HOME drops (HOME within its settle time) leaves nothing behind:
+/// a later single ST pulse is not refused as two.
+#[test]
+fn home_drops_a_waiting_st_edge_whole() {
+    // A settle time of 20 ms, so that HOME comes while ST0's edge waits.
+    let mut rig = Rig::with_inputs(
+        Config {
+            settle: Duration::from_millis(20),
+            ..config(Pattern::Solenoid3, StartMode::Edge)
+        },
+        axis(report(READY_STATUS, 0, DONE_OUT | 3), 0),
+        In::STP_N | In::SON,
+    );
+    rig.set(st(0), true);
+    rig.run(8);
+    rig.set(st(0), false);
+    rig.set(In::HOME, true);
+    let jobs = kinds(rig.run(20));
+    assert_eq!(jobs.len(), 1, "{jobs:?}");
+    assert!(matches!(jobs[0], JobKind::Home(_)));
+    rig.set(In::HOME, false);
+    rig.status(READY_STATUS, 0, DONE_OUT);
+    rig.run(10);
+    rig.set(st(1), true);
+    rig.run(8);
+    rig.set(st(1), false);
+    assert_eq!(kinds(rig.run(40)), vec![JobKind::MoveToPoint(p(1), None)]);
+    assert_eq!(rig.pio.take_refused(), None);
+}

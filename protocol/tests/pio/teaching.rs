@@ -14,7 +14,8 @@ const MOVING_OUT: u8 = 0xA0;
 const JOG: Jog = Jog {
     plus_end: Pulses(-8000),
     minus_end: Pulses(0),
-    step: Pulses(-10),
+    plus_step: Pulses(-10),
+    minus_step: Pulses(10),
     velocity: match Velocity::new(500) {
         Some(v) => v,
         None => panic!(),
@@ -176,4 +177,42 @@ fn without_the_jog_known_the_jog_inputs_do_nothing() {
     rig.set(In::JOG_PLUS, true);
     assert_eq!(rig.run(20), vec![]);
     assert_eq!(rig.pio.inputs(), base() | In::ST6 | In::JOG_PLUS);
+}
+
+/// A held jog outlives a link down: its release still stops the axis.
+#[test]
+fn a_held_jog_outlives_a_link_down() {
+    let mut rig = teaching();
+    rig.set(In::JOG_PLUS, true);
+    assert_eq!(kinds(rig.run(10)), vec![jog_to(JOG.plus_end)]);
+    rig.link_ok = false;
+    rig.run(20);
+    rig.set(In::JOG_PLUS, false);
+    assert_eq!(kinds(rig.run(10)), vec![JobKind::Stop]);
+}
+
+/// MODE turned OFF while a PWRT waits for PC1-PC8 to settle: the PWRT is dropped, it does not
+/// become a CSTR.
+#[test]
+fn a_pwrt_never_becomes_a_move() {
+    let mut rig = teaching();
+    rig.select(5);
+    rig.set(In::CSTR, true);
+    // The PWRT and PC1-PC8 change together: the strobe waits for them to settle (until 12 ms),
+    // and MODE is recognised OFF at 8 ms.
+    rig.run(2);
+    rig.set(In::ST6, false);
+    assert_eq!(rig.run(20), vec![]);
+    assert_eq!(rig.pio.take_teach(), None);
+}
+
+/// A pattern's PIO with a jog under way is in motion (the node stops the axis when PIOPAT
+/// replaces it).
+#[test]
+fn a_jog_is_motion() {
+    let mut rig = teaching();
+    assert!(!rig.pio.in_motion());
+    rig.set(In::JOG_MINUS, true);
+    rig.run(10);
+    assert!(rig.pio.in_motion());
 }
