@@ -77,6 +77,16 @@ impl Rig {
         }
     }
 
+    /// SON until SV, a HOME pulse until HEND and PEND: what every wired sequence starts with.
+    fn servo_on_and_home(&mut self) {
+        self.set(PioInputs::SON, true);
+        self.until(500, |o| o.sv());
+        self.set(PioInputs::HOME, true);
+        self.run(20);
+        self.set(PioInputs::HOME, false);
+        self.until(5_000, |o| o.hend() && o.pend());
+    }
+
     fn set(&mut self, input: PioInputs, on: bool) {
         self.inputs = self.inputs.with(input, on);
     }
@@ -102,12 +112,7 @@ fn son_home_strobe_a_position_and_read_pm() {
         "link up, no alarm: {:?}",
         r.outputs
     );
-    r.set(PioInputs::SON, true);
-    r.until(500, |o| o.sv());
-    r.set(PioInputs::HOME, true);
-    r.run(20);
-    r.set(PioInputs::HOME, false);
-    r.until(5_000, |o| o.hend() && o.pend());
+    r.servo_on_and_home();
     assert!(r.h.bus.controller(axis0()).unwrap().homed());
     // Position 5, with the PC bits set only 2 ms before CSTR: the strobe waits for settling.
     r.inputs = r.inputs.with_position(PositionNo::new(5).unwrap());
@@ -276,12 +281,7 @@ fn a_res_pulse_acknowledges_the_fail_safe_once_the_stop_input_is_closed() {
 fn teaching_jogs_and_pwrt_stores_the_position_into_the_selected_point() {
     let mut r = rig_with(|c| c.pio_pattern = Pattern::Teaching);
     r.run(100);
-    r.set(PioInputs::SON, true);
-    r.until(500, |o| o.sv());
-    r.set(PioInputs::HOME, true);
-    r.run(20);
-    r.set(PioInputs::HOME, false);
-    r.until(5_000, |o| o.hend() && o.pend());
+    r.servo_on_and_home();
     r.set(PioInputs::ST6, true); // MODE
     r.until(100, |o| o.modes());
     // JOG+ held for 300 ms at 100 mm/s (PIOJOG's default), then released.

@@ -37,6 +37,19 @@ fn rig(pattern: Pattern, start: StartMode) -> Rig {
     )
 }
 
+/// Pattern 5 in edge mode with a settle time of 20 ms (longer than a short pulse is
+/// recognised ON), otherwise as [`rig`].
+fn slow_settle_rig() -> Rig {
+    Rig::with_inputs(
+        Config {
+            settle: Duration::from_millis(20),
+            ..config(Pattern::Solenoid3, StartMode::Edge)
+        },
+        axis(report(READY_STATUS, 0, DONE_OUT | 3), 0),
+        In::STP_N | In::SON,
+    )
+}
+
 /// The move to point `n` runs (the status shows it), then completes there.
 fn complete(rig: &mut Rig, n: u8) {
     rig.status(MOVING_STATUS, 0, MOVING_OUT);
@@ -179,14 +192,7 @@ fn inputs_that_change_together_within_the_settle_time_are_one_selection() {
 fn an_edge_pulse_shorter_than_the_settle_time_is_taken() {
     // A settle time of 20 ms, an 8 ms pulse: ST2 is recognised OFF again (and the settle time
     // restarted) before the selection is taken; its edge still is.
-    let mut rig = Rig::with_inputs(
-        Config {
-            settle: Duration::from_millis(20),
-            ..config(Pattern::Solenoid3, StartMode::Edge)
-        },
-        axis(report(READY_STATUS, 0, DONE_OUT | 3), 0),
-        In::STP_N | In::SON,
-    );
+    let mut rig = slow_settle_rig();
     rig.set(st(2), true);
     rig.run(8);
     rig.set(st(2), false);
@@ -390,14 +396,7 @@ fn res_during_an_alarm_also_clears_a_refusal() {
 #[test]
 fn home_drops_a_waiting_st_edge_whole() {
     // A settle time of 20 ms, so that HOME comes while ST0's edge waits.
-    let mut rig = Rig::with_inputs(
-        Config {
-            settle: Duration::from_millis(20),
-            ..config(Pattern::Solenoid3, StartMode::Edge)
-        },
-        axis(report(READY_STATUS, 0, DONE_OUT | 3), 0),
-        In::STP_N | In::SON,
-    );
+    let mut rig = slow_settle_rig();
     rig.set(st(0), true);
     rig.run(8);
     rig.set(st(0), false);

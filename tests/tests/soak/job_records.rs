@@ -26,6 +26,14 @@ pub(crate) fn job_requests(job: &Job) -> Vec<Request> {
     let a = job.axis;
     let one = |c: Command| vec![Request::new(a, c)];
     let steps = |s: &[jobs::Step]| s.iter().map(|s| s.request).collect::<Vec<_>>();
+    // `v2`, then a move: a jog's and a direct move's two frames.
+    let v2_then = |velocity, acceleration, command| {
+        let v2 = Command::SetVelocityAcceleration {
+            velocity,
+            acceleration,
+        };
+        vec![Request::new(a, v2), Request::new(a, command)]
+    };
     match job.kind {
         JobKind::Command(c) => one(c),
         JobKind::Servo(on) => one(Command::Servo(on)),
@@ -37,38 +45,21 @@ pub(crate) fn job_requests(job: &Job) -> Vec<Request> {
             end,
             velocity,
             acceleration,
-        } => vec![
-            Request::new(
-                a,
-                Command::SetVelocityAcceleration {
-                    velocity,
-                    acceleration,
-                },
-            ),
-            Request::new(a, Command::MoveAbsolute(end)),
-        ],
+        } => v2_then(velocity, acceleration, Command::MoveAbsolute(end)),
         JobKind::DirectMove {
             target,
             relative,
             velocity,
             acceleration,
-        } => vec![
-            Request::new(
-                a,
-                Command::SetVelocityAcceleration {
-                    velocity,
-                    acceleration,
-                },
-            ),
-            Request::new(
-                a,
-                if relative {
-                    Command::MoveRelative(target)
-                } else {
-                    Command::MoveAbsolute(target)
-                },
-            ),
-        ],
+        } => v2_then(
+            velocity,
+            acceleration,
+            if relative {
+                Command::MoveRelative(target)
+            } else {
+                Command::MoveAbsolute(target)
+            },
+        ),
         JobKind::Stop => one(Command::CancelMotion),
         JobKind::AlarmReset => vec![
             Request::new(a, Command::Servo(false)),
