@@ -70,6 +70,7 @@ pub mod jobs;
 pub mod line;
 pub mod memory;
 pub mod modbus;
+pub mod net;
 pub mod node;
 pub mod pio;
 pub mod plc;

@@ -107,6 +107,9 @@
 //!                 node.stored(saved);
 //!             }
 //!             Action::Store(Store::FactoryReset | Store::Restart) => board.restart(),
+//!             // A board with Ethernet (feature `tcp`) sends or closes on its sockets.
+//!             #[cfg(feature = "tcp")]
+//!             Action::TcpReply { .. } | Action::TcpClose(_) => {}
 //!         }
 //!     }
 //!     board.write_output_pins(node.outputs().bits());
@@ -131,9 +134,15 @@ use crate::units::{Accel, Length, Speed};
 use crate::{Axis, PositionNo, Pulses};
 
 /// The most the whole node may take on a microcontroller: 12 KiB for 16 axes (an STM32F103C8
-/// has 20 KiB of RAM in all). Checked at compile time on the firmware's targets; the host test
+/// has 20 KiB of RAM in all); 16 KiB with the Modbus TCP side (feature `tcp`: five connection
+/// buffers, a slave and a reply of its own; only on boards with Ethernet, which have far more
+/// RAM). Checked at compile time on the firmware's targets; the host test
 /// `the_whole_state_fits_12_kib` prints the figures.
-pub const RAM_BUDGET: usize = 12 * 1024;
+pub const RAM_BUDGET: usize = if cfg!(feature = "tcp") {
+    16 * 1024
+} else {
+    12 * 1024
+};
 
 #[cfg(target_os = "none")]
 const _: () = assert!(core::mem::size_of::<Node>() <= RAM_BUDGET);
@@ -153,6 +162,37 @@ pub enum Action<'a> {
     /// Do this with the flash (SAVE, FACTORY, RESTART), then report a save with
     /// [`Node::stored`]. A factory reset and a restart end with the board restarting.
     Store(Store),
+    /// Send this Modbus TCP reply on `socket` (feature `tcp`). Never wait for the client to
+    /// take it: if the socket's send buffer has no room for it, the client is not reading, so
+    /// close the socket (and report it with [`Node::tcp_closed`]).
+    #[cfg(feature = "tcp")]
+    TcpReply {
+        /// The socket the request came on.
+        socket: usize,
+        /// The reply, MBAP header included.
+        bytes: &'a [u8],
+    },
+    /// Close `socket` (feature `tcp`): a refused, replaced or idle client, or a stream that
+    /// lost its framing. Report it with [`Node::tcp_closed`] once done.
+    #[cfg(feature = "tcp")]
+    TcpClose(usize),
+}
+
+/// The Modbus TCP side of the node: the connections, a slave of its own (its counters and
+/// state are not the serial line's), and the reply being sent.
+#[cfg(feature = "tcp")]
+#[derive(Debug)]
+struct TcpPort {
+    server: crate::modbus::tcp::Server,
+    slave: Slave,
+    reply: ReplyBuffer,
+}
+
+/// What the TCP side has for the caller (the reply is in [`TcpPort::reply`]).
+#[cfg(feature = "tcp")]
+enum TcpOut {
+    Reply(usize),
+    Close(usize),
 }
 
 /// The state of the indicator LEDs (besides a run LED the firmware blinks itself).
@@ -174,6 +214,8 @@ pub struct Node {
     reply: ReplyBuffer,
     pio: Pio,
     outputs: PioOutputs,
+    #[cfg(feature = "tcp")]
+    tcp: TcpPort,
     /// When the gateway is due next, as of its last idle answer.
     idle_until: Option<Instant>,
     /// Something arrived since that answer: poll now.
@@ -208,6 +250,12 @@ impl Node {
             reply: ReplyBuffer::new(),
             pio: Pio::new(pio::Config::DEFAULT),
             outputs: PioOutputs::SAFE,
+            #[cfg(feature = "tcp")]
+            tcp: TcpPort {
+                server: crate::modbus::tcp::Server::new(),
+                slave: Slave::new(),
+                reply: ReplyBuffer::new(),
+            },
             idle_until: None,
             dirty: true,
         }
@@ -349,7 +397,7 @@ impl Node {
             Some(at) if now >= at => {}
             _ => return None,
         }
-        let link = self.slave.counters();
+        let link = self.link_counters();
         let mut model = self.gateway.registers(now, link);
         let handled = self
             .slave
@@ -369,6 +417,17 @@ impl Node {
                 return Some(Action::Reply(reply));
             }
             self.gateway.plc_activity(now, now);
+        }
+        #[cfg(feature = "tcp")]
+        match self.poll_tcp(now) {
+            Some(TcpOut::Reply(socket)) => {
+                return Some(Action::TcpReply {
+                    socket,
+                    bytes: self.tcp.reply.as_bytes(),
+                })
+            }
+            Some(TcpOut::Close(socket)) => return Some(Action::TcpClose(socket)),
+            None => {}
         }
         if let Some(line) = self.gateway.take_plc_line() {
             self.receiver = plc_receiver(line.baud, self.gateway.config().plc_frame_gap);
@@ -401,7 +460,22 @@ impl Node {
         if self.dirty {
             return Some(Instant::ZERO);
         }
-        earliest(self.idle_until, self.receiver.next_deadline())
+        let at = earliest(self.idle_until, self.receiver.next_deadline());
+        #[cfg(feature = "tcp")]
+        let at = earliest(
+            at,
+            self.tcp.server.poll_at(&self.gateway.config().net.policy),
+        );
+        at
+    }
+
+    /// The PLC link's counters (PLCLINK): the serial line's, and TCP's added where there is
+    /// TCP.
+    fn link_counters(&self) -> SlaveCounters {
+        let link = self.slave.counters();
+        #[cfg(feature = "tcp")]
+        let link = link.plus(&self.tcp.slave.counters());
+        link
     }
 
     /// Until when the bus line's received bytes may stay in the UART buffer: the frame that has
@@ -462,7 +536,7 @@ impl Node {
         &self.gateway
     }
 
-    /// What the Modbus slave has counted.
+    /// What the Modbus slave of the serial line has counted.
     pub fn plc_counters(&self) -> SlaveCounters {
         self.slave.counters()
     }
@@ -475,5 +549,94 @@ impl Node {
     /// The PIO logic (its recognised inputs).
     pub fn pio(&self) -> &Pio {
         &self.pio
+    }
+}
+
+/// The Modbus TCP side (feature `tcp`): the caller owns [`SOCKETS`](crate::modbus::tcp::SOCKETS)
+/// sockets listening on one port (502), numbered from 0, and reports what happens on them; the
+/// node answers through [`Action::TcpReply`] and closes through [`Action::TcpClose`]. The
+/// same register map, units and exceptions as the serial line
+/// ([`crate::modbus::tcp`] says what differs); any request to a unit served, from any
+/// connection, is PLC activity for the watchdog.
+#[cfg(feature = "tcp")]
+impl Node {
+    /// A client at `peer` connected on `socket` at `now`: whether it is admitted (not on a
+    /// non-empty allow-list: close the socket at once, without reporting it closed). When
+    /// every slot is taken, the connection idle the longest is closed for it
+    /// ([`Action::TcpClose`]).
+    pub fn tcp_opened(&mut self, now: Instant, socket: usize, peer: crate::net::Ipv4) -> bool {
+        let policy = self.gateway.config().net.policy;
+        self.dirty = true;
+        self.tcp.server.open(now, socket, peer, &policy)
+    }
+
+    /// Bytes from the client on `socket` at `now`: how many were taken. Offer the rest again
+    /// once [`tcp_room`](Node::tcp_room) says there is room (after the request in front has
+    /// been answered), and read the socket only then: TCP's window holds the client back
+    /// meanwhile, as it should.
+    pub fn tcp_received(&mut self, now: Instant, socket: usize, bytes: &[u8]) -> usize {
+        let taken = self.tcp.server.received(now, socket, bytes);
+        if taken > 0 {
+            self.dirty = true;
+        }
+        taken
+    }
+
+    /// How many bytes [`tcp_received`](Node::tcp_received) would take on `socket` now (0: no
+    /// connection there, or a whole request waits to be answered).
+    pub fn tcp_room(&self, socket: usize) -> usize {
+        self.tcp.server.room(socket)
+    }
+
+    /// The connection on `socket` has ended: the client closed it, it broke, or the caller
+    /// closed it (asked by [`Action::TcpClose`], or a reply that did not fit).
+    pub fn tcp_closed(&mut self, socket: usize) {
+        self.tcp.server.closed(socket);
+    }
+
+    /// What the TCP server has counted.
+    pub fn tcp_counters(&self) -> crate::modbus::tcp::TcpCounters {
+        self.tcp.server.counters()
+    }
+
+    /// What the Modbus slave of the TCP side has counted.
+    pub fn tcp_slave_counters(&self) -> SlaveCounters {
+        self.tcp.slave.counters()
+    }
+
+    /// The connections open now.
+    pub fn tcp_connections(&self) -> u8 {
+        self.tcp.server.connections()
+    }
+
+    /// A socket to close, or the next request answered (taking turns between connections).
+    fn poll_tcp(&mut self, now: Instant) -> Option<TcpOut> {
+        let policy = self.gateway.config().net.policy;
+        if let Some(socket) = self.tcp.server.take_close(now, &policy) {
+            return Some(TcpOut::Close(socket));
+        }
+        let link = self.link_counters();
+        let view = crate::plc::TcpView {
+            counters: self.tcp.server.counters(),
+            connections: self.tcp.server.connections(),
+        };
+        let direct_unit = self.gateway.config().unit;
+        loop {
+            let (socket, adu) = self.tcp.server.next_frame()?;
+            let mut model = self.gateway.registers(now, link).with_tcp(view);
+            let handled =
+                self.tcp
+                    .slave
+                    .handle_tcp(&adu, direct_unit, &mut model, &mut self.tcp.reply);
+            match handled {
+                Handled::Reply(_) => {
+                    self.gateway.plc_activity(now, now);
+                    return Some(TcpOut::Reply(socket));
+                }
+                Handled::Unserved(_) => return Some(TcpOut::Reply(socket)),
+                // Not a request: nothing to answer; the next one, if any.
+                _ => {}
+            }
+        }
     }
 }

@@ -31,6 +31,11 @@ impl Duration {
         Duration(ms.saturating_mul(US_PER_MS.get() as u64))
     }
 
+    /// `s` seconds.
+    pub const fn from_secs(s: u64) -> Duration {
+        Duration(s.saturating_mul(1_000_000))
+    }
+
     /// `us` microseconds.
     pub const fn from_micros(us: u64) -> Duration {
         Duration(us)

@@ -424,7 +424,7 @@ fn ghms_shows_homing_only() {
 
 // ---------------------------------------------------------------- size
 
-/// All protocol state for 16 axes fits a small MCU. (On the host `usize` is 8 bytes, so these
+/// All protocol state for 16 axes fits a small MCU (with TCP, the Ethernet board's budget). (On the host `usize` is 8 bytes, so these
 /// figures bound the thumbv7em ones from above; the firmware build checks its own.)
 #[test]
 fn the_whole_state_fits_12_kib() {
@@ -438,6 +438,11 @@ fn the_whole_state_fits_12_kib() {
             std::mem::size_of::<protocol::modbus::Receiver>(),
         ),
         ("Pio", std::mem::size_of::<protocol::pio::Pio>()),
+        #[cfg(feature = "tcp")]
+        (
+            "TcpServer",
+            std::mem::size_of::<protocol::modbus::tcp::Server>(),
+        ),
     ];
     for (name, size) in sizes {
         println!("{name:>9}: {size:>6} bytes");

@@ -9,7 +9,9 @@ use proptest::prelude::*;
 use protocol::modbus::Exception;
 use protocol::pio::{Pattern, Ports, StartMode};
 use protocol::plc::map::*;
-use protocol::plc::settings::{Settings, SettingsError, FORMAT_1, RECORD_LEN, RECORD_LEN_1};
+use protocol::plc::settings::{
+    Settings, SettingsError, FORMAT_1, FORMAT_2, RECORD_LEN, RECORD_LEN_1, RECORD_LEN_2,
+};
 use protocol::plc::{Boot, ConfigSource, GatewayConfig, Parity, ResetCause, Store};
 use protocol::units::Lead;
 use protocol::AxisSet;
@@ -24,7 +26,33 @@ fn config() -> GatewayConfig {
     c.pio_start = StartMode::Edge;
     c.pio_jog = 25_00;
     c.pio_inch = 5;
+    c.axis_base = 17;
+    c.unit = 63;
+    c.net.ip = protocol::net::Ipv4([10, 1, 2, 3]);
+    c.net.prefix = 16;
+    c.net.router = protocol::net::Ipv4([10, 1, 0, 1]);
+    c.net.policy.allow[2] = protocol::net::Ipv4([10, 1, 2, 9]);
+    c.net.policy.max_connections = 2;
+    c.net.policy.idle_s = 600;
     c
+}
+
+/// A record of format 2 (before the unit base and the network) is read: axis 0 is unit 1, the
+/// network's defaults, everything else as stored.
+#[test]
+fn a_format_2_record_is_read() {
+    let mut old = config();
+    old.axis_base = 1;
+    old.net = protocol::net::NetConfig::DEFAULT;
+    let record = Settings::of(&old).encode();
+    let mut v2 = record[..RECORD_LEN_2].to_vec();
+    v2[0] = FORMAT_2;
+    let sum = protocol::modbus::crc::checksum(&v2[..RECORD_LEN_2 - 2]);
+    v2[RECORD_LEN_2 - 2..].copy_from_slice(&sum.to_le_bytes());
+    assert_eq!(Settings::decode(&v2), Ok(Settings::of(&old)));
+    let mut long = record;
+    long[0] = FORMAT_2;
+    assert_eq!(Settings::decode(&long), Err(SettingsError::Length));
 }
 
 /// A record of format 1 (before the PIO patterns), as the firmware before them stored it, is
@@ -32,6 +60,8 @@ fn config() -> GatewayConfig {
 #[test]
 fn a_format_1_record_is_read() {
     let mut old = config();
+    old.axis_base = 1;
+    old.net = protocol::net::NetConfig::DEFAULT;
     old.pio_pattern = Pattern::Positioning;
     old.pio_start = StartMode::Level;
     old.pio_jog = protocol::plc::DEFAULT_PIO_JOG;
@@ -101,7 +131,7 @@ fn a_damaged_record_is_refused_whole() {
         Err(SettingsError::Length)
     );
     let mut other = record;
-    other[0] = 3;
+    other[0] = 4;
     assert_eq!(Settings::decode(&other), Err(SettingsError::Version));
     assert_eq!(
         Settings::decode(&[0xFF; RECORD_LEN]),
@@ -121,10 +151,10 @@ fn a_field_out_of_range_is_refused() {
         r[RECORD_LEN - 2..].copy_from_slice(&sum.to_le_bytes());
         Settings::decode(&r)
     };
-    let cases: [(usize, &[u8]); 17] = [
+    let cases: [(usize, &[u8]); 22] = [
         (1, &[0]),                        // unit 0
         (1, &[248]),                      // unit past 247
-        (1, &[2]),                        // unit 2 = axis 1's, which is on the bus
+        (1, &[18]),                       // unit 18 = axis 1's (base 17), which is on the bus
         (2, &1234u32.to_le_bytes()),      // PLC rate
         (6, &[3]),                        // parity
         (7, &10u16.to_le_bytes()),        // watchdog below 50 ms
@@ -139,6 +169,11 @@ fn a_field_out_of_range_is_refused() {
         (177, &[2]),                      // PIO start mode
         (178, &[0, 0]),                   // jog speed 0
         (180, &[101, 0]),                 // inching step past 1.00 mm
+        (182, &[0]),                      // axis base 0
+        (182, &[233]),                    // axis base: axis 15 past unit 247
+        (187, &[33]),                     // prefix past 32
+        (192, &[5]),                      // more than 4 connections
+        (193, &3601u16.to_le_bytes()),    // idle past an hour
     ];
     for (at, bytes) in cases {
         assert_eq!(

@@ -49,6 +49,10 @@ pub struct NodeHarness {
     pub stores: Vec<(u64, protocol::plc::Store)>,
     /// Modbus replies not yet taken, with the time they were sent.
     replies: Vec<(u64, Vec<u8>)>,
+    /// Modbus TCP replies, with their socket and time, in order.
+    pub tcp_replies: Vec<(u64, usize, Vec<u8>)>,
+    /// Sockets the node closed, with the time.
+    pub tcp_closes: Vec<(u64, usize)>,
     /// The next input sample is due then.
     next_sample: u64,
 }
@@ -67,6 +71,8 @@ impl NodeHarness {
             plc_lines: Vec::new(),
             stores: Vec::new(),
             replies: Vec::new(),
+            tcp_replies: Vec::new(),
+            tcp_closes: Vec::new(),
             next_sample: 0,
         }
     }
@@ -98,6 +104,13 @@ impl NodeHarness {
                 }
                 Some(Action::Reply(bytes)) => self.replies.push((self.now, bytes.to_vec())),
                 Some(Action::PlcLine(line)) => self.plc_lines.push((self.now, line)),
+                Some(Action::TcpReply { socket, bytes }) => {
+                    self.tcp_replies.push((self.now, socket, bytes.to_vec()))
+                }
+                Some(Action::TcpClose(socket)) => {
+                    self.tcp_closes.push((self.now, socket));
+                    self.node.tcp_closed(socket);
+                }
                 Some(Action::Store(store)) => {
                     if let protocol::plc::Store::Save(_) = store {
                         let saves = self.stores.len() as u32 + 1;

@@ -85,6 +85,24 @@ impl<'a> Adu<'a> {
     }
 }
 
+/// How a frame wraps its PDU: the serial line's unit id and CRC, or TCP's MBAP header
+/// (Messaging on TCP/IP Implementation Guide V1.0b, §3.1.3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Framing {
+    /// Unit id, PDU, CRC (Serial Line §2.5.1).
+    Rtu,
+    /// MBAP header (transaction id, protocol id 0, length, unit id), PDU. A reply echoes the
+    /// request's transaction id and unit id byte for byte (feature `tcp`).
+    #[cfg(feature = "tcp")]
+    Tcp {
+        /// The request's transaction id.
+        transaction: u16,
+        /// The request's unit id, as it came (0xFF and 0 included).
+        unit: u8,
+    },
+}
+
 /// Writes a frame into a byte slice, never past its end. A field that does not fit spoils the
 /// frame (nothing more is written) and [`finish`](Writer::finish) says `None`: one check at the
 /// end rather than one after every field, which took flash at each of the many fields written.
@@ -92,12 +110,45 @@ pub(crate) struct Writer<'a> {
     buf: &'a mut [u8],
     /// Bytes written; past `buf`'s end once the frame is spoilt.
     len: usize,
+    framing: Framing,
 }
 
+/// Where an MBAP header's length field is, and the bytes before the unit id it counts from.
+#[cfg(feature = "tcp")]
+pub(crate) const MBAP_LENGTH_AT: usize = 4;
+/// See [`MBAP_LENGTH_AT`].
+#[cfg(feature = "tcp")]
+pub(crate) const MBAP_UNCOUNTED: usize = 6;
+
 impl<'a> Writer<'a> {
-    /// An empty frame in `buf`.
+    /// An empty serial-line frame in `buf` (the caller writes the unit id).
     pub(crate) fn new(buf: &'a mut [u8]) -> Writer<'a> {
-        Writer { buf, len: 0 }
+        Writer {
+            buf,
+            len: 0,
+            framing: Framing::Rtu,
+        }
+    }
+
+    /// A frame in `buf` for `unit`, its header written: the unit id (RTU), or the MBAP header
+    /// with the request's own unit id (TCP).
+    pub(crate) fn frame(buf: &'a mut [u8], framing: Framing, unit: u8) -> Writer<'a> {
+        let mut w = Writer {
+            buf,
+            len: 0,
+            framing,
+        };
+        match framing {
+            Framing::Rtu => w.byte(unit),
+            #[cfg(feature = "tcp")]
+            Framing::Tcp { transaction, unit } => {
+                w.u16(transaction);
+                w.u16(0);
+                w.u16(0); // the length, known at `finish`
+                w.byte(unit);
+            }
+        }
+        w
     }
 
     /// Appends one byte.
@@ -143,11 +194,22 @@ impl<'a> Writer<'a> {
         self.len = usize::MAX;
     }
 
-    /// Appends the CRC of everything written and returns the frame length; `None` if the frame
-    /// is spoilt or the CRC does not fit.
+    /// Ends the frame (RTU: appends the CRC of everything written; TCP: fills in the MBAP
+    /// length) and returns its length; `None` if the frame is spoilt or does not fit.
     pub(crate) fn finish(mut self) -> Option<usize> {
-        let crc = crc::checksum(self.buf.get(..self.len)?);
-        self.bytes(&crc::to_wire(crc));
+        match self.framing {
+            Framing::Rtu => {
+                let crc = crc::checksum(self.buf.get(..self.len)?);
+                self.bytes(&crc::to_wire(crc));
+            }
+            #[cfg(feature = "tcp")]
+            Framing::Tcp { .. } => {
+                let counted = u16::try_from(self.len.checked_sub(MBAP_UNCOUNTED)?).ok()?;
+                self.buf
+                    .get_mut(MBAP_LENGTH_AT..MBAP_UNCOUNTED)?
+                    .copy_from_slice(&counted.to_be_bytes());
+            }
+        }
         (self.len != usize::MAX).then_some(self.len)
     }
 }

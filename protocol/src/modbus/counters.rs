@@ -33,6 +33,8 @@ pub struct SlaveCounters {
     pub illegal_data_value: u32,
     /// Exception 04 replies.
     pub server_device_failure: u32,
+    /// Exception 0A replies (TCP: a unit nobody serves).
+    pub gateway_path_unavailable: u32,
     /// Replies produced, normal and exception.
     pub replies: u32,
     /// PDUs that are not requests (to a served unit or broadcast).
@@ -58,11 +60,40 @@ impl SlaveCounters {
         illegal_data_address: 0,
         illegal_data_value: 0,
         server_device_failure: 0,
+        gateway_path_unavailable: 0,
         replies: 0,
         malformed: 0,
         served: 0,
         unanswered: 0,
     };
+
+    /// Both sets of counts added up (the PLC link's counters over RTU and TCP together).
+    #[must_use]
+    pub fn plus(&self, other: &SlaveCounters) -> SlaveCounters {
+        let add = |a: u32, b: u32| a.wrapping_add(b);
+        SlaveCounters {
+            frames: add(self.frames, other.frames),
+            crc_errors: add(self.crc_errors, other.crc_errors),
+            too_short: add(self.too_short, other.too_short),
+            too_long: add(self.too_long, other.too_long),
+            bad_gaps: add(self.bad_gaps, other.bad_gaps),
+            ignored: add(self.ignored, other.ignored),
+            broadcasts: add(self.broadcasts, other.broadcasts),
+            broadcast_errors: add(self.broadcast_errors, other.broadcast_errors),
+            illegal_function: add(self.illegal_function, other.illegal_function),
+            illegal_data_address: add(self.illegal_data_address, other.illegal_data_address),
+            illegal_data_value: add(self.illegal_data_value, other.illegal_data_value),
+            server_device_failure: add(self.server_device_failure, other.server_device_failure),
+            gateway_path_unavailable: add(
+                self.gateway_path_unavailable,
+                other.gateway_path_unavailable,
+            ),
+            replies: add(self.replies, other.replies),
+            malformed: add(self.malformed, other.malformed),
+            served: add(self.served, other.served),
+            unanswered: add(self.unanswered, other.unanswered),
+        }
+    }
 
     /// The number of replies with `exception`.
     pub fn exceptions(&self, exception: Exception) -> u32 {
@@ -71,6 +102,7 @@ impl SlaveCounters {
             Exception::IllegalDataAddress => self.illegal_data_address,
             Exception::IllegalDataValue => self.illegal_data_value,
             Exception::ServerDeviceFailure => self.server_device_failure,
+            Exception::GatewayPathUnavailable => self.gateway_path_unavailable,
         }
     }
 
@@ -81,6 +113,7 @@ impl SlaveCounters {
             Exception::IllegalDataAddress => &mut self.illegal_data_address,
             Exception::IllegalDataValue => &mut self.illegal_data_value,
             Exception::ServerDeviceFailure => &mut self.server_device_failure,
+            Exception::GatewayPathUnavailable => &mut self.gateway_path_unavailable,
         }
     }
 }

@@ -11,6 +11,7 @@
 //! | [`rtu`] | Where frames end: t3.5 silence, t1.5 gaps ([`Receiver`], Serial Line §2.5.1.1) |
 //! | [`pdu`] | What the master asks ([`Request`], Application Protocol §6) |
 //! | [`slave`] | What the slave answers ([`Slave`], exceptions of Application Protocol §7) |
+//! | `tcp` | Modbus TCP: MBAP frames, connections (feature `tcp`) |
 //!
 //! This module holds what the gateway implements: the [`DataModel`] trait (the four tables of
 //! Application Protocol §4.3) and the [`Exception`]s it may return.
@@ -80,8 +81,10 @@ pub mod ident;
 pub mod pdu;
 pub mod rtu;
 pub mod slave;
+#[cfg(feature = "tcp")]
+pub mod tcp;
 
-pub use adu::{Adu, FrameError, MAX_ADU_LEN, MAX_PDU_LEN};
+pub use adu::{Adu, FrameError, Framing, MAX_ADU_LEN, MAX_PDU_LEN};
 pub use bits::{Bits, BitsMut};
 pub use counters::SlaveCounters;
 pub use diag::Diagnostic;
@@ -180,6 +183,8 @@ pub enum Exception {
     IllegalDataValue = 3,
     /// 04: an unrecoverable error while performing the action.
     ServerDeviceFailure = 4,
+    /// 0A: a gateway has no path to the unit (on TCP: a unit id the gateway does not serve).
+    GatewayPathUnavailable = 0x0A,
 }
 
 impl Exception {
@@ -188,13 +193,14 @@ impl Exception {
         self as u8
     }
 
-    /// The exception with this code, if it is one of the four above.
+    /// The exception with this code, if it is one of those above.
     pub const fn from_code(code: u8) -> Option<Exception> {
         match code {
             1 => Some(Exception::IllegalFunction),
             2 => Some(Exception::IllegalDataAddress),
             3 => Some(Exception::IllegalDataValue),
             4 => Some(Exception::ServerDeviceFailure),
+            0x0A => Some(Exception::GatewayPathUnavailable),
             _ => None,
         }
     }
@@ -207,6 +213,7 @@ impl fmt::Display for Exception {
             Exception::IllegalDataAddress => "illegal data address",
             Exception::IllegalDataValue => "illegal data value",
             Exception::ServerDeviceFailure => "server device failure",
+            Exception::GatewayPathUnavailable => "gateway path unavailable",
         };
         write!(f, "Modbus exception {:02X}: {text}", self.code())
     }

@@ -12,7 +12,8 @@
 //! - Everything else gets exactly one reply: the normal one, or the function code with bit 7 set
 //!   and an [`Exception`] code.
 //!
-//! Memory: the reply goes to a caller-provided [`ReplyBuffer`] (256 bytes, the longest ADU).
+//! Memory: the reply goes to a caller-provided [`ReplyBuffer`] (the longest frame: 256 bytes,
+//! 260 with feature `tcp`).
 //! The model reads into a scratch array inside the [`Slave`], sized to the Modbus maxima: 250
 //! bytes of packed bits (FC01/02 read at most 2000) or 125 `u16`s (FC03/04 read at most 125
 //! registers, FC10 writes at most 123), 250 bytes shared by the two; FC0F hands the model the
@@ -21,7 +22,7 @@
 //! `Slave` (typically a `static` or a task's state) rather than on the stack keeps
 //! [`Slave::handle`]'s stack frame small.
 
-use super::adu::{Adu, FrameError, Writer, MAX_ADU_LEN};
+use super::adu::{Adu, FrameError, Framing, Writer};
 use super::bits::{Bits, BitsMut};
 pub use super::counters::SlaveCounters;
 use super::diag::{Diagnostic, LineCounts, OVERRUNS};
@@ -46,6 +47,9 @@ pub enum Handled {
     /// A request to a unit served, deliberately not answered (Listen Only mode, or the request
     /// that enters or leaves it).
     Silent,
+    /// On TCP, a request for a unit nobody serves: answered with exception 0A, the first `len`
+    /// bytes of the [`ReplyBuffer`] (never on the serial line, where it is [`Handled::Ignored`]).
+    Unserved(usize),
 }
 
 /// Adds one to a wrapping counter.
@@ -53,10 +57,17 @@ fn bump(counter: &mut u32) {
     *counter = counter.wrapping_add(1);
 }
 
-/// The reply to transmit: one ADU of at most 256 bytes.
+/// The longest reply: an RTU frame (256 bytes), or with feature `tcp` a TCP one (260).
+#[cfg(not(feature = "tcp"))]
+const REPLY_LEN: usize = super::adu::MAX_ADU_LEN;
+/// See above.
+#[cfg(feature = "tcp")]
+const REPLY_LEN: usize = super::tcp::MAX_TCP_ADU_LEN;
+
+/// The reply to transmit: one frame, RTU or TCP.
 #[derive(Clone, Debug)]
 pub struct ReplyBuffer {
-    bytes: [u8; MAX_ADU_LEN],
+    bytes: [u8; REPLY_LEN],
     len: usize,
 }
 
@@ -70,7 +81,7 @@ impl ReplyBuffer {
     /// An empty buffer.
     pub const fn new() -> ReplyBuffer {
         ReplyBuffer {
-            bytes: [0; MAX_ADU_LEN],
+            bytes: [0; REPLY_LEN],
             len: 0,
         }
     }
@@ -226,17 +237,27 @@ impl Slave {
             bump(&mut self.counters.unanswered);
             return Handled::Silent;
         }
+        self.answer(unit, adu.function(), request, Framing::Rtu, model, reply)
+    }
+
+    /// Carries out a request to a served unit and writes its reply, normal or exception, in
+    /// `framing`; FC08's restart and clears take effect after their reply.
+    fn answer(
+        &mut self,
+        unit: u8,
+        function: u8,
+        request: Result<Request<'_>, Exception>,
+        framing: Framing,
+        model: &mut impl DataModel,
+        reply: &mut ReplyBuffer,
+    ) -> Handled {
         let result = request.and_then(|request| {
             self.execute(unit, &request, model)?;
-            self.encode(unit, adu.function(), &request, model, &mut reply.bytes)
+            self.encode(unit, function, &request, framing, model, &mut reply.bytes)
         });
         let len = match result {
             Ok(len) => len,
-            Err(exception) => {
-                bump(self.counters.exception_counter(exception));
-                encode_exception(unit, adu.function(), exception, &mut reply.bytes).unwrap_or(0)
-                // never: the buffer holds 256 bytes
-            }
+            Err(exception) => self.exception(unit, function, exception, framing, reply),
         };
         reply.len = len;
         bump(&mut self.counters.replies);
@@ -261,6 +282,68 @@ impl Slave {
             _ => {}
         }
         Handled::Reply(len)
+    }
+
+    /// An exception reply, counted; its length.
+    fn exception(
+        &mut self,
+        unit: u8,
+        function: u8,
+        exception: Exception,
+        framing: Framing,
+        reply: &mut ReplyBuffer,
+    ) -> usize {
+        bump(self.counters.exception_counter(exception));
+        // Never 0: the buffer holds the longest frame.
+        encode_exception(unit, function, exception, framing, &mut reply.bytes).unwrap_or(0)
+    }
+
+    /// Carries out one Modbus TCP frame and writes its reply, if any, into `reply`: 0xFF and 0
+    /// are `direct_unit` (the device at the IP address, TCP Guide §4.4.2), there is no
+    /// broadcast, a unit nobody serves is answered with exception 0A, and FC08 (serial line
+    /// only) with 01. The reply echoes the transaction id and the unit id byte.
+    #[cfg(feature = "tcp")]
+    pub fn handle_tcp(
+        &mut self,
+        adu: &super::tcp::TcpAdu<'_>,
+        direct_unit: u8,
+        model: &mut impl DataModel,
+        reply: &mut ReplyBuffer,
+    ) -> Handled {
+        bump(&mut self.counters.frames);
+        reply.len = 0;
+        let framing = Framing::Tcp {
+            transaction: adu.transaction(),
+            unit: adu.unit(),
+        };
+        let unit = match adu.unit() {
+            BROADCAST | super::tcp::DIRECT_UNIT => direct_unit,
+            unit => unit,
+        };
+        let function = adu.function();
+        if !(1..0x80).contains(&function) {
+            bump(&mut self.counters.malformed);
+            bump(&mut self.counters.unanswered);
+            return Handled::Malformed;
+        }
+        if !model.serves(unit) {
+            bump(&mut self.counters.ignored);
+            let exception = Exception::GatewayPathUnavailable;
+            reply.len = self.exception(unit, function, exception, framing, reply);
+            bump(&mut self.counters.replies);
+            return Handled::Unserved(reply.len);
+        }
+        bump(&mut self.counters.served);
+        let request = match Request::parse(adu.pdu()) {
+            Ok(Request::Diagnostic { .. } | Request::ReturnQueryData { .. }) => {
+                Err(Exception::IllegalFunction)
+            }
+            Ok(request) => Ok(request),
+            Err(PduError::Exception(exception)) => Err(exception),
+            // Ruled out above (function codes 1-0x7F are requests).
+            Err(PduError::NotARequest) => Err(Exception::IllegalFunction),
+        };
+        self.answer(unit, function, request, framing, model, reply)
     }
 
     /// FC08 sub-function 01: the port starts afresh (counters cleared, Listen Only left).
@@ -382,11 +465,11 @@ impl Slave {
         unit: u8,
         function: u8,
         request: &Request<'_>,
+        framing: Framing,
         model: &impl DataModel,
         out: &mut [u8],
     ) -> Result<usize, Exception> {
-        let mut w = Writer::new(out);
-        w.byte(unit);
+        let mut w = Writer::frame(out, framing, unit);
         w.byte(function);
         match *request {
             Request::ReadCoils { quantity, .. } | Request::ReadDiscreteInputs { quantity, .. } => {
@@ -464,10 +547,16 @@ impl Slave {
     }
 }
 
-/// An exception reply (Application Protocol §7): unit, function | 0x80, code, CRC: 5 bytes.
-fn encode_exception(unit: u8, function: u8, exception: Exception, out: &mut [u8]) -> Option<usize> {
-    let mut w = Writer::new(out);
-    w.byte(unit);
+/// An exception reply (Application Protocol §7): unit, function | 0x80, code, CRC: 5 bytes
+/// (on TCP: the MBAP header, function | 0x80, code: 9 bytes).
+fn encode_exception(
+    unit: u8,
+    function: u8,
+    exception: Exception,
+    framing: Framing,
+    out: &mut [u8],
+) -> Option<usize> {
+    let mut w = Writer::frame(out, framing, unit);
     w.byte(function | 0x80);
     w.byte(exception.code());
     w.finish()

@@ -4,6 +4,7 @@ use super::boot::Boot;
 use crate::axes::{AxisMap, AxisSet};
 use crate::engine::Config;
 use crate::modbus::Identity;
+use crate::net::NetConfig;
 use crate::pio::{Pattern, Ports, StartMode};
 use crate::time::Duration;
 use crate::units::{Complement, Lead, Length, Scale};
@@ -119,10 +120,20 @@ pub(crate) fn unit_ok(unit: u16) -> bool {
     (1..=247).contains(&unit)
 }
 
-/// The axis of `axes` whose unit is `unit` (axis n is unit n + 1), if any: the gateway's
+/// The unit id of axis 0 unless set: axis n is unit n + 1, as IAI's SIO-through mode.
+pub const DEFAULT_AXIS_BASE: u8 = 1;
+/// The highest AXISBASE: axis 15 is then unit 247, the last slave address (Serial Line §2.2).
+pub const MAX_AXIS_BASE: u8 = 247 - 15;
+
+/// Whether `base` is an AXISBASE: every axis' unit a slave address, 1 to 247.
+pub(crate) fn axis_base_ok(base: u16) -> bool {
+    (1..=u16::from(MAX_AXIS_BASE)).contains(&base)
+}
+
+/// The axis of `axes` whose unit is `unit` (axis n is unit `base` + n), if any: the gateway's
 /// own unit must not be one.
-pub(crate) fn axis_of(unit: u8, axes: AxisSet) -> Option<Axis> {
-    unit.checked_sub(1)
+pub(crate) fn axis_of(unit: u8, base: u8, axes: AxisSet) -> Option<Axis> {
+    unit.checked_sub(base)
         .and_then(Axis::new)
         .filter(|&a| axes.contains(a))
 }
@@ -196,8 +207,11 @@ pub(crate) const fn pio_inch_ok(inch: u16) -> bool {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct GatewayConfig {
-    /// The gateway's own Modbus unit id (axis units are axis + 1).
+    /// The gateway's own Modbus unit id.
     pub unit: u8,
+    /// The unit id of axis 0: axis n is unit `axis_base + n` (several gateways on one PLC
+    /// line each take their own range).
+    pub axis_base: u8,
     /// The PLC line.
     pub plc: PlcLine,
     /// The silence that ends a Modbus frame on the PLC line when it must be longer than t3.5 of
@@ -225,6 +239,9 @@ pub struct GatewayConfig {
     pub pio_jog: u16,
     /// Pattern 1's inching step, 0.01 mm (PIOINCH; PCON parameter No. 48).
     pub pio_inch: u16,
+    /// The Ethernet board's address and the Modbus TCP server's policy (stored on every
+    /// board; used where there is Ethernet).
+    pub net: NetConfig,
     /// Who the gateway is (FC2B/0E, FC11), and its firmware version (VERSION).
     pub identity: Identity,
     /// What the firmware knows about this start (settings source, saves, reset cause).
@@ -236,6 +253,7 @@ impl GatewayConfig {
     pub const fn new(axes: AxisSet) -> GatewayConfig {
         GatewayConfig {
             unit: DEFAULT_GATEWAY_UNIT,
+            axis_base: DEFAULT_AXIS_BASE,
             plc: PlcLine::DEFAULT,
             plc_frame_gap: None,
             bus: Config {
@@ -251,6 +269,7 @@ impl GatewayConfig {
             pio_ports: Ports::ALL,
             pio_jog: DEFAULT_PIO_JOG,
             pio_inch: DEFAULT_PIO_INCH,
+            net: NetConfig::DEFAULT,
             identity: IDENTITY,
             boot: Boot::DEFAULT,
         }
@@ -258,6 +277,6 @@ impl GatewayConfig {
 
     /// The axis addressed by a Modbus unit id, if the PLC may address it.
     pub fn axis_of_unit(&self, unit: u8) -> Option<Axis> {
-        axis_of(unit, self.bus.axes)
+        axis_of(unit, self.axis_base, self.bus.axes)
     }
 }

@@ -23,7 +23,7 @@ const DIAG_LINK: u16 = 14;
 const DIAG_LAST_ERROR: u16 = 15;
 
 /// Register `offset` of a block of u32 counters, two registers each, high word first.
-fn counter_register(counters: &[u32], offset: u16) -> u16 {
+pub(super) fn counter_register(counters: &[u32], offset: u16) -> u16 {
     let word = counters.get(usize::from(offset / 2)).copied().unwrap_or(0);
     split(word)
         .get(usize::from(offset % 2))
@@ -56,6 +56,7 @@ impl Gateway {
             G_PLC_BAUD => u16::try_from(self.persist.plc.baud / 100).unwrap_or(0),
             G_PLC_PARITY => self.persist.plc.parity as u16,
             G_UNIT_ID => u16::from(self.persist.unit),
+            G_AXIS_BASE => u16::from(self.persist.axis_base),
             G_SAVE | G_FACTORY | G_RESTART => 0,
             G_SAVE_STATUS => self.persist.status as u16,
             G_SAVE_COUNT | 0x0016 => {
@@ -90,6 +91,7 @@ impl Gateway {
                         Exception::IllegalDataAddress,
                         Exception::IllegalDataValue,
                         Exception::ServerDeviceFailure,
+                        Exception::GatewayPathUnavailable,
                     ]
                     .into_iter()
                     .fold(0u32, |n, e| n.wrapping_add(link.exceptions(e)));
@@ -177,10 +179,14 @@ impl Gateway {
             GatewayWrite::AckFailsafe => self.failsafe.may_acknowledge(true),
             GatewayWrite::UnitId(unit) => {
                 let axes = AxisSet(self.config.bus.axes.0 | self.persist.axes.0);
-                axis_of(unit, axes).is_none()
+                axis_of(unit, self.persist.axis_base, axes).is_none()
+            }
+            GatewayWrite::AxisBase(base) => {
+                let axes = AxisSet(self.config.bus.axes.0 | self.persist.axes.0);
+                axis_of(self.persist.unit, base, axes).is_none()
             }
             GatewayWrite::Axis(axis, AxisSetting::Enabled(true)) => {
-                axis.get() + 1 != self.persist.unit
+                axis.get().checked_add(self.persist.axis_base) != Some(self.persist.unit)
             }
             GatewayWrite::SyncMask(mask) => mask.0 & !self.config.bus.axes.0 == 0,
             GatewayWrite::PioPattern(pattern) => self.config.pio_ports.run(pattern),
@@ -210,11 +216,17 @@ impl Gateway {
             GatewayWrite::PlcBaud(hundreds) => self.persist.plc.baud = u32::from(hundreds) * 100,
             GatewayWrite::PlcParity(parity) => self.persist.plc.parity = parity,
             GatewayWrite::UnitId(unit) => self.persist.unit = unit,
+            GatewayWrite::AxisBase(base) => self.persist.axis_base = base,
+            #[cfg(feature = "tcp")]
+            GatewayWrite::Net(offset, value) => {
+                let _ = self.config.net.set_register(offset, value);
+            }
             GatewayWrite::Apply => {
                 let pending = self.persist.pending(&self.config);
                 self.plc_line_changed |= pending.plc != self.config.plc;
                 self.config.plc = pending.plc;
                 self.config.unit = pending.unit;
+                self.config.axis_base = pending.axis_base;
                 self.config.bus.axes = pending.bus.axes;
                 self.config.bus.baud = pending.bus.baud;
                 self.config.bus.rtim = pending.bus.rtim;

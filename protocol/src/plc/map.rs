@@ -177,6 +177,17 @@ pub const G_PIO_START: u16 = 0x001D;
 pub const G_PIO_JOG: u16 = 0x001E;
 /// PIOINCH: pattern 1's inching step, 0.01 mm.
 pub const G_PIO_INCH: u16 = 0x001F;
+/// AXISBASE: the unit id of axis 0 (axis n is unit AXISBASE + n); taken on APPLY.
+pub const G_AXIS_BASE: u16 = 0x0020;
+/// The network block (feature `tcp`): IPADDR, IPPREFIX, IPROUTER, TCPMAX, TCPIDLE, TCPCONN,
+/// TCPALLOW; offsets in [`crate::net::registers`].
+pub const G_NET: u16 = 0x0600;
+/// Registers of the network block.
+pub const G_NET_LEN: u16 = crate::net::registers::LEN;
+/// TCPLINK: the Modbus TCP server's counters (6 x u32; feature `tcp`).
+pub const G_TCP: u16 = 0x0610;
+/// Registers of TCPLINK.
+pub const G_TCP_LEN: u16 = 12;
 /// The value G_FACTORY wants, so that no stray write erases the settings.
 pub const FACTORY_KEY: u16 = 0xFAC7;
 
@@ -356,6 +367,7 @@ pub const MAP: &[Entry] = &[
     e(Unit::Gateway, Holding, G_PLC_BAUD, 1, "PLCBAUD", "100 bit/s", "12 24 48 96 192 384 576 1152", true, "PLC line rate, taken on APPLY or at the next start", Gateway),
     e(Unit::Gateway, Holding, G_PLC_PARITY, 1, "PLCPARITY", "", "0-2", true, "PLC line parity: 0 none, 1 odd, 2 even (8 data bits, 1 stop bit), taken on APPLY or at the next start", Gateway),
     e(Unit::Gateway, Holding, G_UNIT_ID, 1, "UNITID", "unit", "1-247", true, "The gateway's own unit id (not an enabled axis' unit), taken on APPLY or at the next start", Gateway),
+    e(Unit::Gateway, Holding, G_AXIS_BASE, 1, "AXISBASE", "unit", "1-232", true, "The unit id of axis 0: axis n is unit AXISBASE + n (default 1; several gateways on one PLC line take ranges of their own); not to include UNITID; taken on APPLY or at the next start", Gateway),
     e(Unit::Gateway, Holding, G_SAVE, 1, "SAVE", "", "1", true, "Write 1: store every setting (with the pending ones) in flash; SAVESTAT says when it is done", Gateway),
     e(Unit::Gateway, Status, G_SAVE_STATUS, 1, "SAVESTAT", "", "0-3", false, "The last save: 0 none, 1 saving, 2 saved, 3 failed", Gateway),
     e(Unit::Gateway, Status, G_SAVE_COUNT, 2, "SAVECOUNT", "count", "uint32", false, "Saves so far (flash wear: about 10,000 erases per page, spread over the settings pages)", Gateway),
@@ -372,7 +384,23 @@ pub const MAP: &[Entry] = &[
     e(Unit::Gateway, Status, G_RESPONSE, G_RESPONSE_LEN, "RESP", "", "", false, "Command channel response: code (|0x8000 on error), error (as CMER), value high, value low (as the controller now holds it), V5 write count (0xFFFF: value already stored, nothing written)", Gateway),
     e(Unit::Gateway, Status, G_DIAG, G_DIAG_LEN * AXES, "DIAG", "count", "", false, "Per axis n at 0x0400+16n: frames sent, replies, time-outs, BCC errors, bad replies, retries, rejections (u32 each), link, last error", Gateway),
     e(Unit::Gateway, Status, G_BUS, G_BUS_LEN, "BUS", "count", "", false, "Unsolicited frames, events lost, queue full, establishments (u32 each)", Gateway),
-    e(Unit::Gateway, Status, G_PLC, G_PLC_LEN, "PLCLINK", "count", "", false, "Modbus frames, CRC errors, exceptions, replies, other units, broadcasts, malformed (u32 each)", Gateway),
+    e(Unit::Gateway, Status, G_PLC, G_PLC_LEN, "PLCLINK", "count", "", false, "Modbus frames, CRC errors, exceptions, replies, other units, broadcasts, malformed (u32 each; RTU and TCP together)", Gateway),
+    #[cfg(feature = "tcp")]
+    e(Unit::Gateway, Holding, G_NET, 2, "IPADDR", "IPv4", "a.b, c.d", true, "Ethernet board: its address, high byte first (default 192.168.1.100); taken at the next start (SAVE, RESTART)", Gateway),
+    #[cfg(feature = "tcp")]
+    e(Unit::Gateway, Holding, G_NET + 2, 1, "IPPREFIX", "bits", "1-32", true, "Ethernet board: subnet prefix length (default 24 = 255.255.255.0); taken at the next start", Gateway),
+    #[cfg(feature = "tcp")]
+    e(Unit::Gateway, Holding, G_NET + 3, 2, "IPROUTER", "IPv4", "a.b, c.d", true, "Ethernet board: default router, 0.0.0.0 none (the default); taken at the next start", Gateway),
+    #[cfg(feature = "tcp")]
+    e(Unit::Gateway, Holding, G_NET + 5, 1, "TCPMAX", "count", "1-4", true, "Modbus TCP connections at once (default 4); a new client beyond it replaces the connection idle the longest; in force at once", Gateway),
+    #[cfg(feature = "tcp")]
+    e(Unit::Gateway, Holding, G_NET + 6, 1, "TCPIDLE", "s", "0-3600", true, "A Modbus TCP connection with no request for this long is closed (default 60; 0 never); in force at once", Gateway),
+    #[cfg(feature = "tcp")]
+    e(Unit::Gateway, Status, G_NET + 7, 1, "TCPCONN", "count", "0-4", false, "Modbus TCP connections open now", Gateway),
+    #[cfg(feature = "tcp")]
+    e(Unit::Gateway, Holding, G_NET + 8, 8, "TCPALLOW", "IPv4", "4 x (a.b, c.d)", true, "The clients allowed to connect, 0.0.0.0 an empty slot; all empty: anyone (the default). Checked when a client connects; write each address in one FC10", Gateway),
+    #[cfg(feature = "tcp")]
+    e(Unit::Gateway, Status, G_TCP, G_TCP_LEN, "TCPLINK", "count", "", false, "Modbus TCP: connections accepted, refused (not allowed), replaced (limit), closed idle, MBAP errors, frames (u32 each)", Gateway),
 ];
 
 #[cfg(test)]

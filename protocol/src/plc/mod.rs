@@ -54,6 +54,8 @@ pub use config::{
 };
 pub use failsafe::{CAUSE_STOP_INPUT, CAUSE_WATCHDOG};
 pub use gateway::Gateway;
+#[cfg(feature = "tcp")]
+pub use model::TcpView;
 pub use model::{diagnostic, Registers};
 pub use persist::Store;
 pub use points::CACHED_ROWS;

@@ -23,6 +23,19 @@ use crate::time::Instant;
 pub struct Registers<'a> {
     gateway: &'a mut Gateway,
     link: SlaveCounters,
+    /// The TCP server's counters and connections (TCPLINK, TCPCONN).
+    #[cfg(feature = "tcp")]
+    tcp: TcpView,
+}
+
+/// What the gateway unit shows of the Modbus TCP server.
+#[cfg(feature = "tcp")]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TcpView {
+    /// Its counters.
+    pub counters: crate::modbus::tcp::TcpCounters,
+    /// Connections open now.
+    pub connections: u8,
 }
 
 impl Gateway {
@@ -33,7 +46,41 @@ impl Gateway {
         Registers {
             gateway: self,
             link,
+            #[cfg(feature = "tcp")]
+            tcp: TcpView::default(),
         }
+    }
+}
+
+#[cfg(feature = "tcp")]
+impl Registers<'_> {
+    /// The same request, with the TCP server's counters and connections to show.
+    #[must_use]
+    pub fn with_tcp(mut self, tcp: TcpView) -> Self {
+        self.tcp = tcp;
+        self
+    }
+
+    /// A register of the network block or TCPLINK, if `address` is one.
+    fn tcp_read(&self, address: u16) -> Option<u16> {
+        use super::map::{G_NET, G_NET_LEN, G_TCP, G_TCP_LEN};
+        if let Some(offset) = address.checked_sub(G_NET).filter(|&o| o < G_NET_LEN) {
+            return match offset {
+                crate::net::registers::CONNECTIONS => Some(u16::from(self.tcp.connections)),
+                _ => self.gateway.config.net.register(offset),
+            };
+        }
+        let offset = address.checked_sub(G_TCP).filter(|&o| o < G_TCP_LEN)?;
+        let c = self.tcp.counters;
+        let values = [
+            c.accepted,
+            c.refused,
+            c.replaced,
+            c.idle_closed,
+            c.mbap_errors,
+            c.frames,
+        ];
+        Some(super::gateway_unit::counter_register(&values, offset))
     }
 }
 
@@ -190,6 +237,14 @@ impl DataModel for Registers<'_> {
         // One loop for both kinds of unit.
         for (i, slot) in out.iter_mut().enumerate() {
             let a = nth(address, i).ok_or(Exception::IllegalDataAddress)?;
+            #[cfg(feature = "tcp")]
+            if axis.is_none() {
+                if let Some(value) = self.tcp_read(a) {
+                    *slot = value;
+                    continue;
+                }
+            }
+            let gateway = &mut *self.gateway;
             *slot = match axis {
                 Some(axis) => gateway.axis_read(axis, a),
                 None => gateway.gateway_read(a, &self.link),

@@ -15,6 +15,9 @@ use crate::Rtim;
 /// What the firmware is asked to do with the flash.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+// No heap to box the record in: one request at a time lives in the gateway, and the firmware
+// writes it to flash from there.
+#[allow(clippy::large_enum_variant)]
 pub enum Store {
     /// Store this record ([`Settings::encode`]) as the settings.
     Save([u8; RECORD_LEN]),
@@ -46,6 +49,8 @@ pub(super) struct Persist {
     pub(super) plc: PlcLine,
     /// UNITID.
     pub(super) unit: u8,
+    /// AXISBASE.
+    pub(super) axis_base: u8,
     /// AXISCFG's "enabled" bits.
     pub(super) axes: AxisSet,
     pub(super) status: SaveStatus,
@@ -61,6 +66,7 @@ impl Persist {
             rtim: config.bus.rtim,
             plc: config.plc,
             unit: config.unit,
+            axis_base: config.axis_base,
             axes: config.bus.axes,
             status: SaveStatus::Idle,
             saves: config.boot.save_count,
@@ -75,6 +81,7 @@ impl Persist {
         config.bus.rtim = self.rtim;
         config.plc = self.plc;
         config.unit = self.unit;
+        config.axis_base = self.axis_base;
         config.bus.axes = self.axes;
         config
     }

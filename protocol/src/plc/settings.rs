@@ -26,30 +26,41 @@
 //! | 177 | PIO start mode: 0 level, 1 edge |
 //! | 178-179 | PIO jog speed, 0.01 mm/s (1-65535) |
 //! | 180-181 | PIO inching step, 0.01 mm (1-100) |
-//! | 182-183 | CRC-16/MODBUS of bytes 0-181 |
+//! | 182 | unit id of axis 0 (1-232) |
+//! | 183-186 | Ethernet: the board's IPv4 address |
+//! | 187 | Ethernet: subnet prefix length (1-32) |
+//! | 188-191 | Ethernet: default router (0.0.0.0 none) |
+//! | 192 | Modbus TCP: connections at once (1-4) |
+//! | 193-194 | Modbus TCP: idle time, s (0-3600) |
+//! | 195-210 | Modbus TCP: four allowed client addresses (0.0.0.0 empty) |
+//! | 211-212 | CRC-16/MODBUS of bytes 0-210 |
 //!
 //! [`Settings::decode`] accepts a record only if its version, length, CRC and every field's
 //! range are right: a record that is not exactly what [`Settings::encode`] writes is refused
-//! as a whole, never applied in part. It also reads format 1, the record before the PIO
-//! patterns (176 bytes and the CRC): pattern 0, level mode, the jog's factory values; so the
-//! settings a gateway stored
-//! before an update survive it.
+//! as a whole, never applied in part. It also reads the formats before: 2, without the unit
+//! base and the network (182 bytes and the CRC: axis 0 is unit 1, the network's defaults), and
+//! 1, also without the PIO patterns (176 bytes and the CRC: pattern 0, level mode, the jog's
+//! factory values); so the settings a gateway stored before an update survive it.
 
 use super::config::{
-    axis_of, complement_code, complement_of, home_of, pio_inch_ok, stroke_of, unit_ok, watchdog_ok,
-    AxisConfig, GatewayConfig, Parity, PlcLine, WatchdogAction, DEFAULT_PIO_INCH, DEFAULT_PIO_JOG,
+    axis_base_ok, axis_of, complement_code, complement_of, home_of, pio_inch_ok, stroke_of,
+    unit_ok, watchdog_ok, AxisConfig, GatewayConfig, Parity, PlcLine, WatchdogAction,
+    DEFAULT_AXIS_BASE, DEFAULT_PIO_INCH, DEFAULT_PIO_JOG,
 };
 use crate::axes::AxisSet;
 use crate::engine::MAX_RETRIES;
 use crate::line::Baud;
 use crate::modbus::crc;
+use crate::net::{idle_ok, max_connections_ok, prefix_ok, Ipv4, NetConfig, Policy};
 use crate::pio::{Pattern, StartMode};
 use crate::time::Duration;
 use crate::units::Lead;
 use crate::{Axis, Rtim};
 
-/// The format version this code writes (it reads [`FORMAT_1`] too).
-pub const FORMAT: u8 = 2;
+/// The format version this code writes (it reads [`FORMAT_2`] and [`FORMAT_1`] too).
+pub const FORMAT: u8 = 3;
+/// The format before the unit base and the network: [`RECORD_LEN_2`] bytes.
+pub const FORMAT_2: u8 = 2;
 /// The format before the PIO patterns: [`RECORD_LEN_1`] bytes.
 pub const FORMAT_1: u8 = 1;
 /// Bytes of one axis' configuration.
@@ -58,8 +69,12 @@ const AXIS_LEN: usize = 10;
 const AXES_AT: usize = 16;
 /// Where the PIO's pattern and start mode are.
 const PIO_AT: usize = AXES_AT + 16 * AXIS_LEN;
+/// Where the unit base and the network are.
+const NET_AT: usize = PIO_AT + 6;
 /// The record's length, CRC included.
-pub const RECORD_LEN: usize = PIO_AT + 6 + 2;
+pub const RECORD_LEN: usize = NET_AT + 29 + 2;
+/// A format 2 record's length, CRC included.
+pub const RECORD_LEN_2: usize = NET_AT + 2;
 /// A format 1 record's length, CRC included.
 pub const RECORD_LEN_1: usize = PIO_AT + 2;
 
@@ -110,6 +125,10 @@ pub struct Settings {
     pub pio_inch: u16,
     /// Axes on the bus.
     pub axes: AxisSet,
+    /// The unit id of axis 0.
+    pub axis_base: u8,
+    /// The Ethernet board's address and the Modbus TCP server's policy.
+    pub net: NetConfig,
     /// Every axis' configuration.
     pub axis_config: crate::AxisMap<AxisConfig>,
 }
@@ -131,6 +150,8 @@ impl Settings {
             pio_jog: config.pio_jog,
             pio_inch: config.pio_inch,
             axes: config.bus.axes,
+            axis_base: config.axis_base,
+            net: config.net,
             axis_config: config.axes,
         }
     }
@@ -160,6 +181,8 @@ impl Settings {
         config.pio_jog = self.pio_jog;
         config.pio_inch = self.pio_inch;
         config.bus.axes = self.axes;
+        config.axis_base = self.axis_base;
+        config.net = self.net;
         config.axes = self.axis_config;
     }
 
@@ -191,6 +214,15 @@ impl Settings {
         w.u8(self.pio_start as u8);
         w.bytes(&self.pio_jog.to_le_bytes());
         w.bytes(&self.pio_inch.to_le_bytes());
+        w.u8(self.axis_base);
+        w.bytes(&self.net.ip.0);
+        w.u8(self.net.prefix);
+        w.bytes(&self.net.router.0);
+        w.u8(self.net.policy.max_connections);
+        w.bytes(&self.net.policy.idle_s.to_le_bytes());
+        for address in &self.net.policy.allow {
+            w.bytes(&address.0);
+        }
         let sum = crc::checksum(out.get(..RECORD_LEN - 2).unwrap_or(&[]));
         if let Some(tail) = out.get_mut(RECORD_LEN - 2..) {
             tail.copy_from_slice(&sum.to_le_bytes());
@@ -202,6 +234,7 @@ impl Settings {
     pub fn decode(record: &[u8]) -> Result<Settings, SettingsError> {
         let len = match record.first() {
             Some(&FORMAT) => RECORD_LEN,
+            Some(&FORMAT_2) => RECORD_LEN_2,
             Some(&FORMAT_1) => RECORD_LEN_1,
             _ if record.len() != RECORD_LEN => return Err(SettingsError::Length),
             _ => return Err(SettingsError::Version),
@@ -283,6 +316,42 @@ impl Settings {
                 .ok_or(bad(PIO_AT + 4))?;
             (pattern, start, jog, inch)
         };
+        let (axis_base, net) = if len == RECORD_LEN {
+            let base = r
+                .u8(NET_AT)
+                .filter(|&b| axis_base_ok(b.into()))
+                .ok_or(bad(NET_AT))?;
+            let prefix = r
+                .u8(NET_AT + 5)
+                .filter(|&p| prefix_ok(p.into()))
+                .ok_or(bad(NET_AT + 5))?;
+            let max_connections = r
+                .u8(NET_AT + 10)
+                .filter(|&n| max_connections_ok(n.into()))
+                .ok_or(bad(NET_AT + 10))?;
+            let idle_s = r
+                .u16(NET_AT + 11)
+                .filter(|&s| idle_ok(s))
+                .ok_or(bad(NET_AT + 11))?;
+            let address = |at: usize| r.array(at).map(Ipv4).ok_or(bad(at));
+            let mut allow = [Ipv4::UNSPECIFIED; 4];
+            for (at, slot) in (NET_AT + 13..).step_by(4).zip(allow.iter_mut()) {
+                *slot = address(at)?;
+            }
+            let net = NetConfig {
+                ip: address(NET_AT + 1)?,
+                prefix,
+                router: address(NET_AT + 6)?,
+                policy: Policy {
+                    allow,
+                    max_connections,
+                    idle_s,
+                },
+            };
+            (base, net)
+        } else {
+            (DEFAULT_AXIS_BASE, NetConfig::DEFAULT)
+        };
         let settings = Settings {
             unit,
             plc: PlcLine { baud, parity },
@@ -297,10 +366,12 @@ impl Settings {
             pio_jog,
             pio_inch,
             axes,
+            axis_base,
+            net,
             axis_config,
         };
-        // The gateway unit must not be one of the axes' units (axis n is unit n + 1).
-        if axis_of(unit, axes).is_some() {
+        // The gateway unit must not be one of the axes' units.
+        if axis_of(unit, axis_base, axes).is_some() {
             return Err(bad(1));
         }
         Ok(settings)

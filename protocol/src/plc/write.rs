@@ -12,7 +12,7 @@
 use core::num::NonZeroU16;
 
 use super::config::{
-    complement_of, home_of, pio_inch_ok, unit_ok, watchdog_ok, Parity, WatchdogAction,
+    axis_base_ok, complement_of, home_of, pio_inch_ok, unit_ok, watchdog_ok, Parity, WatchdogAction,
 };
 use super::map::{self, *};
 use super::refused::Refused;
@@ -300,6 +300,11 @@ pub enum GatewayWrite {
     PioAxis(Option<Axis>),
     /// PIOPAT.
     PioPattern(Pattern),
+    /// AXISBASE (taken on APPLY).
+    AxisBase(u8),
+    /// A register of the network block, at its offset (feature `tcp`).
+    #[cfg(feature = "tcp")]
+    Net(u16, u16),
     /// PIOSTART.
     PioStart(StartMode),
     /// PIOJOG, 0.01 mm/s.
@@ -351,6 +356,10 @@ impl GatewayWrite {
                 .ok()
                 .filter(|_| unit_ok(value))
                 .map(GatewayWrite::UnitId),
+            G_AXIS_BASE => u8::try_from(value)
+                .ok()
+                .filter(|_| axis_base_ok(value))
+                .map(GatewayWrite::AxisBase),
             G_APPLY => trigger(GatewayWrite::Apply),
             G_SAVE => trigger(GatewayWrite::Save),
             G_RESTART => trigger(GatewayWrite::Restart),
@@ -374,6 +383,15 @@ impl GatewayWrite {
             G_SYNC_MASK => Some(GatewayWrite::SyncMask(AxisSet(value))),
             a if a.checked_sub(G_REQUEST).is_some_and(|i| i < G_REQUEST_LEN) => {
                 Some(GatewayWrite::ChannelRequest)
+            }
+            #[cfg(feature = "tcp")]
+            a if a.checked_sub(G_NET).is_some_and(|i| i < G_NET_LEN) => {
+                let offset = a - G_NET;
+                // Checked on a copy; applied after every register of the write is checked.
+                let mut probe = crate::net::NetConfig::DEFAULT;
+                probe
+                    .set_register(offset, value)
+                    .then_some(GatewayWrite::Net(offset, value))
             }
             a => per_axis(a, G_AXIS_CONFIG, G_AXIS_CONFIG_LEN).and_then(|(axis, field)| {
                 AxisSetting::parse(field, value).map(|s| GatewayWrite::Axis(axis, s))

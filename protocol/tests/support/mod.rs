@@ -320,6 +320,10 @@ pub struct Rig {
     /// Flash requests (each save succeeds), with their time.
     pub stores: Vec<(u64, protocol::plc::Store)>,
     replies: Vec<Vec<u8>>,
+    /// Modbus TCP replies, with their socket, in order.
+    pub tcp_replies: Vec<(usize, Vec<u8>)>,
+    /// Sockets the node closed, with the time.
+    pub tcp_closes: Vec<(u64, usize)>,
 }
 
 impl Rig {
@@ -333,6 +337,8 @@ impl Rig {
             plc_lines: Vec::new(),
             stores: Vec::new(),
             replies: Vec::new(),
+            tcp_replies: Vec::new(),
+            tcp_closes: Vec::new(),
         }
     }
 
@@ -383,6 +389,15 @@ impl Rig {
                         self.node.stored(Ok(saves));
                     }
                     self.stores.push((self.now, store));
+                }
+                #[cfg(feature = "tcp")]
+                Some(Action::TcpReply { socket, bytes }) => {
+                    self.tcp_replies.push((socket, bytes.to_vec()))
+                }
+                #[cfg(feature = "tcp")]
+                Some(Action::TcpClose(socket)) => {
+                    self.tcp_closes.push((self.now, socket));
+                    self.node.tcp_closed(socket);
                 }
             }
         }

@@ -6,6 +6,8 @@
 //! PLC /dev/pts/5
 //! $ rc-gateway-host --plc /dev/ttyUSB0 --plc-baud 38400 --bus /dev/ttyUSB1 --axes 2
 //! PLC /dev/ttyUSB0
+//! $ rc-gateway-host --modbus-tcp 127.0.0.1:5020 --sim 2
+//! TCP 127.0.0.1:5020
 //! ```
 //!
 //! See `rc_host::host` for the loop and its timing limits; `--help` for the options, the
@@ -22,7 +24,7 @@ use protocol::line::Baud;
 use protocol::units::{Lead, Length};
 use protocol::AxisSet;
 use protocol::HomeDirection;
-use rc_host::host::{BusLine, Ended, Host, Level, Options, Parity, PlcLine};
+use rc_host::host::{BusLine, Ended, Host, Level, Options, Parity, PlcLine, TcpOptions};
 
 const ABOUT: &str = "\
 The Robo Cylinder gateway on a PC: the firmware's bus master and Modbus register map, between a
@@ -31,13 +33,19 @@ Modbus RTU master (the PLC) and simulated or real IAI controllers on RS485.
 LINES
   PLC side:  --plc-pty        a new pseudo-terminal; a Modbus master program opens it
              --plc PATH       a serial device, raw, 8 data bits, 1 stop bit, --plc-parity
+             --modbus-tcp ADDR:PORT
+                              Modbus TCP (alone, or beside --plc/--plc-pty); port 0 takes a
+                              free one; --tcp-allow A[,B..] lists the clients allowed (up to
+                              4; none: anyone)
   Bus side:  --sim N          N simulated controllers (axes 0..N-1) in this process, already at
                               --bus-baud and RTIM 3 ms (no establishment procedure)
              --bus PATH       an RS485 adapter; the establishment procedure (break, set-up at
                               9.6 kbit/s, communication change) runs first unless
                               --no-establish; --axes says which axes are on the bus
-  The first line on standard output is `PLC <device>`: the device the Modbus master opens.
+  The first line on standard output is `PLC <device>`: the device the Modbus master opens; with
+  --modbus-tcp a line `TCP <address>:<port>` follows it (or is the first, with no serial line).
   Units: axis n is Modbus unit n + 1; the gateway itself is --unit (63; 1-247, not an axis' unit).
+  On TCP, unit 0xFF (and 0) is the gateway unit; a unit nobody serves gets exception 0A.
 
 CONTROL LINES (standard input)
   On by default with --sim, off with --bus (--control / --no-control). One command per line;
@@ -81,7 +89,8 @@ enum ParityArg {
 /// The Robo Cylinder gateway on a PC (Modbus RTU PLC side, RS485 bus side).
 #[derive(Parser, Debug)]
 #[command(name = "rc-gateway-host", version, long_about = ABOUT)]
-#[command(group(ArgGroup::new("plc_side").required(true).args(["plc_pty", "plc"])))]
+#[command(group(ArgGroup::new("plc_side").required(true).multiple(true).args(["plc_pty", "plc", "modbus_tcp"])))]
+#[command(group(ArgGroup::new("serial_plc").args(["plc_pty", "plc"])))]
 #[command(group(ArgGroup::new("bus_side").required(true).args(["sim", "bus"])))]
 struct Cli {
     /// PLC side: a new pseudo-terminal (its path is the first line on stdout).
@@ -90,6 +99,18 @@ struct Cli {
     /// PLC side: a serial device.
     #[arg(long, value_name = "PATH")]
     plc: Option<PathBuf>,
+    /// PLC side: Modbus TCP on this address and port (port 0: any free one; the address
+    /// listened on is printed as `TCP <address>:<port>`).
+    #[arg(long, value_name = "ADDR:PORT")]
+    modbus_tcp: Option<std::net::SocketAddr>,
+    /// --modbus-tcp: the clients allowed to connect, up to 4 IPv4 addresses (none: anyone).
+    #[arg(
+        long,
+        value_name = "A[,B..]",
+        value_delimiter = ',',
+        requires = "modbus_tcp"
+    )]
+    tcp_allow: Vec<std::net::Ipv4Addr>,
     /// The PLC line's rate, bit/s (sets the Modbus t3.5).
     #[arg(long, default_value_t = 115_200, value_name = "BPS")]
     plc_baud: u32,
@@ -246,10 +267,25 @@ fn options(cli: &Cli) -> Result<Options, String> {
         .map(Length)
         .map_err(|_| "--stroke-mm: out of range".to_string())?;
     let bus_baud = Baud::from_bits_per_second(cli.bus_baud).ok_or("--bus-baud: unsupported")?;
-    let plc = match &cli.plc {
-        Some(path) => PlcLine::Device(path.clone()),
-        None => PlcLine::Pty,
+    let plc = match (&cli.plc, cli.plc_pty) {
+        (Some(path), _) => PlcLine::Device(path.clone()),
+        (None, true) => PlcLine::Pty,
+        (None, false) => PlcLine::None,
     };
+    if cli.tcp_allow.len() > 4 {
+        return Err(format!(
+            "--tcp-allow: {} addresses, at most 4",
+            cli.tcp_allow.len()
+        ));
+    }
+    let tcp = cli.modbus_tcp.map(|listen| TcpOptions {
+        listen,
+        allow: cli
+            .tcp_allow
+            .iter()
+            .map(|a| protocol::net::Ipv4(a.octets()))
+            .collect(),
+    });
     if rc_host::host::port::termios_rate(cli.plc_baud).is_none() {
         return Err(format!(
             "--plc-baud {}: termios has no constant for this rate",
@@ -284,6 +320,7 @@ fn options(cli: &Cli) -> Result<Options, String> {
     };
     Ok(Options {
         plc,
+        tcp,
         plc_baud: cli.plc_baud,
         plc_parity: match cli.plc_parity {
             ParityArg::None => Parity::None,
@@ -350,7 +387,12 @@ fn run(options: &Options) -> std::io::Result<Ended> {
     let mut host = Host::new(options)?;
     {
         let mut out = std::io::stdout().lock();
-        writeln!(out, "PLC {}", host.plc_path().display())?;
+        if let Some(path) = host.plc_path() {
+            writeln!(out, "PLC {}", path.display())?;
+        }
+        if let Some(addr) = host.tcp_addr() {
+            writeln!(out, "TCP {addr}")?;
+        }
         out.flush()?;
     }
     let axes: Vec<String> = host
@@ -362,10 +404,20 @@ fn run(options: &Options) -> std::io::Result<Ended> {
         .iter()
         .map(|a| a.get().to_string())
         .collect();
+    let plc = match (host.plc_path(), host.tcp_addr()) {
+        (Some(path), Some(addr)) => {
+            format!(
+                "PLC {} at {} bit/s and TCP {addr}",
+                path.display(),
+                options.plc_baud
+            )
+        }
+        (Some(path), None) => format!("PLC {} at {} bit/s", path.display(), options.plc_baud),
+        (None, Some(addr)) => format!("TCP {addr}"),
+        (None, None) => String::new(),
+    };
     eprintln!(
-        "rc-gateway-host: PLC {} at {} bit/s, gateway unit {}; {} axes {} at {} bit/s",
-        host.plc_path().display(),
-        options.plc_baud,
+        "rc-gateway-host: {plc}, gateway unit {}; {} axes {} at {} bit/s",
         options.unit,
         if host.sim().is_some() {
             "simulated"

@@ -41,6 +41,18 @@ pub fn gateway_config(options: &Options) -> io::Result<GatewayConfig> {
         baud: options.plc_baud,
         parity: options.plc_parity,
     };
+    if let Some(tcp) = &options.tcp {
+        if tcp.allow.len() > config.net.policy.allow.len() {
+            return Err(invalid(format!(
+                "{} clients to allow: at most {}",
+                tcp.allow.len(),
+                config.net.policy.allow.len()
+            )));
+        }
+        for (slot, &ip) in config.net.policy.allow.iter_mut().zip(&tcp.allow) {
+            *slot = ip;
+        }
+    }
     config.bus.baud = options.bus_baud;
     config.bus.rtim = Rtim::MIN;
     config.bus.establish = establish;

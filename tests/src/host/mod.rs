@@ -32,6 +32,7 @@ mod control;
 pub mod log;
 pub mod port;
 mod run;
+pub mod tcp;
 
 pub use config::{gateway_config, simulated_bus};
 pub use control::{Control, HELP};
@@ -73,6 +74,18 @@ pub enum PlcLine {
     Pty,
     /// A serial device (an RS485 or RS232 adapter wired to the PLC).
     Device(PathBuf),
+    /// No serial PLC line: the PLC talks Modbus TCP ([`Options::tcp`]).
+    None,
+}
+
+/// The Modbus TCP side of the host gateway.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TcpOptions {
+    /// Where to listen (port 0: any free one; the address listened on is
+    /// [`Host::tcp_addr`]).
+    pub listen: std::net::SocketAddr,
+    /// The clients allowed (at most 4; empty: anyone).
+    pub allow: Vec<protocol::net::Ipv4>,
 }
 
 /// Where the actuators are.
@@ -108,6 +121,8 @@ pub struct Options {
     pub plc_baud: u32,
     /// The PLC line's parity (serial device only).
     pub plc_parity: Parity,
+    /// The Modbus TCP side, if any.
+    pub tcp: Option<TcpOptions>,
     /// The bus side.
     pub bus: BusLine,
     /// The RS485 line rate.
@@ -136,6 +151,7 @@ impl Default for Options {
             plc: PlcLine::Pty,
             plc_baud: 115_200,
             plc_parity: Parity::None,
+            tcp: None,
             bus: BusLine::Sim {
                 axes: 1,
                 points: false,
@@ -175,7 +191,8 @@ enum BusSide {
 /// The gateway between two lines; see the [module documentation](self).
 pub struct Host {
     node: Box<Node>,
-    plc: Port,
+    plc: Option<Port>,
+    tcp: Option<tcp::TcpSide>,
     bus: BusSide,
     /// Frames sent to each axis, by command mnemonic.
     sent: Vec<BTreeMap<&'static str, u64>>,
@@ -217,12 +234,25 @@ impl Host {
             }
         };
         let plc = match &options.plc {
-            PlcLine::Pty => Port::pty(options.plc_baud)?,
-            PlcLine::Device(path) => Port::serial(path, options.plc_baud, options.plc_parity)?,
+            PlcLine::Pty => Some(Port::pty(options.plc_baud)?),
+            PlcLine::Device(path) => {
+                Some(Port::serial(path, options.plc_baud, options.plc_parity)?)
+            }
+            PlcLine::None => None,
+        };
+        let tcp = match &options.tcp {
+            Some(tcp) => Some(tcp::TcpSide::bind(tcp.listen)?),
+            None if plc.is_none() => {
+                return Err(invalid(
+                    "no PLC side: a serial line, Modbus TCP or both".into(),
+                ))
+            }
+            None => None,
         };
         Ok(Host {
             node,
             plc,
+            tcp,
             bus,
             sent: vec![BTreeMap::new(); 16],
             log: Log::new(options.log),
@@ -236,9 +266,15 @@ impl Host {
         })
     }
 
-    /// The PLC's device: the pseudo-terminal's `/dev/pts/N`, or the device opened.
-    pub fn plc_path(&self) -> &Path {
-        self.plc.path()
+    /// The PLC's device: the pseudo-terminal's `/dev/pts/N`, or the device opened; `None`
+    /// without a serial PLC line.
+    pub fn plc_path(&self) -> Option<&Path> {
+        self.plc.as_ref().map(Port::path)
+    }
+
+    /// The address the Modbus TCP side listens on, if there is one.
+    pub fn tcp_addr(&self) -> Option<std::net::SocketAddr> {
+        self.tcp.as_ref().and_then(|tcp| tcp.local_addr().ok())
     }
 
     /// The node (the gateway behind its lines).

@@ -37,7 +37,9 @@ impl Host {
             if let Some(ended) = self.read_control(now, &mut buf)? {
                 return Ok(ended);
             }
-            self.plc.flush()?;
+            if let Some(plc) = &mut self.plc {
+                plc.flush()?;
+            }
             if let BusSide::Device { port, .. } = &mut self.bus {
                 port.flush()?;
             }
@@ -46,8 +48,14 @@ impl Host {
     }
 
     fn read_plc(&mut self, now: u64, buf: &mut [u8]) -> io::Result<()> {
+        if let Some(tcp) = &mut self.tcp {
+            tcp.pump(now, &mut self.node)?;
+        }
         for _ in 0..MAX_READS_PER_PASS {
-            let n = match self.plc.read(buf)? {
+            let Some(plc) = &mut self.plc else {
+                break;
+            };
+            let n = match plc.read(buf)? {
                 Input::Bytes(n) => n,
                 Input::Nothing => break,
             };
@@ -113,16 +121,33 @@ impl Host {
                     }
                 }
                 Some(Action::Reply(bytes)) => {
-                    self.plc.send(bytes)?;
+                    if let Some(plc) = &mut self.plc {
+                        plc.send(bytes)?;
+                    }
                     self.log.modbus_request(now, &self.burst, "reply");
                     self.log.modbus_reply(now, bytes);
                     self.burst.clear();
                 }
                 Some(Action::Line(action)) => self.line(now, action)?,
                 Some(Action::PlcLine(line)) => {
-                    self.plc.drain()?;
-                    self.plc.set_rate(line.baud)?;
+                    if let Some(plc) = &mut self.plc {
+                        plc.drain()?;
+                        plc.set_rate(line.baud)?;
+                    }
                     self.log.note(now, &format!("PLC line: {line:?}"));
+                }
+                Some(Action::TcpReply { socket, bytes }) => {
+                    self.log.modbus_reply(now, bytes);
+                    if let Some(tcp) = &mut self.tcp {
+                        let bytes = bytes.to_vec();
+                        tcp.reply(now, socket, &bytes, &mut self.node);
+                    }
+                }
+                Some(Action::TcpClose(socket)) => {
+                    self.log.note(now, &format!("TCP: socket {socket} closed"));
+                    if let Some(tcp) = &mut self.tcp {
+                        tcp.close(socket, &mut self.node);
+                    }
                 }
                 Some(Action::Store(store)) => {
                     // A PC has no settings flash: a save is kept for the run (and counted), a
@@ -183,7 +208,13 @@ impl Host {
         if let Some(t) = until {
             wake = wake.min(t);
         }
-        let mut fds: Vec<(BorrowedFd<'_>, bool)> = vec![(self.plc.fd(), self.plc.output_pending())];
+        let mut fds: Vec<(BorrowedFd<'_>, bool)> = Vec::new();
+        if let Some(plc) = &self.plc {
+            fds.push((plc.fd(), plc.output_pending()));
+        }
+        if let Some(tcp) = &self.tcp {
+            fds.extend(tcp.fds());
+        }
         match &self.bus {
             BusSide::Sim(bus) => {
                 if let Some(t) = bus.next_event() {
