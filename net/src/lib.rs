@@ -1,0 +1,269 @@
+//! The gateway's network task: Modbus TCP on port 502 around the protocol [`Node`], with
+//! embassy-net. Shared by every build with Ethernet (the Ethernet board and the emulator's
+//! `mps2-an386` build), so that what the emulator proves is the board's own code.
+//!
+//! # Shape
+//! The node has one owner, the gateway task, as on every board: nothing here locks it. Each of
+//! [`SOCKETS`] sockets has a task of its own ([`serve`]) that accepts a client on port 502 and
+//! moves bytes; the two sides meet in a [`Port`] (in a `static`):
+//!
+//! | Socket task → gateway | Gateway → socket task |
+//! |---|---|
+//! | [`Event::Opened`] with the client's address | `close`: close the connection (refused, replaced, idle, framing lost, not reading) |
+//! | bytes in the socket's receive pipe, and [`Event::Data`] | the replies, in the socket's send pipe |
+//! | [`Event::Closed`]: the connection has ended, and the task no longer touches the pipes | `released`: the pipes are empty, accept the next client |
+//!
+//! The gateway task hands each event to [`Port::handle`] and each [`Action::TcpReply`] /
+//! [`Action::TcpClose`] to [`Port::reply`] / [`Port::close`]. It never waits on a socket: a
+//! reply that does not fit in the send pipe means the client is not reading, and closes its
+//! connection; the node's own receive buffer takes one request at a time, so a client that
+//! pipelines waits in its pipe and in TCP's window, not in the gateway's time. Every end of a
+//! connection goes through [`Event::Closed`] and `released`, so no byte of one client ever
+//! reaches the next one on the same socket.
+//!
+//! [`Action::TcpReply`]: protocol::node::Action::TcpReply
+//! [`Action::TcpClose`]: protocol::node::Action::TcpClose
+
+#![no_std]
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+use embassy_futures::select::{select3, Either3};
+use embassy_net::tcp::TcpSocket;
+use embassy_net::{IpAddress, Stack};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::channel::Channel;
+use embassy_sync::pipe::Pipe;
+use embassy_sync::signal::Signal;
+use protocol::net::Ipv4;
+use protocol::node::Node;
+use protocol::time::Instant;
+
+pub use protocol::modbus::tcp::{PORT, SOCKETS};
+
+type Cs = CriticalSectionRawMutex;
+
+/// Bytes from a client waiting for the node: more than one request (260 bytes at most), so a
+/// pipelining client's next request is already here when the node is ready for it.
+pub const RECEIVE_PIPE: usize = 512;
+
+/// Replies waiting for the socket: a few whole replies (260 bytes at most each). A client that
+/// lets this fill up is not reading its replies.
+pub const SEND_PIPE: usize = 1024;
+
+/// Events queued for the gateway task, at most (a socket task waits when it is full).
+const EVENTS: usize = 4 * SOCKETS;
+
+/// What a socket task tells the gateway task.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Event {
+    /// A client at this address connected on the socket.
+    Opened {
+        /// The socket, 0 to [`SOCKETS`] - 1.
+        socket: usize,
+        /// The client's IPv4 address.
+        peer: Ipv4,
+    },
+    /// Bytes from the client wait in the socket's receive pipe.
+    Data(usize),
+    /// The socket's connection has ended (the client closed it, it broke, or the gateway
+    /// closed it), and its task waits to be released.
+    Closed(usize),
+}
+
+/// One socket's side of the [`Port`].
+struct Socket {
+    receive: Pipe<Cs, RECEIVE_PIPE>,
+    send: Pipe<Cs, SEND_PIPE>,
+    close: Signal<Cs, ()>,
+    released: Signal<Cs, ()>,
+}
+
+impl Socket {
+    const fn new() -> Socket {
+        Socket {
+            receive: Pipe::new(),
+            send: Pipe::new(),
+            close: Signal::new(),
+            released: Signal::new(),
+        }
+    }
+}
+
+/// Where the socket tasks and the gateway task meet; see the [crate documentation](crate).
+pub struct Port {
+    events: Channel<Cs, Event, EVENTS>,
+    sockets: [Socket; SOCKETS],
+}
+
+impl Default for Port {
+    fn default() -> Self {
+        Port::new()
+    }
+}
+
+impl Port {
+    /// Empty pipes, no events.
+    pub const fn new() -> Port {
+        Port {
+            events: Channel::new(),
+            sockets: [const { Socket::new() }; SOCKETS],
+        }
+    }
+
+    /// The next event (the gateway task waits for it beside its lines and deadlines).
+    pub async fn event(&self) -> Event {
+        self.events.receive().await
+    }
+
+    /// An event already queued, if any.
+    pub fn try_event(&self) -> Option<Event> {
+        self.events.try_receive().ok()
+    }
+
+    /// Hands an event to the node at `now`.
+    pub fn handle(&self, event: Event, node: &mut Node, now: Instant) {
+        match event {
+            Event::Opened { socket, peer } => {
+                if !node.tcp_opened(now, socket, peer) {
+                    self.close_socket(socket);
+                }
+            }
+            Event::Data(socket) => self.feed(socket, node, now),
+            Event::Closed(socket) => {
+                node.tcp_closed(socket);
+                if let Some(s) = self.sockets.get(socket) {
+                    s.receive.clear();
+                    s.send.clear();
+                    s.close.reset();
+                    s.released.signal(());
+                }
+            }
+        }
+    }
+
+    /// Gives the node the received bytes it has room for.
+    pub fn feed(&self, socket: usize, node: &mut Node, now: Instant) {
+        let Some(s) = self.sockets.get(socket) else {
+            return;
+        };
+        let mut buf = [0u8; 64];
+        loop {
+            let room = node.tcp_room(socket).min(buf.len());
+            let Some(chunk) = buf.get_mut(..room).filter(|c| !c.is_empty()) else {
+                return;
+            };
+            let Ok(n) = s.receive.try_read(chunk) else {
+                return;
+            };
+            node.tcp_received(now, socket, chunk.get(..n).unwrap_or(&[]));
+        }
+    }
+
+    /// Queues the node's reply on `socket`, whole, or closes the connection (its client is not
+    /// reading); then gives the node what came meanwhile.
+    pub fn reply(&self, socket: usize, bytes: &[u8], node: &mut Node, now: Instant) {
+        let Some(s) = self.sockets.get(socket) else {
+            return;
+        };
+        if s.send.free_capacity() < bytes.len() || s.send.try_write(bytes) != Ok(bytes.len()) {
+            self.close(socket, node);
+            return;
+        }
+        self.feed(socket, node, now);
+    }
+
+    /// Closes the connection on `socket`, as the node asked ([`Action::TcpClose`]).
+    ///
+    /// [`Action::TcpClose`]: protocol::node::Action::TcpClose
+    pub fn close(&self, socket: usize, node: &mut Node) {
+        node.tcp_closed(socket);
+        self.close_socket(socket);
+    }
+
+    fn close_socket(&self, socket: usize) {
+        if let Some(s) = self.sockets.get(socket) {
+            s.close.signal(());
+        }
+    }
+}
+
+/// The client's IPv4 address (0.0.0.0, which no allow-list matches, if it has none).
+fn peer_of(socket: &TcpSocket<'_>) -> Ipv4 {
+    match socket.remote_endpoint().map(|e| e.addr) {
+        Some(IpAddress::Ipv4(address)) => Ipv4(address.octets()),
+        #[allow(unreachable_patterns)]
+        _ => Ipv4::UNSPECIFIED,
+    }
+}
+
+/// Socket `index`: accepts a client on [`PORT`], moves its bytes to and from the gateway task
+/// through `port` until the connection ends, reports the end, waits to be released, and
+/// accepts the next client, for good. `rx` and `tx` are the socket's own TCP buffers.
+///
+/// TCP's own time-outs are off: the node closes an idle connection (its TCPIDLE setting), and
+/// keep-alives would only hide a half-open one from it.
+pub async fn serve(
+    stack: Stack<'static>,
+    port: &'static Port,
+    index: usize,
+    rx: &'static mut [u8],
+    tx: &'static mut [u8],
+) -> ! {
+    let Some(s) = port.sockets.get(index) else {
+        loop {
+            core::future::pending::<()>().await;
+        }
+    };
+    let mut buf = [0u8; 256];
+    let mut out = [0u8; 256];
+    loop {
+        let mut socket = TcpSocket::new(stack, rx, tx);
+        socket.set_nagle_enabled(false);
+        if socket.accept(PORT).await.is_ok() {
+            s.close.reset();
+            port.events
+                .send(Event::Opened {
+                    socket: index,
+                    peer: peer_of(&socket),
+                })
+                .await;
+            connected(&mut socket, port, s, index, &mut buf, &mut out).await;
+            socket.abort();
+            let _ = socket.flush().await;
+        }
+        drop(socket);
+        s.released.reset();
+        port.events.send(Event::Closed(index)).await;
+        s.released.wait().await;
+    }
+}
+
+/// Moves bytes until the client closes, the connection breaks or the gateway closes it.
+async fn connected(
+    socket: &mut TcpSocket<'_>,
+    port: &Port,
+    s: &Socket,
+    index: usize,
+    buf: &mut [u8],
+    out: &mut [u8],
+) {
+    use embedded_io_async::Write;
+    loop {
+        let (mut reader, mut writer) = socket.split();
+        match select3(reader.read(buf), s.send.read(out), s.close.wait()).await {
+            Either3::First(Ok(n)) if n > 0 => {
+                s.receive.write_all(buf.get(..n).unwrap_or(&[])).await;
+                port.events.send(Event::Data(index)).await;
+            }
+            // The client closed (0 bytes) or the connection broke.
+            Either3::First(_) => return,
+            Either3::Second(n) => {
+                if writer.write_all(out.get(..n).unwrap_or(&[])).await.is_err() {
+                    return;
+                }
+            }
+            Either3::Third(()) => return,
+        }
+    }
+}
