@@ -1,13 +1,19 @@
 //! The gateway's network side on QEMU's `mps2-an386` machine: a Cortex-M4 with an SMSC LAN9118
-//! Ethernet controller (QEMU has no STM32 with Ethernet). It proves the network task (embassy-net,
-//! its sockets and buffers, the per-socket serving loop) in the emulator, not the STM32's MAC.
+//! Ethernet controller (QEMU has no STM32 with Ethernet). It runs the protocol [`Node`] with its
+//! Modbus TCP side behind the network task the Ethernet board runs ([`rc_net`]: the same socket
+//! tasks, pipes and buffers), so what the emulator suite proves over TCP is the board's code;
+//! not the STM32's Ethernet MAC, its PHY or its driver (embassy-stm32's `eth`).
 //!
-//! - IPv4 10.0.2.15/24, gateway 10.0.2.2, static: the addresses of QEMU's user-mode network
+//! - IPv4 from the node's settings ([`GatewayConfig::net`]); this build sets 10.0.2.15/24,
+//!   router 10.0.2.2, the addresses of QEMU's user-mode network
 //!   (`-nic user,hostfwd=tcp:127.0.0.1:PORT-:502`).
-//! - TCP port 502, [`SOCKETS`] sockets, each served by its own task ([`serve`]): up to five
-//!   connections at once. For now each connection is echoed; the echo is where the gateway's
-//!   node will be called.
-//! - The log goes over semihosting (`-semihosting-config enable=on,target=native`).
+//! - TCP port 502, [`rc_net::SOCKETS`] sockets, each served by its own task ([`rc_net::serve`]);
+//!   the gateway task owns the node and answers them.
+//! - No RS485 bus and no PIO here: the bus frames the node sends go nowhere, so its axes stay
+//!   offline (the bus is proven on the L475 emulator build). No flash: SAVE is counted, not
+//!   stored.
+//! - The log goes over semihosting (`-semihosting-config enable=on,target=native`); the line
+//!   `ready` says the sockets listen.
 //!
 //! Run it with `scripts/emu-net.sh`.
 
@@ -26,26 +32,29 @@ mod rt;
 mod time;
 
 use embassy_executor::Spawner;
-use embassy_net::tcp::TcpSocket;
+use embassy_futures::select::{select, Either};
 use embassy_net::{Config, Ipv4Address, Ipv4Cidr, Stack, StackResources, StaticConfigV4};
-use embassy_time::Duration;
+use embassy_time::Timer;
+use protocol::net::Ipv4;
+use protocol::node::{Action, Node};
+use protocol::plc::{GatewayConfig, Store};
+use protocol::time::Instant;
+use protocol::AxisSet;
+use rc_net::{Port, SOCKETS};
 use static_cell::StaticCell;
 
 /// The LAN9118's register window on the AN386 (hw/arm/mps2.c: `ethernet_base`).
 const ETH_BASE: usize = 0x4020_0000;
 /// A locally administered MAC address (bit 1 of the first byte set).
 const MAC: [u8; 6] = [0x02, 0x00, 0x00, 0x47, 0x57, 0x01];
-/// The Modbus/TCP port.
-const PORT: u16 = 502;
-/// Connections served at once: one socket, one task each.
-pub const SOCKETS: usize = 5;
-/// Bytes of each socket's receive and transmit buffer.
+/// Bytes of each socket's TCP receive and transmit buffer (as on the Ethernet board).
 const SOCKET_BUF: usize = 1024;
-/// A connection idle this long is dropped (the socket is then free for the next client).
-const IDLE_TIMEOUT: Duration = Duration::from_secs(60);
 
 /// Shared by the driver and the LAN9118's interrupt handler (`rt::DefaultHandler`).
 pub static ETH_STATE: lan9118::State = lan9118::State::new();
+
+/// Where the socket tasks and the gateway task meet.
+static PORT: Port = Port::new();
 
 /// One socket's buffers.
 struct SocketBuffers {
@@ -56,51 +65,72 @@ struct SocketBuffers {
 /// Every socket's buffers, in a static: socket `i` takes entry `i` once.
 static BUFFERS: [StaticCell<SocketBuffers>; SOCKETS] = [const { StaticCell::new() }; SOCKETS];
 static RESOURCES: StaticCell<StackResources<SOCKETS>> = StaticCell::new();
+static NODE: StaticCell<Node> = StaticCell::new();
+
+/// The node's configuration here: two axes (on no bus), the emulator's network.
+fn config() -> GatewayConfig {
+    let mut config = GatewayConfig::new(AxisSet::first(2));
+    config.bus.establish = false;
+    config.net.ip = Ipv4([10, 0, 2, 15]);
+    config.net.prefix = 24;
+    config.net.router = Ipv4([10, 0, 2, 2]);
+    config
+}
 
 #[cortex_m_rt::entry]
 fn main() -> ! {
-    let Some(mut core) = cortex_m::Peripherals::take() else {
+    let Some(core) = cortex_m::Peripherals::take() else {
         log!("core peripherals taken twice");
         loop {
             cortex_m::asm::wfi();
         }
     };
     time::init(core.SYST);
-    rt::run(|spawner| start(spawner, &mut core.NVIC))
+    rt::run(start)
 }
 
-/// Brings the Ethernet controller and the stack up and spawns the tasks.
-fn start(spawner: Spawner, nvic: &mut cortex_m::peripheral::NVIC) {
+/// The network settings as embassy-net takes them.
+fn ip_config(config: &GatewayConfig) -> Config {
+    let net = config.net;
+    let [a, b, c, d] = net.ip.0;
+    let router = (net.router != Ipv4::UNSPECIFIED).then(|| {
+        let [a, b, c, d] = net.router.0;
+        Ipv4Address::new(a, b, c, d)
+    });
+    Config::ipv4_static(StaticConfigV4 {
+        address: Ipv4Cidr::new(Ipv4Address::new(a, b, c, d), net.prefix),
+        gateway: router,
+        dns_servers: Default::default(),
+    })
+}
+
+/// Brings the Ethernet controller, the stack and the node up and spawns the tasks.
+fn start(spawner: Spawner) {
     // SAFETY: 0x4020_0000 is the AN386's LAN9118 (hw/arm/mps2.c), device memory for good, and
     // only the driver (and its interrupt handler, through `ETH_STATE`) touches it.
     let regs = unsafe { lan9118::Regs::new(ETH_BASE) };
-    let mut eth = match lan9118::Lan9118::new(regs, &ETH_STATE, MAC) {
+    let eth = match lan9118::Lan9118::new(regs, &ETH_STATE, MAC) {
         Ok(eth) => eth,
         Err(e) => {
             log!("lan9118: {:?}", e);
             return;
         }
     };
-    log!(
-        "lan9118: ID_REV {:#010x}, MAC {:02x?}",
-        eth.id_rev(),
-        eth.read_mac().unwrap_or_default()
-    );
     // The driver has set the line active high: only now may the NVIC see it.
     // SAFETY: no mask-based critical section of this program relies on IRQ 13 being masked.
     unsafe { cortex_m::peripheral::NVIC::unmask(rt::ETH_IRQ) };
-    let _ = nvic;
 
-    let config = Config::ipv4_static(StaticConfigV4 {
-        address: Ipv4Cidr::new(Ipv4Address::new(10, 0, 2, 15), 24),
-        gateway: Some(Ipv4Address::new(10, 0, 2, 2)),
-        dns_servers: Default::default(),
-    });
+    let config = config();
     // The seed of TCP's initial sequence numbers and ephemeral ports: the time since reset
     // (which varies a little under QEMU) over a constant. Not secret, as nothing here is.
     let seed = 0x5EED_0502_u64 ^ embassy_time::Instant::now().as_ticks();
-    let (stack, runner) =
-        embassy_net::new(eth, config, RESOURCES.init(StackResources::new()), seed);
+    let (stack, runner) = embassy_net::new(
+        eth,
+        ip_config(&config),
+        RESOURCES.init(StackResources::new()),
+        seed,
+    );
+    let node = NODE.init(Node::new(config));
     match net_task(runner) {
         Ok(token) => spawner.spawn(token),
         Err(_) => log!("net task not started"),
@@ -111,11 +141,11 @@ fn start(spawner: Spawner, nvic: &mut cortex_m::peripheral::NVIC) {
             Err(_) => log!("socket task {} not started", index),
         }
     }
-    log!(
-        "emu-net: listening on 10.0.2.15:{} with {} sockets",
-        PORT,
-        SOCKETS
-    );
+    match gateway_task(node) {
+        Ok(token) => spawner.spawn(token),
+        Err(_) => log!("gateway task not started"),
+    }
+    log!("ready");
 }
 
 /// The stack's own task: moves frames between the driver and the sockets.
@@ -124,77 +154,66 @@ async fn net_task(mut runner: embassy_net::Runner<'static, lan9118::Lan9118>) ->
     runner.run().await
 }
 
-/// One task per socket index.
+/// One task per socket, with the socket's buffers.
 #[embassy_executor::task(pool_size = SOCKETS)]
 async fn socket_task(stack: Stack<'static>, index: usize) {
-    serve(stack, index).await
-}
-
-/// Socket `index`: accepts a connection on [`PORT`], serves it until the client closes it (or it
-/// fails or idles out), and accepts the next one, forever. Its buffers are the static entry
-/// `index` of [`BUFFERS`].
-///
-/// The echo below is the stand-in for the gateway: there, each request read is handed to the
-/// shared node and its answer written back, on the same loop.
-pub async fn serve(stack: Stack<'static>, index: usize) {
-    let Some(cell) = BUFFERS.get(index) else {
+    let Some(buffers) = BUFFERS.get(index).and_then(|cell| {
+        cell.try_init(SocketBuffers {
+            rx: [0; SOCKET_BUF],
+            tx: [0; SOCKET_BUF],
+        })
+    }) else {
         log!("socket {}: no buffers", index);
         return;
     };
-    let Some(buffers) = cell.try_init(SocketBuffers {
-        rx: [0; SOCKET_BUF],
-        tx: [0; SOCKET_BUF],
-    }) else {
-        log!("socket {}: buffers taken twice", index);
-        return;
-    };
     let SocketBuffers { rx, tx } = buffers;
-    let mut data = [0u8; 512];
-    loop {
-        let mut socket = TcpSocket::new(stack, rx, tx);
-        socket.set_timeout(Some(IDLE_TIMEOUT));
-        // Answers go out at once, not after Nagle's wait for an ACK.
-        socket.set_nagle_enabled(false);
-        if let Err(e) = socket.accept(PORT).await {
-            log!("socket {}: accept: {:?}", index, e);
-            continue;
-        }
-        log!(
-            "socket {}: connected from {:?}",
-            index,
-            socket.remote_endpoint()
-        );
-        loop {
-            let n = match socket.read(&mut data).await {
-                Ok(0) => break,
-                Ok(n) => n,
-                Err(e) => {
-                    log!("socket {}: read: {:?}", index, e);
-                    break;
-                }
-            };
-            let Some(request) = data.get(..n) else { break };
-            if let Err(e) = write_all(&mut socket, request).await {
-                log!("socket {}: write: {:?}", index, e);
-                break;
-            }
-        }
-        socket.close();
-        // Wait for the FIN to be sent and acknowledged before the socket is dropped (dropping it
-        // frees its slot in the stack at once, and would cut the close short).
-        let _ = socket.flush().await;
-        log!("socket {}: closed", index);
-    }
+    rc_net::serve(stack, &PORT, index, rx, tx).await
 }
 
-/// Writes all of `bytes`.
-async fn write_all(
-    socket: &mut TcpSocket<'_>,
-    mut bytes: &[u8],
-) -> Result<(), embassy_net::tcp::Error> {
-    while !bytes.is_empty() {
-        let n = socket.write(bytes).await?;
-        bytes = bytes.get(n..).unwrap_or_default();
+/// Now, as the protocol counts time (µs since boot).
+fn now() -> Instant {
+    Instant(embassy_time::Instant::now().as_micros())
+}
+
+/// The node's owner: network events in, the node's actions out, until its next deadline.
+#[embassy_executor::task]
+async fn gateway_task(node: &'static mut Node) -> ! {
+    let mut saves = 0;
+    loop {
+        let deadline = async {
+            match node.poll_at() {
+                Some(Instant(us)) => Timer::at(embassy_time::Instant::from_micros(us)).await,
+                None => core::future::pending().await,
+            }
+        };
+        if let Either::First(event) = select(PORT.event(), deadline).await {
+            PORT.handle(event, node, now());
+        }
+        while let Some(event) = PORT.try_event() {
+            PORT.handle(event, node, now());
+        }
+        let clock = now();
+        while let Some(action) = node.poll(clock) {
+            match action {
+                Action::TcpReply { socket, bytes } => {
+                    // The reply borrows the node: copied out first (260 bytes at most).
+                    let mut reply = [0u8; protocol::modbus::tcp::MAX_TCP_ADU_LEN];
+                    let n = bytes.len().min(reply.len());
+                    reply[..n].copy_from_slice(&bytes[..n]);
+                    PORT.reply(socket, &reply[..n], node, clock);
+                }
+                Action::TcpClose(socket) => PORT.close(socket, node),
+                Action::Store(Store::Save(_)) => {
+                    saves += 1;
+                    node.stored(Ok(saves));
+                }
+                // No bus, no serial PLC line, no flash, no restart here.
+                Action::Bus(_)
+                | Action::Line(_)
+                | Action::Reply(_)
+                | Action::PlcLine(_)
+                | Action::Store(_) => {}
+            }
+        }
     }
-    Ok(())
 }
