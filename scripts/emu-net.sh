@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # The network side in QEMU's mps2-an386 (Cortex-M4 + SMSC LAN9118): builds rc-gateway-mps2
-# (emu-net/) and runs it with a free host port forwarded to the guest's TCP port 502.
+# (emu-net/: the node's Modbus TCP side behind rc-net) and runs it with a free host port forwarded
+# to the guest's TCP port 502.
 #
 #   scripts/emu-net.sh          # build, run; prints the port, the guest log goes to stdout
 #   scripts/emu-net.sh build    # build only, prints the ELF's path
-#   scripts/emu-net.sh test     # build, then tests/emu-net/test_echo.py (starts its own QEMU)
+#   scripts/emu-net.sh test     # build, then the Modbus TCP suite against it (scripts/tcp-test.sh)
 #
 # QEMU: scripts/qemu-install.sh (qemu-system-arm 10.0 from bookworm-backports).
 set -euo pipefail
@@ -22,7 +23,7 @@ build)
     echo "$elf"
     ;;
 test)
-    exec python3 tests/emu-net/test_echo.py "$elf"
+    exec scripts/tcp-test.sh --target firmware
     ;;
 run)
     port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')

@@ -28,6 +28,9 @@ cargo clippy -p rc-gateway --target thumbv7em-none-eabihf --locked -- -D warning
 step "clippy: firmware for the STM32F103C8 board (thumbv7m-none-eabi), warnings denied"
 cargo clippy -p rc-gateway --target thumbv7m-none-eabi --no-default-features --features hw,board-f103 --locked -- -D warnings
 
+step "clippy: the network side for thumbv7em-none-eabihf (rc-net, the LAN9118 driver, the mps2-an386 build), warnings denied"
+cargo clippy -p rc-net -p lan9118 -p rc-gateway-mps2 --target thumbv7em-none-eabihf --locked -- -D warnings
+
 step "protocol: no_std build (with defmt) for the firmware target"
 cargo clippy -p protocol --target thumbv7em-none-eabihf --features defmt --locked -- -D warnings
 
@@ -45,6 +48,9 @@ scripts/e2e.sh
 
 step "interop: libmodbus and mbpoll -> rc-gateway-host (PTY), and -> the firmware in QEMU -> simulated actuators"
 scripts/interop.sh
+
+step "Modbus TCP: pymodbus and raw clients -> rc-gateway-host, and -> the network firmware in QEMU (mps2-an386)"
+scripts/tcp-test.sh
 
 step "firmware: release build"
 cargo fw --locked

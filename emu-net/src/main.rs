@@ -187,9 +187,11 @@ async fn gateway_task(node: &'static mut Node) -> ! {
             }
         };
         if let Either::First(event) = select(PORT.event(), deadline).await {
+            trace(&event);
             PORT.handle(event, node, now());
         }
         while let Some(event) = PORT.try_event() {
+            trace(&event);
             PORT.handle(event, node, now());
         }
         let clock = now();
@@ -200,9 +202,14 @@ async fn gateway_task(node: &'static mut Node) -> ! {
                     let mut reply = [0u8; protocol::modbus::tcp::MAX_TCP_ADU_LEN];
                     let n = bytes.len().min(reply.len());
                     reply[..n].copy_from_slice(&bytes[..n]);
-                    PORT.reply(socket, &reply[..n], node, clock);
+                    if !PORT.reply(socket, &reply[..n], node, clock) {
+                        log!("socket {}: a reply did not fit: closed", socket);
+                    }
                 }
-                Action::TcpClose(socket) => PORT.close(socket, node),
+                Action::TcpClose(socket) => {
+                    log!("socket {}: closed by the node", socket);
+                    PORT.close(socket, node)
+                }
                 Action::Store(Store::Save(_)) => {
                     saves += 1;
                     node.stored(Ok(saves));
@@ -215,5 +222,14 @@ async fn gateway_task(node: &'static mut Node) -> ! {
                 | Action::Store(_) => {}
             }
         }
+    }
+}
+
+/// The log's line for a connection's start or end.
+fn trace(event: &rc_net::Event) {
+    match event {
+        rc_net::Event::Opened { socket, peer } => log!("socket {}: {} connected", socket, peer),
+        rc_net::Event::Closed(socket) => log!("socket {}: ended", socket),
+        rc_net::Event::Data(_) => {}
     }
 }

@@ -161,16 +161,28 @@ impl Port {
     }
 
     /// Queues the node's reply on `socket`, whole, or closes the connection (its client is not
-    /// reading); then gives the node what came meanwhile.
-    pub fn reply(&self, socket: usize, bytes: &[u8], node: &mut Node, now: Instant) {
+    /// reading: `false`); then gives the node what came meanwhile.
+    pub fn reply(&self, socket: usize, bytes: &[u8], node: &mut Node, now: Instant) -> bool {
         let Some(s) = self.sockets.get(socket) else {
-            return;
+            return false;
         };
-        if s.send.free_capacity() < bytes.len() || s.send.try_write(bytes) != Ok(bytes.len()) {
+        if s.send.free_capacity() < bytes.len() {
             self.close(socket, node);
-            return;
+            return false;
+        }
+        // A pipe writes up to its end at a time: a reply across the wrap takes two writes.
+        let mut rest = bytes;
+        while !rest.is_empty() {
+            match s.send.try_write(rest) {
+                Ok(n) if n > 0 => rest = rest.get(n..).unwrap_or(&[]),
+                _ => {
+                    self.close(socket, node);
+                    return false;
+                }
+            }
         }
         self.feed(socket, node, now);
+        true
     }
 
     /// Closes the connection on `socket`, as the node asked ([`Action::TcpClose`]).
