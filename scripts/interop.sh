@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Interop: Modbus RTU masters other than pymodbus drive rc-gateway-host (the firmware's engine and
-# register map on the PC) through a pseudo-terminal, with simulated controllers behind it:
+# Interop: Modbus RTU and TCP masters other than pymodbus drive rc-gateway-host (the firmware's
+# engine and register map on the PC) through a pseudo-terminal, with simulated controllers behind
+# it:
 #   - libmodbus, through tests/interop/libmodbus_client.c: every function the gateway serves
 #     (raw requests for FC08 and FC2B, which libmodbus has no call for), exceptions 01/02/03,
 #     broken frames;
@@ -16,6 +17,12 @@
 # and bridges the firmware's PLC line to a pseudo-terminal for the masters. There the
 # controllers' view is rc-sim's frame log (commands other than status and position polls), and
 # the refusals are counted by the gateway's PLCLINK registers.
+#
+# Over Modbus TCP, libmodbus (`modbus_new_tcp`) and `mbpoll -m tcp` drive rc-gateway-host
+# --modbus-tcp (host) and the network firmware in QEMU's mps2-an386 (firmware: rc-gateway-mps2,
+# the Ethernet board's network task over an emulated LAN9118; it has no bus, so the axes'
+# scenarios run on the host only): unit 0xFF, exception 0A for a unit nobody serves, the gateway
+# unit's reads and writes, FC11, the axes.
 #
 #   scripts/interop.sh [--target host|firmware|all]
 #
@@ -562,8 +569,145 @@ mbpoll_suite() {
     stop_gateway
 }
 
+# ---------------------------------------------------------------------------------- Modbus TCP
+
+tcp_port=""
+
+# A fresh gateway listening on Modbus TCP: its port in $tcp_port.
+start_tcp_gateway() {
+    gateway_log="$target/interop/tcp-$kind.log"
+    if [[ $kind == firmware ]]; then
+        tcp_port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+        qemu-system-arm -M mps2-an386 -nographic -monitor none -serial null -icount shift=auto \
+            -semihosting-config enable=on,target=native \
+            -nic "user,hostfwd=tcp:127.0.0.1:$tcp_port-:502" -kernel "$net_elf" \
+            >"$gateway_log" 2>&1 </dev/null &
+        gateway_pid=$!
+        local i
+        for i in $(seq 600); do
+            grep -q '^ready' "$gateway_log" && break
+            sleep 0.2
+        done
+        grep -q '^ready' "$gateway_log" || { echo "interop: the network firmware did not start" >&2 && tail -n 20 "$gateway_log" >&2 && exit 1; }
+        echo "# network firmware in QEMU mps2-an386 (pid $gateway_pid): Modbus TCP on 127.0.0.1:$tcp_port"
+        return
+    fi
+    coproc GW { exec "$gateway_bin" --modbus-tcp 127.0.0.1:0 --sim "$AXES" --points --watchdog-ms 0 --no-control 2>"$gateway_log"; }
+    gateway_pid=$GW_PID
+    local line=""
+    if ! read -r -t 20 -u "${GW[0]}" line || [[ $line != "TCP "* ]]; then
+        echo "interop: rc-gateway-host --modbus-tcp did not start: '$line'" >&2
+        exit 1
+    fi
+    tcp_port=${line##*:}
+    echo "# rc-gateway-host (pid $gateway_pid, $AXES simulated axes): Modbus TCP on 127.0.0.1:$tcp_port"
+}
+
+stop_tcp_gateway() {
+    [[ -n $gateway_pid ]] || return 0
+    kill -TERM "$gateway_pid" 2>/dev/null || true
+    local i
+    for i in $(seq 50); do
+        kill -0 "$gateway_pid" 2>/dev/null || break
+        sleep 0.1
+    done
+    kill -KILL "$gateway_pid" 2>/dev/null || true
+    wait "$gateway_pid" 2>/dev/null || true
+    gateway_pid=""
+}
+
+# mbpoll over TCP: -m tcp -p PORT, the rest as on RTU (-0 PDU addresses, one poll).
+MBT=(mbpoll -m tcp -0 -1 -o 2)
+mbt() {
+    mb_rc=0
+    mb_out=$(timeout --kill-after=5 60 "${MBT[@]}" -p "$tcp_port" "$@" 127.0.0.1 2>&1) || mb_rc=$?
+}
+
+mbt_write() { # UNIT REF VALUE: FC06
+    mb_rc=0
+    mb_out=$(timeout --kill-after=5 60 "${MBT[@]}" -p "$tcp_port" -a "$1" -t 4 -r "$2" 127.0.0.1 -- "$3" 2>&1) || mb_rc=$?
+    if ((mb_rc != 0)) || ! grep -q "^Written 1 references" <<<"$mb_out"; then
+        fail "write unit $1 $2 = $3: $(mb_error)"
+    fi
+}
+
+mbt_read() { # UNIT TYPE REF COUNT: ${values[@]}
+    mbt -a "$1" -t "$2" -r "$3" -c "$4"
+    ((mb_rc == 0)) || fail "read unit $1 $3 x$4: $(mb_error)" || return 1
+    mapfile -t values < <(sed -n 's/^\[[0-9]*\]:[[:space:]]*\([^ ]*\).*/\1/p' <<<"$mb_out")
+    ((${#values[@]} == $4)) || fail "read unit $1 $3: ${#values[@]} values, expected $4"
+}
+
+mbt_version() {
+    IFS=. read -r major minor patch <<<"$version"
+    local unit
+    for unit in $GATEWAY 255; do
+        mbt_read "$unit" 4 0 2 || return 1
+        ((values[0] == (major << 8 | minor) && values[1] == patch)) ||
+            fail "unit $unit VERSION ${values[*]}, expected $((major << 8 | minor)) $patch" || return 1
+    done
+}
+
+mbt_watchdog() {
+    mbt_write 255 6 60000 && mbt_read 255 4 6 1 || return 1
+    ((values[0] == 60000)) || fail "WATCHDOG reads ${values[0]} after writing 60000" || return 1
+    mbt_write 255 6 0
+}
+
+mbt_unserved() {
+    mbt -a 99 -t 4 -r 0 -c 1
+    if ((mb_rc == 0)) || ! grep -qi "gateway path unavailable" <<<"$mb_out"; then
+        fail "unit 99: '$(mb_error)', expected exception 0A (gateway path unavailable)"
+    fi
+}
+
+mbt_tcp_settings() {
+    # TCPMAX TCPIDLE TCPCONN: the defaults, and this one connection open.
+    mbt_read 255 4 0x0605 3 || return 1
+    [[ ${values[*]} == "4 60 1" ]] || fail "TCPMAX TCPIDLE TCPCONN = ${values[*]}, expected 4 60 1"
+}
+
+mbt_axes() {
+    local deadline=$((SECONDS + 20))
+    while :; do
+        mbt -a 1,2,3 -t 4 -r 0x9F02
+        [[ $(sed -n 's/^\[[0-9]*\]:[[:space:]]*//p' <<<"$mb_out" | paste -sd, -) == 1,1,1 ]] && break
+        ((SECONDS < deadline)) || fail "LINK of units 1-3 not all 1 over TCP: $mb_out" || return 1
+        sleep 0.1
+    done
+    mbt_read 1 4 0x9005 1 || return 1
+    ((values[0] & PWR)) || fail "unit 1 DSS1 ${values[0]}: PWR off"
+}
+
+tcp_suite() {
+    start_tcp_gateway
+    failed_before=$failures
+    run_client_tcp() {
+        local out="$target/interop/libmodbus-tcp-$kind.out" status=0 failed groups=(tcp)
+        [[ $kind == host ]] && groups+=(tcp-axes)
+        timeout --kill-after=10 300 "$client" "tcp:127.0.0.1:$tcp_port" "$version" "$AXES" "${groups[@]}" |
+            sed -u "s#^\(ok\|FAIL\|skip\) #\1 $kind/#" | tee "$out" || status=$?
+        failed=$(grep -c '^FAIL' "$out" || true)
+        ((failed > 0 || status == 0)) || failed=1
+        failures=$((failures + failed))
+    }
+    run_client_tcp
+    scenario mbpoll-tcp-version mbt_version
+    scenario mbpoll-tcp-watchdog mbt_watchdog
+    scenario mbpoll-tcp-exception-0a mbt_unserved
+    scenario mbpoll-tcp-settings mbt_tcp_settings
+    if [[ $kind == host ]]; then
+        scenario mbpoll-tcp-axes mbt_axes
+    else
+        skip mbpoll-tcp-axes "the network firmware in QEMU has no RS485 bus (its axes: rc-gateway-host)"
+    fi
+    ((failures == failed_before)) || tail -n 30 "$gateway_log"
+    stop_tcp_gateway
+}
+
 if [[ " ${targets[*]} " == *" firmware "* ]]; then
     scripts/qemu-install.sh
+    net_elf=$(scripts/emu-net.sh build)
     elf=$(scripts/emu-build.sh)
     cargo build --locked --quiet -p rc-host --bin rc-sim
     python=$(scripts/py-env.sh)
@@ -571,10 +715,11 @@ fi
 for kind in "${targets[@]}"; do
     libmodbus_suite
     mbpoll_suite
+    tcp_suite
 done
 
 if ((failures)); then
     echo "interop: $failures failed"
     exit 1
 fi
-echo "interop: all passed (libmodbus, mbpoll; ${targets[*]})"
+echo "interop: all passed (libmodbus, mbpoll; RTU and TCP; ${targets[*]})"

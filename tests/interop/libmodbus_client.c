@@ -4,12 +4,15 @@
  *
  *   libmodbus_client [-v] DEVICE VERSION AXES GROUP...
  *
- * DEVICE   the PLC line rc-gateway-host printed (`PLC /dev/pts/N`)
+ * DEVICE   the PLC line rc-gateway-host printed (`PLC /dev/pts/N`), or `tcp:HOST:PORT` for
+ *          Modbus TCP (modbus_new_tcp)
  * VERSION  the firmware version the gateway reports ("0.1.0"), as protocol/Cargo.toml says
  * AXES     how many simulated axes it runs (axis n is unit n + 1; the gateway is unit 63)
  * GROUP    `valid`: requests the gateway carries out; `invalid`: requests it must refuse (with
  *          the documented exception, or no reply at all), after which nothing of the axes'
- *          state may have changed (the script also checks that nothing reached the bus)
+ *          state may have changed (the script also checks that nothing reached the bus);
+ *          `tcp`: what differs on Modbus TCP (unit 0xFF, exception 0A, a function not served)
+ *          and the gateway unit's requests; `tcp-axes`: the axes over TCP (simulated ones)
  * -v       libmodbus debug output (every frame) on standard error
  *
  * One line per scenario: `ok <name>` or `FAIL <name>: <why>`; exit status 1 if any failed.
@@ -653,6 +656,62 @@ static int fc11_report_server_id(void)
     return 0;
 }
 
+/* ------------------------------------------------------------------------------ tcp */
+
+#define DIRECT_UNIT 0xFF
+#define G_TCPMAX 0x0605
+
+/* On TCP, unit 0xFF is the device at the IP address (TCP Guide 4.4.2): the gateway unit. */
+static int tcp_direct_unit(void)
+{
+    uint16_t a[2], b[2];
+    if (read_regs(GATEWAY, G_VERSION, 2, a) < 0 || read_regs(DIRECT_UNIT, G_VERSION, 2, b) < 0)
+        return -1;
+    CHECK(a[0] == b[0] && a[1] == b[1], "unit 0xFF VERSION %u %u, unit 63 %u %u", b[0], b[1], a[0],
+          a[1]);
+    uint16_t t[2];
+    if (read_regs(DIRECT_UNIT, G_TCPMAX, 2, t) < 0)
+        return -1;
+    CHECK(t[0] == 4 && t[1] == 60, "TCPMAX TCPIDLE = %u %u, expected 4 60 (the defaults)", t[0],
+          t[1]);
+    return 0;
+}
+
+/* A unit nobody serves: exception 0A (gateway path unavailable), not a time-out. */
+static int tcp_unserved_unit(void)
+{
+    uint16_t r;
+    modbus_set_slave(ctx, 99);
+    int n = modbus_read_registers(ctx, G_VERSION, 1, &r);
+    CHECK(n < 0 && errno == EMBXGPATH, "unit 99: %s, expected gateway path unavailable",
+          n < 0 ? modbus_strerror(errno) : "a reply");
+    return 0;
+}
+
+/* FC16 (mask write register) is not served: exception 01, as on RTU. */
+static int tcp_unsupported_function(void)
+{
+    modbus_set_slave(ctx, GATEWAY);
+    int n = modbus_mask_write_register(ctx, G_WATCHDOG, 0xFFFF, 0);
+    CHECK(n < 0 && errno == EMBXILFUN, "FC16: %s, expected illegal function",
+          n < 0 ? modbus_strerror(errno) : "a reply");
+    return 0;
+}
+
+static int tcp_fc11_gateway(void)
+{
+    char expected[64];
+    snprintf(expected, sizeof expected, "RC-GW %s", version_text);
+    uint8_t id[MODBUS_MAX_PDU_LENGTH];
+    modbus_set_slave(ctx, GATEWAY);
+    int n = modbus_report_slave_id(ctx, sizeof id, id);
+    CHECK(n >= 2, "FC11: %s", modbus_strerror(errno));
+    CHECK(id[0] == GATEWAY && id[1] == 0xFF, "FC11: server id %u run 0x%02X", id[0], id[1]);
+    CHECK(n - 2 == (int)strlen(expected) && memcmp(id + 2, expected, n - 2) == 0,
+          "FC11: \"%.*s\", expected \"%s\"", n - 2, (const char *)id + 2, expected);
+    return 0;
+}
+
 static int fc03_plclink(void)
 {
     /* PLCLINK: Modbus frames, CRC errors, exceptions, replies (u32 each), never cleared. */
@@ -836,7 +895,7 @@ int main(int argc, char **argv)
             break;
     }
     if (argc - arg < 4) {
-        fprintf(stderr, "usage: %s [-v] DEVICE VERSION AXES valid|invalid...\n", argv[0]);
+        fprintf(stderr, "usage: %s [-v] DEVICE VERSION AXES valid|invalid|tcp|tcp-axes...\n", argv[0]);
         return 2;
     }
     const char *device = argv[arg];
@@ -852,7 +911,21 @@ int main(int argc, char **argv)
     }
 
     printf("# libmodbus %s on %s\n", LIBMODBUS_VERSION_STRING, device);
-    ctx = modbus_new_rtu(device, 115200, 'N', 8, 1);
+    if (strncmp(device, "tcp:", 4) == 0) {
+        char host[64];
+        int port = 0;
+        const char *colon = strrchr(device + 4, ':');
+        if (colon == NULL || (size_t)(colon - device - 4) >= sizeof host ||
+            (port = atoi(colon + 1)) <= 0) {
+            fprintf(stderr, "DEVICE tcp:HOST:PORT: %s\n", device);
+            return 2;
+        }
+        memcpy(host, device + 4, (size_t)(colon - device - 4));
+        host[colon - device - 4] = '\0';
+        ctx = modbus_new_tcp(host, port);
+    } else {
+        ctx = modbus_new_rtu(device, 115200, 'N', 8, 1);
+    }
     if (ctx == NULL || modbus_connect(ctx) < 0) {
         printf("FAIL connect: %s\n", modbus_strerror(errno));
         return 1;
@@ -881,6 +954,19 @@ int main(int argc, char **argv)
             run("fc2b-0e-device-id", fc2b_device_id);
             run("fc11-report-server-id", fc11_report_server_id);
             run("fc03-plclink-counts", fc03_plclink);
+        } else if (strcmp(argv[g], "tcp") == 0) {
+            run("tcp-fc03-gateway-version", fc03_gateway_version);
+            run("tcp-fc06-fc03-gateway-watchdog", fc06_fc03_gateway_watchdog);
+            run("tcp-unit-ff-is-the-gateway", tcp_direct_unit);
+            run("tcp-exception-0a-unserved-unit", tcp_unserved_unit);
+            run("tcp-exception-01-unsupported-function", tcp_unsupported_function);
+            run("tcp-fc11-report-server-id", tcp_fc11_gateway);
+        } else if (strcmp(argv[g], "tcp-axes") == 0) {
+            run("tcp-axes-online", axes_online);
+            run("tcp-fc03-axis-status", fc03_axis_status);
+            run("tcp-fc06-servo-off-on", fc06_servo_off_on);
+            run("tcp-fc05-coil-home", fc05_coil_home);
+            run("tcp-fc10-direct-move", fc10_direct_move);
         } else if (strcmp(argv[g], "invalid") == 0) {
             run("snapshot", before_invalid);
             run("exception-02-unknown-address", x02_unknown_address);
