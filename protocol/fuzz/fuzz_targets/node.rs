@@ -6,7 +6,9 @@
 //! operations. An operation byte's low three
 //! bits choose it, its high five bits give a length `n`:
 //! 0 `n` bytes from the bus; 1 `n` bytes from the PLC; 2 an input sample (two bytes);
-//! 3 the stop input active (bit 3 set) or released; 4 time passes (two bytes, x 50 µs).
+//! 3 the stop input active (bit 3 set) or released; 4 time passes (two bytes, x 50 µs);
+//! Modbus TCP on socket `n % 5`: 5 a client connects (one byte: the last byte of its address
+//! 10.0.0.x), 6 bytes from it (one length byte, then the bytes), 7 it closes.
 //! After each operation the node is polled until it has nothing to do now.
 //!
 //! Checks, besides "nothing panics":
@@ -16,13 +18,19 @@
 //! - and every one of them does get it: after the input's end, time passes with a silent bus
 //!   until no stop is owed (to an axis still on the bus), at most a minute;
 //! - a reply for the PLC only follows bytes from the PLC (none unasked), and is a whole Modbus
-//!   frame with a valid CRC.
+//!   frame with a valid CRC;
+//! - a TCP reply goes only to a connection that is open and has sent bytes,
+//!   and is a whole MBAP frame (protocol id 0, a length that counts the rest, at most 260
+//!   bytes); a close names a socket that exists. (Bit 6 of the set-up byte, which also picks
+//!   the pattern, sets an allow-list of 10.0.0.1, two connections at most and 1 s idle.)
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
 use protocol::command::{Command, Request};
 use protocol::frame::Frame;
 use protocol::modbus::crc;
+use protocol::modbus::tcp::SOCKETS;
+use protocol::net::Ipv4;
 use protocol::node::{Action, Node};
 use protocol::pio::{Pattern, PioInputs};
 use protocol::plc::{GatewayConfig, Store};
@@ -49,7 +57,14 @@ fuzz_target!(|data: &[u8]| {
         Pattern::Solenoid7,
         Pattern::Solenoid3,
     ][usize::from(setup >> 6)];
+    if setup & 0x40 != 0 {
+        config.net.policy.allow[0] = Ipv4([10, 0, 0, 1]);
+        config.net.policy.max_connections = 2;
+        config.net.policy.idle_s = 1;
+    }
     let mut node = Node::new(config);
+    // Per socket: a connection is open; it sent bytes since its last reply.
+    let mut tcp = Tcp::default();
     let mut now = 0u64;
     let mut stop_active = false;
     // The axes still owed their stop since the stop input went active.
@@ -81,14 +96,36 @@ fuzz_target!(|data: &[u8]| {
                 stop_active = active;
                 node.set_stop_input(Instant(now), active);
             }
-            _ => {
+            4 => {
                 let b = take(&mut rest, 2);
                 let step = u64::from(b.first().copied().unwrap_or(0))
                     | u64::from(b.get(1).copied().unwrap_or(0)) << 8;
                 now += step * 50;
             }
+            5 => {
+                let socket = n % SOCKETS;
+                let host = take(&mut rest, 1).first().copied().unwrap_or(0);
+                let open = node.tcp_opened(Instant(now), socket, Ipv4([10, 0, 0, host]));
+                tcp.open[socket] = open;
+                tcp.asked[socket] = false;
+            }
+            6 => {
+                let socket = n % SOCKETS;
+                let len = usize::from(take(&mut rest, 1).first().copied().unwrap_or(0));
+                let bytes = take(&mut rest, len);
+                let taken = node.tcp_received(Instant(now), socket, bytes);
+                assert!(taken <= bytes.len());
+                if tcp.open[socket] && taken > 0 {
+                    tcp.asked[socket] = true;
+                }
+            }
+            _ => {
+                let socket = n % SOCKETS;
+                node.tcp_closed(socket);
+                tcp.open[socket] = false;
+            }
         }
-        if !drain(&mut node, now, &mut owed, &mut asked) {
+        if !drain(&mut node, now, &mut owed, &mut asked, &mut tcp) {
             return;
         }
     }
@@ -106,15 +143,22 @@ fuzz_target!(|data: &[u8]| {
             "stops still owed to {still:?} a minute after the input ended"
         );
         now = node.poll_at().map_or(end, |at| at.0.clamp(now + 1, end));
-        if !drain(&mut node, now, &mut owed, &mut asked) {
+        if !drain(&mut node, now, &mut owed, &mut asked, &mut tcp) {
             return;
         }
     }
 });
 
+/// What the harness knows of the TCP sockets.
+#[derive(Default)]
+struct Tcp {
+    open: [bool; SOCKETS],
+    asked: [bool; SOCKETS],
+}
+
 /// Poll the node at `now` until it has nothing to do, checking each action; `false` when the
 /// board restarts.
-fn drain(node: &mut Node, now: u64, owed: &mut AxisSet, asked: &mut bool) -> bool {
+fn drain(node: &mut Node, now: u64, owed: &mut AxisSet, asked: &mut bool, tcp: &mut Tcp) -> bool {
     for _ in 0..256 {
         let bus_axes = node.gateway().config().bus.axes;
         let Some(action) = node.poll(Instant(now)) else {
@@ -156,6 +200,19 @@ fn drain(node: &mut Node, now: u64, owed: &mut AxisSet, asked: &mut bool) -> boo
             // The board restarts.
             Action::Store(Store::FactoryReset | Store::Restart) => return false,
             Action::Line(_) | Action::PlcLine(_) => {}
+            Action::TcpReply { socket, bytes } => {
+                assert!(socket < SOCKETS && tcp.open[socket], "a reply to socket {socket}, not open");
+                assert!(tcp.asked[socket], "a TCP reply nobody asked for");
+                assert!(bytes.len() >= 9 && bytes.len() <= 260, "TCP reply length");
+                assert_eq!(&bytes[2..4], &[0, 0], "protocol id");
+                let length = usize::from(u16::from_be_bytes([bytes[4], bytes[5]]));
+                assert_eq!(length, bytes.len() - 6, "MBAP length");
+            }
+            Action::TcpClose(socket) => {
+                assert!(socket < SOCKETS, "a close of socket {socket}");
+                tcp.open[socket] = false;
+                node.tcp_closed(socket);
+            }
         }
     }
     true
