@@ -20,7 +20,8 @@
 //! | [`jobs`] | Point-table reads and writes as frame sequences |
 //! | [`engine`] | The bus master: what to send next, time-outs, retries, polling, jobs |
 //! | [`line`](mod@line) | Break, baud rates, the communication-change broadcast |
-//! | [`modbus`] | The gateway's other side: a Modbus RTU slave for the PLC ([`modbus::Slave`]) |
+//! | [`modbus`] | The gateway's other side: a Modbus slave for the PLC ([`modbus::Slave`]), RTU and (feature `tcp`) TCP |
+//! | [`net`] | The network settings: the board's address, who may connect over TCP |
 //! | [`pio`] | The PLC's discrete I/O (PCON pattern 0 signals) for one axis, as jobs and outputs |
 //! | [`plc`] | What the PLC sees: the Modbus register map, commands, fail-safe |
 //! | [`node`] | The one object the firmware drives: the gateway behind its lines and pins |

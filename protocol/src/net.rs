@@ -119,7 +119,7 @@ impl NetConfig {
 }
 
 /// The registers of [`NetConfig`] in the gateway unit's network block, by offset: IPADDR (2),
-/// IPPREFIX, IPROUTER (2), TCPMAX, TCPIDLE, then (offset [`CONNECTIONS`], read-only, not a
+/// IPPREFIX, IPROUTER (2), TCPMAX, TCPIDLE, then (offset [`CONNECTIONS`](registers::CONNECTIONS), read-only, not a
 /// setting) TCPCONN, then TCPALLOW (4 x 2). Addresses are two registers, high byte first.
 pub mod registers {
     /// IPADDR, two registers.

@@ -46,9 +46,10 @@ def free_port():
 class Gateway:
     """A running gateway: where it listens, what it is, and how to end it."""
 
-    def __init__(self, kind, port, process, log):
+    def __init__(self, kind, port, process, log, plc=None):
         self.kind = kind
         self.port = port
+        self.plc = plc
         self.process = process
         self.log = log
 
@@ -78,11 +79,16 @@ def start_host(extra=()):
         stdout=subprocess.PIPE, stderr=log, stdin=subprocess.DEVNULL,
     )
     line = process.stdout.readline().decode().strip()
+    plc = None
+    if line.startswith("PLC "):
+        # With a serial PLC line too: it comes first, then the TCP line.
+        plc = line[4:]
+        line = process.stdout.readline().decode().strip()
     if not line.startswith("TCP "):
         process.kill()
         raise RuntimeError(f"rc-gateway-host did not start: {line!r}")
     port = int(line.rsplit(":", 1)[1])
-    return Gateway("host", port, process, log)
+    return Gateway("host", port, process, log, plc)
 
 
 def start_firmware():

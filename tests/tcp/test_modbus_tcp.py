@@ -293,3 +293,42 @@ def test_requests_over_tcp_feed_the_watchdog(gateway):
     assert c.write(DIRECT, FAILSAFE, [0]) is None
     assert c.write(DIRECT, WATCHDOG, [0]) is None
     c.close()
+
+
+def crc16(data):
+    """Modbus RTU CRC, low byte first (Serial Line §2.5.1.2)."""
+    crc = 0xFFFF
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
+    return bytes([crc & 0xFF, crc >> 8])
+
+
+def test_tcp_beside_an_rtu_line_serves_both(start_host_with):
+    """--modbus-tcp beside --plc-pty: the PLC line first on standard output, then TCP; both are
+    answered by the one node (a write over one reads back over the other)."""
+    import os
+    import termios
+    import tty
+
+    g = start_host_with("--plc-pty")
+    assert g.plc.startswith("/dev/"), g.plc
+    fd = os.open(g.plc, os.O_RDWR | os.O_NOCTTY)
+    try:
+        tty.setraw(fd)
+        termios.tcflush(fd, termios.TCIOFLUSH)
+        tcp = Client(g.port)
+        assert tcp.write(DIRECT, WATCHDOG, [4321]) is None
+        request = bytes([GATEWAY, 3]) + struct.pack(">HH", WATCHDOG, 1)
+        os.write(fd, request + crc16(request))
+        reply = b""
+        deadline = time.monotonic() + IO_TIMEOUT
+        while len(reply) < 7 and time.monotonic() < deadline:
+            reply += os.read(fd, 64)
+        assert reply[:5] == bytes([GATEWAY, 3, 2]) + struct.pack(">H", 4321), reply.hex()
+        assert reply[5:7] == crc16(reply[:5])
+        assert tcp.write(DIRECT, WATCHDOG, [0]) is None
+        tcp.close()
+    finally:
+        os.close(fd)

@@ -1,4 +1,6 @@
-//! A Modbus RTU **slave** (server), sans-IO: the PLC is the master and talks to the gateway.
+//! A Modbus **slave** (server), sans-IO: the PLC is the master and talks to the gateway, over a
+//! serial line (RTU) or, with feature `tcp`, over TCP ([`tcp`](self#modbus-tcp)): one slave, one
+//! register map, two framings.
 //!
 //! Sources: "MODBUS over Serial Line Specification and Implementation Guide V1.02" (*Serial
 //! Line*) and "MODBUS Application Protocol Specification V1.1b3" (*Application Protocol*);
@@ -12,6 +14,10 @@
 //! | [`pdu`] | What the master asks ([`Request`], Application Protocol §6) |
 //! | [`slave`] | What the slave answers ([`Slave`], exceptions of Application Protocol §7) |
 //! | `tcp` | Modbus TCP: MBAP frames, connections (feature `tcp`) |
+//!
+//! # Modbus TCP
+//! Module `tcp` (feature `tcp`): MBAP frames in a connection's byte stream and the table of
+//! connections; [`Slave::handle_tcp`] answers a frame with the serial line's model.
 //!
 //! This module holds what the gateway implements: the [`DataModel`] trait (the four tables of
 //! Application Protocol §4.3) and the [`Exception`]s it may return.
