@@ -28,6 +28,9 @@ cargo clippy -p rc-gateway --target thumbv7em-none-eabihf --locked -- -D warning
 step "clippy: firmware for the STM32F103C8 board (thumbv7m-none-eabi), warnings denied"
 cargo clippy -p rc-gateway --target thumbv7m-none-eabi --no-default-features --features hw,board-f103 --locked -- -D warnings
 
+step "clippy: firmware for the NUCLEO-F429ZI board (Ethernet, Modbus TCP), warnings denied"
+cargo clippy -p rc-gateway --target thumbv7em-none-eabihf --no-default-features --features hw,board-f429 --locked -- -D warnings
+
 step "protocol: no_std build (with defmt) for the firmware target"
 cargo clippy -p protocol --target thumbv7em-none-eabihf --features defmt --locked -- -D warnings
 
