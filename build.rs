@@ -1,6 +1,6 @@
-//! Build script of the firmware: puts the board's memory layout (`memory/l475vg.x` or
-//! `memory/f103c8.x`) where the linker finds it as `board.x`, and adds defmt's linker script to
-//! the `hw` build only.
+//! Build script of the firmware: puts the board's memory layout (`memory/l475vg.x`,
+//! `memory/f103c8.x` or `memory/f429zi.x`) where the linker finds it as `board.x`, and adds
+//! defmt's linker script to the `hw` build only.
 //!
 //! cortex-m-rt's `link.x` does `INCLUDE memory.x`; the linker finds our top-level `memory.x` in
 //! its working directory (the package root), and that file does `INCLUDE board.x`, which the
@@ -17,6 +17,8 @@ fn main() -> Result<(), Box<dyn Error>> {
     // One memory layout per board, chosen by the board feature.
     let board = if env::var_os("CARGO_FEATURE_BOARD_F103").is_some() {
         "memory/f103c8.x"
+    } else if env::var_os("CARGO_FEATURE_BOARD_F429").is_some() {
+        "memory/f429zi.x"
     } else {
         "memory/l475vg.x"
     };

@@ -1,19 +1,28 @@
 #!/usr/bin/env bash
-# Flash and RAM of the hardware firmware of both boards against their budgets, with the stack
+# Flash and RAM of the hardware firmware of every board against its budget, with the stack
 # high-water mark measured in the emulator (scripts/emu-test.sh paints the stack and measures each
 # test; the L475 emulator build runs the same tasks as both hardware builds) or, if deeper, the
 # hardware build's start-up path by its call graph (scripts/stack_depth.py: the settings load
 # from flash, which QEMU cannot run).
 #
-#   scripts/size-report.sh           # builds both boards, reuses the emulator's stack log when it
+#   scripts/size-report.sh           # builds every board, reuses the emulator's stack log when it
 #                                    # is newer than the emulator ELF (else runs the emulator suite)
-#   scripts/size-report.sh --check   # the same, exit status 1 when the F103 is over budget
+#   scripts/size-report.sh --check   # the same, exit status 1 when the F103 or the F429 is over
+#                                    # budget
 #   SIZE_TOP=30 scripts/size-report.sh   # and the 30 largest symbols per board (default 12)
 #
 # Budgets: STM32F103C8 56 KiB flash (of its 60 KiB outside the settings pages) and 16 KiB static
 # RAM + stack, enforced: it is the chip that limits the firmware, and its build is the one linked
 # for it (memory/f103c8.x), so a build that outgrows the chip does not even link. B-L475E-IOT01A
 # (STM32L475VG, 1 MiB flash) 48 KiB flash and 16 KiB static RAM + stack: a target, reported.
+# NUCLEO-F429ZI (STM32F429ZI, Ethernet: Modbus TCP beside RTU) 128 KiB flash and 64 KiB static
+# RAM + stack, enforced: the chip has 1 MiB of program flash and 192 KiB of SRAM, so the budget
+# is not the chip's limit but a fence against growth. 128 KiB of flash leaves about 40 KiB over
+# the first build (89 KiB) and fits the smallest STM32 with this Ethernet MAC; 64 KiB of RAM is
+# a third of the chip's, with the Ethernet frames (12 KiB), the TCP buffers (10 KiB), the
+# socket pipes (8 KiB) and the node (13 KiB) in it, and leaves the rest for more frames or
+# sockets. Its stack is the deeper of the L475 emulator's (no TCP: an underestimate of the
+# gateway task's) and its own start-up path by the call graph (with its own, larger node).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -23,6 +32,11 @@ check=0
 rustup toolchain install >/dev/null 2>&1 || rustup toolchain install
 # The firmware's linker (.cargo/config.toml).
 scripts/flip-link-install.sh
+# The F429 first: it is built for the same target as the L475 and writes the same ELF path, so
+# its ELF is copied aside before the L475's build replaces it.
+cargo fw-eth --locked --quiet
+mkdir -p target/f429
+cp target/thumbv7em-none-eabihf/release/rc-gateway target/f429/rc-gateway
 cargo fw --locked --quiet
 # The F103 build as it is flashed (`cargo fw-run-f103`).
 cargo fw-f103 --locked --quiet
@@ -40,4 +54,6 @@ objdump="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p
     "L475 B-L475E-IOT01A (STM32L475VG)" target/thumbv7em-none-eabihf/release/rc-gateway \
         0x08000000 0x08100000 0x20000000 0x20018000 48 16 0 \
     "F103 STM32F103C8 (blue pill)" target/thumbv7m-none-eabi/release/rc-gateway \
-        0x08000000 0x0800F000 0x20000000 0x20005000 56 16 1
+        0x08000000 0x0800F000 0x20000000 0x20005000 56 16 1 \
+    "F429 NUCLEO-F429ZI (STM32F429ZI, Ethernet)" target/f429/rc-gateway \
+        0x08000000 0x08100000 0x20000000 0x20030000 128 64 1

@@ -8,6 +8,10 @@
 //! egress); then carry out the node's actions until it has none; tell the I/O task what the
 //! outputs and LEDs show; feed the watchdog.
 //!
+//! With Ethernet (feature `net`), the socket tasks' events ([`crate::net::PORT`]) are one more
+//! thing to wait for and to drain before egress, and the node's Modbus TCP replies go into the
+//! sockets' send pipes, never waiting on a client (`rc_net`).
+//!
 //! No await in the loop lasts longer than a bus frame (16.7 ms at 9.6 kbit/s), a rate change or
 //! a flash write: a PLC reply is handed to its UART and left to it (255 bytes take 2.3 s at
 //! 1.2 kbit/s with parity, longer than the watchdog's timeout), and its line is settled (the
@@ -16,15 +20,21 @@
 
 use core::pin::pin;
 
+#[cfg(feature = "net")]
+use embassy_futures::select::{select, Either};
 use embassy_futures::select::{select4, Either4};
 use embassy_time::Timer;
 
 use crate::board::Board;
 use crate::io::{self, Sample, SAMPLED};
+#[cfg(feature = "net")]
+use crate::net::PORT;
 use crate::node::{Action, Instant, Node};
 use crate::serial::Rs485;
 use crate::settings::Settings;
 use protocol::line::LineAction;
+#[cfg(feature = "net")]
+use protocol::modbus::tcp::MAX_TCP_ADU_LEN;
 use protocol::plc::Store;
 
 /// The loop passes at least this often, whatever happens on the lines: it feeds the watchdog
@@ -108,7 +118,7 @@ pub async fn run(
 
     loop {
         let hold = node.bus_frame_due();
-        let event = select4(
+        let lines = select4(
             bus_read(&mut board.bus, &mut bus_buf, hold),
             plc_read(&mut board.plc, &mut plc_buf),
             SAMPLED.wait(),
@@ -116,8 +126,19 @@ pub async fn run(
                 node.poll_at(),
                 Some(clock + HEARTBEAT),
             )),
-        )
-        .await;
+        );
+        #[cfg(not(feature = "net"))]
+        let event = lines.await;
+        // A network event is handed to the node here and then counts as the deadline's wake
+        // (nothing more to do for it before the ingress below).
+        #[cfg(feature = "net")]
+        let event = match select(lines, PORT.event()).await {
+            Either::First(event) => event,
+            Either::Second(event) => {
+                PORT.handle(event, node, now());
+                Either4::Fourth(())
+            }
+        };
         match event {
             Either4::First(n) => node.bus_received(now(), bytes(&bus_buf, n)),
             Either4::Second(n) => node.plc_received(now(), bytes(&plc_buf, n)),
@@ -145,6 +166,10 @@ pub async fn run(
             if n == 0 && m == 0 {
                 break;
             }
+        }
+        #[cfg(feature = "net")]
+        while let Some(event) = PORT.try_event() {
+            PORT.handle(event, node, now());
         }
 
         clock = now();
@@ -189,6 +214,18 @@ pub async fn run(
                         }
                     }
                 }
+                // Copied out first: the reply borrows the node, which `reply` hands more bytes.
+                #[cfg(feature = "net")]
+                Action::TcpReply { socket, bytes } => {
+                    let mut reply = [0u8; MAX_TCP_ADU_LEN];
+                    let len = bytes.len().min(reply.len());
+                    if let (Some(to), Some(from)) = (reply.get_mut(..len), bytes.get(..len)) {
+                        to.copy_from_slice(from);
+                    }
+                    PORT.reply(socket, self::bytes(&reply, len), node, clock);
+                }
+                #[cfg(feature = "net")]
+                Action::TcpClose(socket) => PORT.close(socket, node),
             }
             clock = now();
         }

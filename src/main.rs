@@ -15,6 +15,7 @@
 //! | [`discrete`] | PIO inputs and outputs as pins; LEDs |
 //! | [`node`] | The protocol node and the settings it starts with |
 //! | [`gateway`] | The one task that owns the node |
+//! | `net` | Modbus TCP over Ethernet: the network stack and its socket tasks (feature `net`) |
 //! | [`io`] | The task that samples the inputs and drives the outputs and LEDs |
 //! | [`settings`] | The settings at start-up and on SAVE, factory reset, reset cause |
 //! | [`rt`] | Executor loop, panic and HardFault handlers (all the `unsafe`) |
@@ -31,10 +32,16 @@
 compile_error!("the features `hw` and `emulator` exclude each other: build the emulator with `--no-default-features --features emulator`");
 #[cfg(not(any(feature = "hw", feature = "emulator")))]
 compile_error!("choose a build: feature `hw` (the default) or `emulator`");
-#[cfg(all(feature = "board-l475", feature = "board-f103"))]
-compile_error!("choose one board: `board-l475` (the default) or `board-f103` with `--no-default-features --features hw,board-f103`");
-#[cfg(not(any(feature = "board-l475", feature = "board-f103")))]
-compile_error!("choose a board: feature `board-l475` or `board-f103`");
+#[cfg(any(
+    all(feature = "board-l475", feature = "board-f103"),
+    all(feature = "board-l475", feature = "board-f429"),
+    all(feature = "board-f103", feature = "board-f429"),
+))]
+compile_error!("choose one board: `board-l475` (the default), or `board-f103` / `board-f429` with `--no-default-features --features hw,board-f103` (or `hw,board-f429`)");
+#[cfg(not(any(feature = "board-l475", feature = "board-f103", feature = "board-f429")))]
+compile_error!("choose a board: feature `board-l475`, `board-f103` or `board-f429`");
+#[cfg(all(feature = "board-f429", feature = "emulator"))]
+compile_error!("the emulator build is the L475's: QEMU has no STM32 with Ethernet (the network side is proven on `mps2-an386`: emu-net/)");
 
 #[macro_use]
 mod log;
@@ -42,6 +49,8 @@ mod board;
 mod discrete;
 mod gateway;
 mod io;
+#[cfg(feature = "net")]
+mod net;
 mod node;
 mod pins;
 #[allow(unsafe_code)]
@@ -87,6 +96,9 @@ struct Parts {
     settings: settings::Settings,
     /// The pins at power-up.
     boot: io::Sample,
+    /// The network settings, as loaded: the stack starts at this address.
+    #[cfg(feature = "net")]
+    net: protocol::net::NetConfig,
 }
 
 /// Brings the chip up, loads the settings (a factory reset first if the inputs held at power-up
@@ -108,6 +120,10 @@ fn start() -> Started {
             outputs: pins.outputs.ports(),
         };
         settings.load(boot.inputs, &mut config);
+    }
+    #[cfg(feature = "net")]
+    if let Some(parts) = parts.as_deref_mut() {
+        parts.net = config.net;
     }
     Started {
         parts,
@@ -136,6 +152,8 @@ fn bring_up(plc: protocol::plc::PlcLine) -> Option<&'static mut Parts> {
                 pins,
                 settings,
                 boot,
+                #[cfg(feature = "net")]
+                net: protocol::net::NetConfig::DEFAULT,
             }))
         }
         Err(_) => {
@@ -146,7 +164,8 @@ fn bring_up(plc: protocol::plc::PlcLine) -> Option<&'static mut Parts> {
     }
 }
 
-/// Spawns the I/O task and the gateway task, which drives the node.
+/// Spawns the I/O task and the gateway task, which drives the node, and with Ethernet the
+/// network stack's tasks.
 fn spawn(spawner: Spawner, started: &'static mut Started) {
     let Started { node, parts } = started;
     let Some(Parts {
@@ -154,10 +173,16 @@ fn spawn(spawner: Spawner, started: &'static mut Started) {
         pins,
         settings,
         boot,
+        #[cfg(feature = "net")]
+        net,
     }) = parts
     else {
         return;
     };
+    #[cfg(feature = "net")]
+    if let Some(ethernet) = board.ethernet.take() {
+        net::spawn(spawner, ethernet, net);
+    }
     match io::run(pins) {
         Ok(token) => spawner.spawn(token),
         Err(_) => error!("I/O task not started"),

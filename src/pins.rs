@@ -180,7 +180,7 @@ pub fn on_fault_drive(pin: PinId, high: bool) {
 
 /// On a fault, `pin` (an alternate-function pin such as a hardware DE) becomes a GPIO output
 /// at 0. (A board whose DE pins are GPIOs registers them with [`on_fault_drive`].)
-#[cfg_attr(feature = "board-f103", allow(dead_code))]
+#[cfg_attr(any(feature = "board-f103", feature = "board-f429"), allow(dead_code))]
 pub fn on_fault_release(pin: PinId) {
     SAFE_RELEASE.add(pin);
 }

@@ -5,6 +5,7 @@
 //! |---|---|---|
 //! | `board-l475` (default) | [`l475`] | ST B-L475E-IOT01A (STM32L475VG, hardware driver enable); what QEMU emulates |
 //! | `board-f103` | [`f103`] | an STM32F103C8 "blue pill" (driver enable as a GPIO) |
+//! | `board-f429` | [`f429`] | ST NUCLEO-F429ZI (STM32F429ZI, driver enable as a GPIO, Ethernet: Modbus TCP) |
 //!
 //! A board module supplies the pins and peripherals ([`board`]), the clock tree, this chip's
 //! part of a UART's settings, the reset cause, the settings' flash range and the board's name;
@@ -12,6 +13,8 @@
 
 #[cfg(feature = "board-f103")]
 pub mod f103;
+#[cfg(feature = "board-f429")]
+pub mod f429;
 #[cfg(feature = "board-l475")]
 pub mod l475;
 
@@ -19,6 +22,11 @@ pub mod l475;
 pub use f103::{
     board, clock_config, reset_cause, uart_config, BUS_UART_HZ, LED_ON, MODEL_NAME, PLC_UART_HZ,
     SETTINGS_RANGE,
+};
+#[cfg(feature = "board-f429")]
+pub use f429::{
+    board, clock_config, reset_cause, uart_config, Ethernet, EthernetDevice, BUS_UART_HZ, LED_ON,
+    MODEL_NAME, PLC_UART_HZ, SETTINGS_RANGE,
 };
 /// The emulator has no settings store.
 #[cfg(all(feature = "board-l475", feature = "hw"))]
@@ -51,8 +59,9 @@ pub const OUTPUT_ON: Level = Level::High;
 /// change or a flash write (a PLC reply is left to the UART: `gateway`).
 const WATCHDOG_TIMEOUT_US: u32 = 1_000_000;
 /// The shortest time [`WATCHDOG_TIMEOUT_US`] may really be: the IWDG counts the LSI, which the
-/// driver takes for its nominal 40 kHz (F103) or 32 kHz (L4); it runs at 30-60 kHz on the F103
-/// (datasheet), so the timeout is 0.67-1.33 s there (29.5-34 kHz on the L4: 0.94-1.08 s). The
+/// driver takes for its nominal 40 kHz (F103) or 32 kHz (L4, F4); it runs at 30-60 kHz on the F103
+/// (datasheet), so the timeout is 0.67-1.33 s there (29.5-34 kHz on the L4: 0.94-1.08 s; 17-47
+/// kHz on the F429: 0.68-1.88 s). The
 /// emulator's model of the watchdog expires after this.
 #[cfg(feature = "emulator")]
 pub const WATCHDOG_SHORTEST_US: u32 = WATCHDOG_TIMEOUT_US / 60 * 40;
@@ -82,6 +91,10 @@ pub struct Board {
     pub watchdog: Watchdog,
     /// The flash for the settings store, taken by the gateway task.
     pub settings_flash: Option<SettingsFlash>,
+    /// The Ethernet MAC and PHY, taken at start-up for the network stack once the stored
+    /// settings (the address) are loaded.
+    #[cfg(feature = "net")]
+    pub ethernet: Option<Ethernet>,
 }
 
 /// The chip's flash, blocking.
@@ -93,6 +106,13 @@ type Flash = embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking
 pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<l475::DcacheOff<Flash>>;
 #[cfg(all(feature = "hw", feature = "board-f103"))]
 pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<Flash>;
+/// On the F429, bank 2's first region (its four 16 KiB sectors; offsets from 0x0810_0000): its
+/// erase page is a 16 KiB sector, where the whole flash's is the largest sector, 128 KiB
+/// (`memory/f429zi.x` says why the small sectors).
+#[cfg(all(feature = "hw", feature = "board-f429"))]
+pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<
+    embassy_stm32::flash::Bank2Region1<'static, embassy_stm32::flash::Blocking>,
+>;
 /// No flash interface in QEMU.
 #[cfg(feature = "emulator")]
 pub type SettingsFlash = core::convert::Infallible;
@@ -234,6 +254,8 @@ pub(crate) fn settings_flash(
     let flash = Flash::new_blocking(flash);
     #[cfg(feature = "board-l475")]
     let flash = l475::DcacheOff(flash);
+    #[cfg(feature = "board-f429")]
+    let flash = flash.into_blocking_regions().bank2_region1;
     Some(embassy_embedded_hal::adapter::BlockingAsync::new(flash))
 }
 
@@ -284,7 +306,11 @@ impl Watchdog {
 fn freeze_watchdog_while_halted() {
     #[cfg(feature = "board-f103")]
     embassy_stm32::pac::DBGMCU.cr().modify(|w| w.set_iwdg(true));
-    #[cfg(not(feature = "board-f103"))]
+    #[cfg(feature = "board-f429")]
+    embassy_stm32::pac::DBGMCU
+        .apb1fzr()
+        .modify(|w| w.set_iwdg(true));
+    #[cfg(feature = "board-l475")]
     embassy_stm32::pac::DBGMCU
         .apb1fzr1()
         .modify(|w| w.set_iwdg(true));

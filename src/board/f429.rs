@@ -1,0 +1,405 @@
+//! # NUCLEO-F429ZI (STM32F429ZI, 2 MiB flash, 192 KiB SRAM, LAN8742A Ethernet PHY)
+//!
+//! The board with Ethernet: Modbus TCP on port 502 ([`crate::net`]) beside Modbus RTU on the PLC
+//! line (both at once), and every PIO port, so patterns 0, 1, 4 and 5 all run. The F4's USARTs
+//! have no hardware driver enable (CR3.DEM is an F0/F3/F7/L4/H7 feature): DE is a GPIO, set before
+//! a write and cleared once the last stop bit has left, as on the F103 ([`Rs485`]).
+//!
+//! Arduino names are the Nucleo-144's (UM1974); every pin is also on the ST morpho connectors
+//! CN11/CN12. Pins the board itself uses are left alone: the Ethernet (RMII), the ST-LINK's
+//! virtual COM port (USART3, PD8/PD9), SWD (PA13/PA14, PB3), the 8 MHz clock from the ST-LINK
+//! (PH0), the 32 kHz crystal (PC14/PC15), the user button (PC13) and the USB OTG connector
+//! (PA8-PA12, PG6, PG7).
+//!
+//! | Signal | Pin | Header | Notes |
+//! |---|---|---|---|
+//! | RS485 **bus** TX / RX | PG14 / PG9 | Arduino D1 / D0 | USART6 (84 MHz APB2) |
+//! | RS485 bus DE | PF15 | Arduino D2 | a GPIO, active high |
+//! | RS485 **PLC** TX / RX | PD5 / PD6 | morpho | USART2 (42 MHz APB1) |
+//! | RS485 PLC DE | PD4 | morpho | a GPIO, active high (USART2's RTS pin, unused as such) |
+//! | IN0-IN5 PC1-PC32 | PE2 PE3 PE4 PE5 PE6 PE7 | morpho | inputs: high = ON, pull-down (open = OFF) |
+//! | IN6 ST6, IN7 JISL, IN8 JOG+, IN9 JOG- | PE8 PE10 PE12 PE14 | morpho | patterns 1 and 4 |
+//! | IN11 HOME, IN12 *STP, IN13 CSTR, IN14 RES, IN15 SON | PE15 PF0 PF1 PF2 PG0 | morpho | |
+//! | Stop input | PA3 | Arduino A0 | safety: the stop is active while the input is OFF (open wire = stop) |
+//! | OUT0-OUT3 PM1-PM8 | PD0 PD1 PG2 PG3 | morpho | outputs: high = ON; every output low after reset, panic, HardFault |
+//! | OUT4 PE4, OUT5 PE5 | PD7 PD11 | morpho | pattern 4 |
+//! | OUT6 MOVE, OUT7 ZONE1 | PD12 PD13 | morpho | |
+//! | OUT9 MODES | PF7 | morpho | pattern 1 |
+//! | OUT10 HEND, OUT11 PEND, OUT12 SV | PF8 PF9 PE9 | morpho, morpho, Arduino D6 | |
+//! | OUT13 LINK, OUT14 *ALM | PE11 PE13 | Arduino D5, D3 | |
+//! | LED run / bus link / alarm | PB0 / PB7 / PB14 | LD1 green / LD2 blue / LD3 red | on the board, lit high |
+//! | Ethernet RMII | PA1 REF_CLK, PA2 MDIO, PC1 MDC, PA7 CRS_DV, PC4 RXD0, PC5 RXD1, PG11 TX_EN, PG13 TXD0, PB13 TXD1 | (on board) | LAN8742A at SMI address 0 |
+//! | (held low) | PA12 | USB OTG D+ | STM32F42x errata 2.2.11: see [`hold_pa12_low`] |
+//!
+//! The 24 V input and output stages are not on this board: as on the others, the table assumes
+//! non-inverting stages, and the carrier holds each output stage's input and each transceiver's
+//! DE low with a 10 kΩ pull-down. **From reset until the firmware drives them** every pin of the
+//! table is a floating input (none is a JTAG pin with a pull-up: PA15, PB4 stay unused), so those
+//! pull-downs keep every output OFF and both drivers off meanwhile.
+
+use core::future::Future;
+use core::task::Context;
+
+use embassy_stm32::eth::{self, PacketQueue, Phy, Sma, StationManagement};
+use embassy_stm32::exti::{self, ExtiInput};
+use embassy_stm32::peripherals::{ETH, ETH_SMA, RNG, USART2, USART6};
+use embassy_stm32::rng::{self, Rng};
+use embassy_stm32::usart::{self, BufferedInterruptHandler, BufferedUart, ConfigError};
+use embassy_stm32::{bind_interrupts, interrupt, Peripherals};
+use static_cell::ConstStaticCell;
+
+use super::{
+    driver_enable, indicator_on_fault, input, led, line_config, output, settings_flash, Board,
+    UartRegs, Watchdog, BUS_RX, BUS_TX, INPUT_ON, OUTPUT_ON, PLC_RX, PLC_TX,
+};
+use crate::discrete::{Inputs, Leds, Outputs};
+use crate::io::Pins;
+use crate::pins::{LineBreak, PinId};
+use crate::serial::Rs485;
+
+/// The board, as the gateway names it to the PLC (device identification).
+pub const MODEL_NAME: &str = "NUCLEO-F429ZI (STM32F429ZI)";
+/// System clock: 168 MHz, the highest the F429 runs without its over-drive mode, and one whose
+/// PLL also makes the 48 MHz the RNG needs (180 MHz cannot: 360 MHz VCO / 48 MHz is not whole).
+const SYSCLK_HZ: u32 = 168_000_000;
+/// The bus UART's (USART6's) kernel clock: PCLK2, the system clock halved (APB2's maximum is
+/// 90 MHz). 9.6 to 230.4 kbit/s: dividers 8,750 to 365.
+pub const BUS_UART_HZ: u32 = SYSCLK_HZ / 2;
+/// The PLC UART's (USART2's) kernel clock: PCLK1, a quarter of the system clock (APB1's maximum
+/// is 45 MHz). 1.2 kbit/s needs a divider of 35,000, under the 16-bit BRR's 65,535; on APB2
+/// (84 MHz) it would be 70,000, which the driver refuses.
+pub const PLC_UART_HZ: u32 = SYSCLK_HZ / 4;
+/// The board's LEDs LD1-LD3 are lit by a high level.
+pub const LED_ON: embassy_stm32::gpio::Level = embassy_stm32::gpio::Level::High;
+
+/// The settings: the first two 16 KiB sectors of bank 2 (sectors 12 and 13, 0x0810_0000 to
+/// 0x0810_8000), as offsets in bank 2's first region, which is what the store's flash is
+/// ([`super::SettingsFlash`]). `memory/f429zi.x` keeps the program in bank 1 and says why these
+/// sectors.
+pub const SETTINGS_RANGE: core::ops::Range<u32> = 0..0x8000;
+
+/// The LAN8742A's address on the SMI: its PHYAD0 strap, low on the NUCLEO-F429ZI (UM1974).
+const PHY_ADDRESS: u8 = 0;
+
+/// Ethernet frames the DMA holds, each way: 4 of 1.5 KiB each (12 KiB of RAM). Modbus TCP moves
+/// small segments; four let a burst from several clients in while the stack is busy.
+const PACKETS: usize = 4;
+
+/// The Ethernet DMA's descriptors and frame buffers, in `.bss` (SRAM, which the DMA reaches:
+/// `memory/f429zi.x`), built in place (`ConstStaticCell`: no 12 KiB temporary on the stack).
+static PACKET_QUEUE: ConstStaticCell<PacketQueue<PACKETS, PACKETS>> =
+    ConstStaticCell::new(PacketQueue::new());
+
+bind_interrupts!(struct Irqs {
+    USART2 => BufferedInterruptHandler<USART2>;
+    USART6 => BufferedInterruptHandler<USART6>;
+    EXTI3 => exti::InterruptHandler<interrupt::typelevel::EXTI3>;
+    ETH => eth::InterruptHandler;
+    HASH_RNG => rng::InterruptHandler<RNG>;
+});
+
+/// The Ethernet driver as the network stack takes it ([`crate::net`]).
+pub type EthernetDevice = eth::Ethernet<'static, ETH, Lan8742a<Sma<'static, ETH_SMA>>>;
+
+/// The Ethernet, brought up by [`board`], and what the network stack needs besides it.
+pub struct Ethernet {
+    /// The MAC and PHY.
+    pub device: EthernetDevice,
+    /// A random seed from the RNG: embassy-net takes its TCP initial sequence numbers and
+    /// ephemeral ports from it, which must not be guessable (a guessed sequence number lets
+    /// a third party inject into a connection).
+    pub seed: u64,
+}
+
+/// The clock tree of [`SYSCLK_HZ`]: the 8 MHz the ST-LINK feeds to PH0 (its MCO, HSE bypass)
+/// / 4 × 168 = 336 MHz VCO; / 2 = 168 MHz system clock, / 7 = 48 MHz for the RNG. The Ethernet
+/// needs HCLK of 25 MHz at least; here it is 168 MHz.
+pub fn clock_config() -> embassy_stm32::Config {
+    use embassy_stm32::rcc::{
+        AHBPrescaler, APBPrescaler, Hse, HseMode, Pll, PllMul, PllPDiv, PllPreDiv, PllQDiv,
+        PllSource, Sysclk,
+    };
+    let mut config = embassy_stm32::Config::default();
+    const HSE_HZ: u32 = 8_000_000;
+    const _: () = assert!(HSE_HZ / 4 * 168 / 2 == SYSCLK_HZ);
+    const _: () = assert!(HSE_HZ / 4 * 168 / 7 == 48_000_000);
+    config.rcc.hse = Some(Hse {
+        freq: embassy_stm32::time::Hertz(HSE_HZ),
+        mode: HseMode::Bypass,
+    });
+    config.rcc.pll_src = PllSource::HSE;
+    config.rcc.pll = Some(Pll {
+        prediv: PllPreDiv::DIV4,
+        mul: PllMul::MUL168,
+        divp: Some(PllPDiv::DIV2),
+        divq: Some(PllQDiv::DIV7),
+        divr: None,
+    });
+    config.rcc.sys = Sysclk::PLL1_P;
+    config.rcc.ahb_pre = AHBPrescaler::DIV1;
+    config.rcc.apb1_pre = APBPrescaler::DIV4;
+    config.rcc.apb2_pre = APBPrescaler::DIV2;
+    config
+}
+
+/// This chip's part of a UART's settings: nothing (DE is a GPIO).
+pub fn uart_config(_config: &mut usart::Config) {}
+
+/// Why the chip last started, from RCC_CSR's reset flags, which are then cleared so that the
+/// next start reads its own. (A power-on sets BORRSTF too: POR is checked before it.)
+pub fn reset_cause() -> protocol::plc::ResetCause {
+    use protocol::plc::ResetCause;
+    let rcc = embassy_stm32::pac::RCC;
+    let csr = rcc.csr().read();
+    let cause = if csr.wdgrstf() || csr.wwdgrstf() {
+        ResetCause::Watchdog
+    } else if csr.sftrstf() {
+        ResetCause::Software
+    } else if csr.porrstf() || csr.borrstf() {
+        ResetCause::PowerOn
+    } else if csr.padrstf() {
+        ResetCause::Pin
+    } else if csr.lpwrrstf() {
+        ResetCause::Other
+    } else {
+        ResetCause::PowerOn
+    };
+    rcc.csr().modify(|w| w.set_rmvf(true));
+    cause
+}
+
+/// STM32F42x/43x errata 2.2.11: on silicon before revision 3, reading flash bank 2 (where the
+/// settings are) can return wrong data while PA12 toggles; the workaround is PA12 an output,
+/// low, pulled down, and embassy-stm32 refuses (panics) to read bank 2 on such silicon unless
+/// PA12 is so. PA12 is the USB OTG connector's D+, which this firmware does not use: held low,
+/// the connector only looks unplugged to a host. Set through the registers, not a HAL pin
+/// object, which would return the pin to an input when dropped.
+fn hold_pa12_low() {
+    use embassy_stm32::pac::gpio::vals::{Moder, Pupdr};
+    let gpioa = embassy_stm32::pac::GPIOA;
+    const PIN: usize = 12;
+    critical_section::with(|_| {
+        gpioa.bsrr().write(|w| w.set_br(PIN, true));
+        gpioa.pupdr().modify(|w| w.set_pupdr(PIN, Pupdr::PULL_DOWN));
+        gpioa.moder().modify(|w| w.set_moder(PIN, Moder::OUTPUT));
+    });
+}
+
+/// The MAC address: locally administered (first octet 0x02: the "local" bit set, the multicast
+/// bit clear), the other five octets a hash of the chip's 96-bit unique ID, so that each board
+/// keeps its own address across starts and two boards on one network differ (but for a hash
+/// collision, one in 2⁴⁰ per pair) without an OUI of our own.
+fn mac_address() -> [u8; 6] {
+    // FNV-1a, 64 bits: small and good enough to spread the ID's lot, wafer and X/Y fields.
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    for byte in embassy_stm32::uid::uid() {
+        hash ^= u64::from(byte);
+        hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    let [a, b, c, d, e, ..] = hash.to_le_bytes();
+    [0x02, a, b, c, d, e]
+}
+
+/// The LAN8742A through its SMI: reset, auto-negotiation advertising 100BASE-TX full duplex
+/// only, and the link reported up only at that speed and duplex.
+///
+/// Why not embassy's `GenericPhy`: its automatic address search panics when no PHY answers
+/// (a damaged PHY would then stop the RS485 gateway, which needs no network), and waits for a
+/// reset without bound at a fixed address. And embassy-stm32 0.6.0's MAC (eth v1) is set to
+/// 100 Mbit/s full duplex once and never follows the link: a link negotiated at 10 Mbit/s or
+/// half duplex would be up and pass nothing, so this PHY does not offer those.
+pub struct Lan8742a<S> {
+    sma: S,
+    address: u8,
+}
+
+/// IEEE 802.3 clause 22 registers and the LAN8742A's own.
+mod reg {
+    /// Basic Control.
+    pub const BCR: u8 = 0;
+    pub const BCR_RESET: u16 = 1 << 15;
+    pub const BCR_AUTONEG: u16 = 1 << 12;
+    pub const BCR_RESTART_AUTONEG: u16 = 1 << 9;
+    /// Basic Status.
+    pub const BSR: u8 = 1;
+    pub const BSR_LINK: u16 = 1 << 2;
+    pub const BSR_AUTONEG_DONE: u16 = 1 << 5;
+    /// Auto-negotiation advertisement: selector 802.3, 100BASE-TX full duplex.
+    pub const ANAR: u8 = 4;
+    pub const ANAR_100_FULL: u16 = 1 << 8 | 0x0001;
+    /// LAN8742A PHY Special Control/Status: bits 4:2 the speed and duplex resolved.
+    pub const PSCSR: u8 = 31;
+    pub const PSCSR_SPEED_MASK: u16 = 0b111 << 2;
+    pub const PSCSR_100_FULL: u16 = 0b110 << 2;
+}
+
+impl<S: StationManagement> Lan8742a<S> {
+    /// The PHY at `address` on `sma`.
+    pub fn new(sma: S, address: u8) -> Lan8742a<S> {
+        Lan8742a { sma, address }
+    }
+
+    fn read(&mut self, register: u8) -> u16 {
+        self.sma.smi_read(self.address, register)
+    }
+
+    fn write(&mut self, register: u8, value: u16) {
+        self.sma.smi_write(self.address, register, value)
+    }
+}
+
+/// How long the PHY may take to leave its reset (the LAN8742A takes well under a millisecond;
+/// an absent PHY reads all ones, the reset bit included, and is waited for this long only).
+const PHY_RESET_WAIT_MS: u32 = 100;
+
+/// How often the link is read while the stack waits for it.
+const LINK_POLL: embassy_time::Duration = embassy_time::Duration::from_millis(500);
+
+impl<S: StationManagement> Phy for Lan8742a<S> {
+    fn phy_reset(&mut self) {
+        self.write(reg::BCR, reg::BCR_RESET);
+        for _ in 0..PHY_RESET_WAIT_MS {
+            if self.read(reg::BCR) & reg::BCR_RESET == 0 {
+                return;
+            }
+            embassy_time::block_for(embassy_time::Duration::from_millis(1));
+        }
+        warn!("Ethernet: the PHY did not answer");
+    }
+
+    fn phy_init(&mut self) {
+        self.write(reg::ANAR, reg::ANAR_100_FULL);
+        self.write(reg::BCR, reg::BCR_AUTONEG | reg::BCR_RESTART_AUTONEG);
+    }
+
+    fn poll_link(&mut self, cx: &mut Context) -> bool {
+        // Read again after LINK_POLL: the stack polls the link only when woken.
+        let _ = core::pin::pin!(embassy_time::Timer::after(LINK_POLL)).poll(cx);
+        let bsr = self.read(reg::BSR);
+        // All ones: no PHY answers (MDIO idles high).
+        let up = reg::BSR_LINK | reg::BSR_AUTONEG_DONE;
+        if bsr == u16::MAX || bsr & up != up {
+            return false;
+        }
+        self.read(reg::PSCSR) & reg::PSCSR_SPEED_MASK == reg::PSCSR_100_FULL
+    }
+}
+
+/// Takes the peripherals this board uses. Fails only if a UART rejects its configuration.
+pub fn board(
+    p: Peripherals,
+    plc_line: protocol::plc::PlcLine,
+) -> Result<(Board, Pins), ConfigError> {
+    // Outputs and driver enables first, driven OFF, so that nothing is ever ON (and no
+    // transmitter drives a line) before the gateway says so.
+    let outputs = Outputs::new(
+        [
+            (0, output(p.PD0)),
+            (1, output(p.PD1)),
+            (2, output(p.PG2)),
+            (3, output(p.PG3)),
+            (4, output(p.PD7)),
+            (5, output(p.PD11)),
+            (6, output(p.PD12)),
+            (7, output(p.PD13)),
+            (9, output(p.PF7)),
+            (10, output(p.PF8)),
+            (11, output(p.PF9)),
+            (12, output(p.PE9)),
+            (13, output(p.PE11)),
+            (14, output(p.PE13)),
+        ],
+        OUTPUT_ON,
+    );
+    let bus_de = driver_enable(p.PF15);
+    let plc_de = driver_enable(p.PD4);
+    let leds = Leds::new(led(p.PB0), led(p.PB7), indicator_on_fault(p.PB14), LED_ON);
+    hold_pa12_low();
+    let inputs = Inputs::new(
+        [
+            (0, input(p.PE2)),
+            (1, input(p.PE3)),
+            (2, input(p.PE4)),
+            (3, input(p.PE5)),
+            (4, input(p.PE6)),
+            (5, input(p.PE7)),
+            (6, input(p.PE8)),
+            (7, input(p.PE10)),
+            (8, input(p.PE12)),
+            (9, input(p.PE14)),
+            (11, input(p.PE15)),
+            (12, input(p.PF0)),
+            (13, input(p.PF1)),
+            (14, input(p.PF2)),
+            (15, input(p.PG0)),
+        ],
+        ExtiInput::from_input(input(p.PA3), p.EXTI3, Irqs),
+        INPUT_ON,
+    );
+
+    let line_break = LineBreak::new(PinId::of(&*p.PG14), None);
+    let bus = BufferedUart::new(
+        p.USART6,
+        p.PG9,
+        p.PG14,
+        BUS_TX.take(),
+        BUS_RX.take(),
+        Irqs,
+        line_config(super::BUS_INITIAL_BAUD, protocol::plc::Parity::None),
+    )?;
+    let plc = BufferedUart::new(
+        p.USART2,
+        p.PD6,
+        p.PD5,
+        PLC_TX.take(),
+        PLC_RX.take(),
+        Irqs,
+        line_config(plc_line.baud, plc_line.parity),
+    )?;
+
+    // The seed before the MAC: the RNG runs from the PLL's 48 MHz (`clock_config`).
+    let seed = Rng::new(p.RNG, Irqs).next_u64();
+    // The PHY's reset is waited for here (at most `PHY_RESET_WAIT_MS`), before the watchdog.
+    let device = eth::Ethernet::new_with_phy(
+        PACKET_QUEUE.take(),
+        p.ETH,
+        Irqs,
+        p.PA1,
+        p.PA7,
+        p.PC4,
+        p.PC5,
+        p.PG13,
+        p.PB13,
+        p.PG11,
+        mac_address(),
+        Lan8742a::new(Sma::new(p.ETH_SMA, p.PA2, p.PC1), PHY_ADDRESS),
+    );
+
+    let board = Board {
+        bus: Rs485::new(
+            bus,
+            UartRegs(embassy_stm32::pac::USART6),
+            (super::BUS_INITIAL_BAUD, protocol::plc::Parity::None),
+            Some(line_break),
+            Some(bus_de),
+        ),
+        plc: Rs485::new(
+            plc,
+            UartRegs(embassy_stm32::pac::USART2),
+            (plc_line.baud, plc_line.parity),
+            None,
+            Some(plc_de),
+        ),
+        watchdog: Watchdog::new(p.IWDG),
+        settings_flash: settings_flash(p.FLASH),
+        ethernet: Some(Ethernet { device, seed }),
+    };
+    Ok((
+        board,
+        Pins {
+            inputs,
+            outputs,
+            leds,
+        },
+    ))
+}
