@@ -263,6 +263,7 @@ fn binary_sources(bin: &str) -> Vec<&'static str> {
         "bench" => vec!["src/bin/bench"],
         "demo" => vec!["src/bin/demo.rs"],
         "regmap" => vec!["src/bin/regmap.rs"],
+        "rcgw" => vec!["src/bin/rcgw"],
         other => panic!("binary {other}: add where its flags are defined"),
     }
 }
