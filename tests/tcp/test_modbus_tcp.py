@@ -3,13 +3,17 @@ four clients at once, pipelined requests, a byte-a-second client beside a normal
 MBAP headers, refused clients, the connection limit, the idle close and the watchdog fed over
 TCP. Raw sockets where the test needs bytes no master sends."""
 
-import inspect
 import socket
 import struct
+import sys
 import threading
 import time
+from pathlib import Path
 
 from pymodbus.client import ModbusTcpClient
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pyshared"))
+from plc import UNIT_KEYWORD, crc16  # noqa: E402  (pymodbus' unit keyword; the RTU CRC)
 
 GATEWAY = 63
 DIRECT = 0xFF
@@ -22,15 +26,7 @@ TCPLINK = 0x0610
 LINK, PNOW = 0x9F02, 0x9000
 
 
-def _unit_keyword():
-    parameters = inspect.signature(ModbusTcpClient.read_holding_registers).parameters
-    for name in ("device_id", "slave", "unit"):
-        if name in parameters:
-            return name
-    raise RuntimeError(f"unknown pymodbus API: {list(parameters)}")
-
-
-UNIT = _unit_keyword()
+UNIT = UNIT_KEYWORD
 
 
 class Client:
@@ -294,15 +290,6 @@ def test_requests_over_tcp_feed_the_watchdog(gateway):
     assert c.write(DIRECT, WATCHDOG, [0]) is None
     c.close()
 
-
-def crc16(data):
-    """Modbus RTU CRC, low byte first (Serial Line §2.5.1.2)."""
-    crc = 0xFFFF
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
-    return bytes([crc & 0xFF, crc >> 8])
 
 
 def test_tcp_beside_an_rtu_line_serves_both(start_host_with):
