@@ -173,61 +173,77 @@ pub async fn run(
         }
 
         clock = now();
-        while let Some(action) = node.poll(clock) {
-            let Board { bus, plc, .. } = &mut *board;
-            match action {
-                // COMM_CHANGE goes out as a frame does: one send (and one await) for both.
-                Action::Bus(_) | Action::Line(LineAction::CommChange) => {
-                    let bytes = match action {
-                        Action::Bus(frame) => frame,
-                        _ => protocol::frame::COMM_CHANGE,
-                    };
-                    plc.settle_then(pin!(bus.send(&bytes))).await;
-                }
-                // Left to the UART: see the module documentation.
-                Action::Reply(reply) => plc.start_send(reply).await,
-                Action::Line(LineAction::SetBaud(baud)) => {
-                    plc.settle_then(pin!(bus.set_baud(baud.bits_per_second())))
-                        .await
-                }
-                Action::Line(LineAction::BreakStart) => {
-                    plc.settle_then(pin!(bus.break_start())).await
-                }
-                Action::Line(LineAction::BreakEnd) => bus.break_end(),
-                // After the reply to the write that asked for it has left.
-                Action::PlcLine(line) => plc.set_line(line.baud, line.parity).await,
-                Action::Store(store) => {
-                    // The reply to the write that asked for it leaves first: on the F103 an
-                    // erase stops the CPU, and with it the interrupt that feeds the UART, for
-                    // 20-40 ms.
-                    plc.settle().await;
-                    match store {
-                        Store::Save(record) => {
-                            let saved = settings.save(&record);
-                            node.stored(saved);
-                        }
-                        Store::FactoryReset | Store::Restart => {
-                            if matches!(store, Store::FactoryReset) {
-                                settings.factory_reset();
+        // One pass without Ethernet; with it, another while a socket's pipe still holds bytes
+        // the node can take (a request that got no reply leaves room that no reply refills).
+        #[cfg_attr(not(feature = "net"), allow(clippy::never_loop))]
+        loop {
+            while let Some(action) = node.poll(clock) {
+                let Board {
+                    bus, plc, watchdog, ..
+                } = &mut *board;
+                match action {
+                    // COMM_CHANGE goes out as a frame does: one send (and one await) for both.
+                    Action::Bus(_) | Action::Line(LineAction::CommChange) => {
+                        let bytes = match action {
+                            Action::Bus(frame) => frame,
+                            _ => protocol::frame::COMM_CHANGE,
+                        };
+                        plc.settle_then(pin!(bus.send(&bytes))).await;
+                    }
+                    // Left to the UART: see the module documentation.
+                    Action::Reply(reply) => plc.start_send(reply).await,
+                    Action::Line(LineAction::SetBaud(baud)) => {
+                        plc.settle_then(pin!(bus.set_baud(baud.bits_per_second())))
+                            .await
+                    }
+                    Action::Line(LineAction::BreakStart) => {
+                        plc.settle_then(pin!(bus.break_start())).await
+                    }
+                    Action::Line(LineAction::BreakEnd) => bus.break_end(),
+                    // After the reply to the write that asked for it has left.
+                    Action::PlcLine(line) => plc.set_line(line.baud, line.parity).await,
+                    Action::Store(store) => {
+                        // The reply to the write that asked for it leaves first: on the F103 an
+                        // erase stops the CPU, and with it the interrupt that feeds the UART, for
+                        // 20-40 ms.
+                        plc.settle().await;
+                        // A whole watchdog period for the erase (on the F429 a 16 KiB sector
+                        // takes 0.25-0.5 s with the interrupts masked), not what the wait for the
+                        // reply left of it.
+                        watchdog.pet();
+                        match store {
+                            Store::Save(record) => {
+                                let saved = settings.save(&record);
+                                node.stored(saved);
                             }
-                            cortex_m::peripheral::SCB::sys_reset();
+                            Store::FactoryReset | Store::Restart => {
+                                if matches!(store, Store::FactoryReset) {
+                                    settings.factory_reset();
+                                }
+                                cortex_m::peripheral::SCB::sys_reset();
+                            }
                         }
                     }
-                }
-                // Copied out first: the reply borrows the node, which `reply` hands more bytes.
-                #[cfg(feature = "net")]
-                Action::TcpReply { socket, bytes } => {
-                    let mut reply = [0u8; MAX_TCP_ADU_LEN];
-                    let len = bytes.len().min(reply.len());
-                    if let (Some(to), Some(from)) = (reply.get_mut(..len), bytes.get(..len)) {
-                        to.copy_from_slice(from);
+                    // Copied out first: the reply borrows the node, which `reply` hands more bytes.
+                    #[cfg(feature = "net")]
+                    Action::TcpReply { socket, bytes } => {
+                        let mut reply = [0u8; MAX_TCP_ADU_LEN];
+                        let len = bytes.len().min(reply.len());
+                        if let (Some(to), Some(from)) = (reply.get_mut(..len), bytes.get(..len)) {
+                            to.copy_from_slice(from);
+                        }
+                        PORT.reply(socket, self::bytes(&reply, len), node, clock);
                     }
-                    PORT.reply(socket, self::bytes(&reply, len), node, clock);
+                    #[cfg(feature = "net")]
+                    Action::TcpClose(socket) => PORT.close(socket, node),
                 }
-                #[cfg(feature = "net")]
-                Action::TcpClose(socket) => PORT.close(socket, node),
+                clock = now();
             }
-            clock = now();
+            #[cfg(feature = "net")]
+            if PORT.refill(node, clock) {
+                continue;
+            }
+            break;
         }
 
         // The I/O task shows them when it next wakes (1 ms with a PIO axis, else up to 20 ms:

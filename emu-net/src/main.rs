@@ -195,31 +195,37 @@ async fn gateway_task(node: &'static mut Node) -> ! {
             PORT.handle(event, node, now());
         }
         let clock = now();
-        while let Some(action) = node.poll(clock) {
-            match action {
-                Action::TcpReply { socket, bytes } => {
-                    // The reply borrows the node: copied out first (260 bytes at most).
-                    let mut reply = [0u8; protocol::modbus::tcp::MAX_TCP_ADU_LEN];
-                    let n = bytes.len().min(reply.len());
-                    reply[..n].copy_from_slice(&bytes[..n]);
-                    if !PORT.reply(socket, &reply[..n], node, clock) {
-                        log!("socket {}: a reply did not fit: closed", socket);
+        loop {
+            while let Some(action) = node.poll(clock) {
+                match action {
+                    Action::TcpReply { socket, bytes } => {
+                        // The reply borrows the node: copied out first (260 bytes at most).
+                        let mut reply = [0u8; protocol::modbus::tcp::MAX_TCP_ADU_LEN];
+                        let n = bytes.len().min(reply.len());
+                        reply[..n].copy_from_slice(&bytes[..n]);
+                        if !PORT.reply(socket, &reply[..n], node, clock) {
+                            log!("socket {}: a reply did not fit: closed", socket);
+                        }
                     }
+                    Action::TcpClose(socket) => {
+                        log!("socket {}: closed by the node", socket);
+                        PORT.close(socket, node)
+                    }
+                    Action::Store(Store::Save(_)) => {
+                        saves += 1;
+                        node.stored(Ok(saves));
+                    }
+                    // No bus, no serial PLC line, no flash, no restart here.
+                    Action::Bus(_)
+                    | Action::Line(_)
+                    | Action::Reply(_)
+                    | Action::PlcLine(_)
+                    | Action::Store(_) => {}
                 }
-                Action::TcpClose(socket) => {
-                    log!("socket {}: closed by the node", socket);
-                    PORT.close(socket, node)
-                }
-                Action::Store(Store::Save(_)) => {
-                    saves += 1;
-                    node.stored(Ok(saves));
-                }
-                // No bus, no serial PLC line, no flash, no restart here.
-                Action::Bus(_)
-                | Action::Line(_)
-                | Action::Reply(_)
-                | Action::PlcLine(_)
-                | Action::Store(_) => {}
+            }
+            // What a request that got no reply left waiting in a pipe.
+            if !PORT.refill(node, clock) {
+                break;
             }
         }
     }
@@ -230,6 +236,6 @@ fn trace(event: &rc_net::Event) {
     match event {
         rc_net::Event::Opened { socket, peer } => log!("socket {}: {} connected", socket, peer),
         rc_net::Event::Closed(socket) => log!("socket {}: ended", socket),
-        rc_net::Event::Data(_) => {}
+        rc_net::Event::Data(_) | rc_net::Event::Sent(_) => {}
     }
 }

@@ -11,15 +11,20 @@
 //! |---|---|
 //! | [`Event::Opened`] with the client's address | `close`: close the connection (refused, replaced, idle, framing lost, not reading) |
 //! | bytes in the socket's receive pipe, and [`Event::Data`] | the replies, in the socket's send pipe |
+//! | [`Event::Sent`]: the send pipe has emptied | |
 //! | [`Event::Closed`]: the connection has ended, and the task no longer touches the pipes | `released`: the pipes are empty, accept the next client |
 //!
-//! The gateway task hands each event to [`Port::handle`] and each [`Action::TcpReply`] /
-//! [`Action::TcpClose`] to [`Port::reply`] / [`Port::close`]. It never waits on a socket: a
-//! reply that does not fit in the send pipe means the client is not reading, and closes its
-//! connection; the node's own receive buffer takes one request at a time, so a client that
-//! pipelines waits in its pipe and in TCP's window, not in the gateway's time. Every end of a
-//! connection goes through [`Event::Closed`] and `released`, so no byte of one client ever
-//! reaches the next one on the same socket.
+//! The gateway task hands each event to [`Port::handle`], each [`Action::TcpReply`] /
+//! [`Action::TcpClose`] to [`Port::reply`] / [`Port::close`], and calls [`Port::refill`] once the
+//! node has nothing more to do. It never waits on a socket. Back-pressure instead: once a
+//! socket's send pipe has no room for another whole reply, the node answers none of that
+//! client's requests ([`Node::tcp_writable`]) until its replies have left ([`Event::Sent`]); a
+//! client that pipelines many requests, or reads its replies slowly, waits in its pipe and in
+//! TCP's window, not in the gateway's time, and one that never reads is closed by the idle time.
+//! Every end of a connection goes through [`Event::Closed`] and `released`, so no byte of one
+//! client ever reaches the next one on the same socket; and the socket task looks at the close
+//! before anything else and around every wait of its own (a full pipe, a client that does not
+//! read), so a close always ends the connection.
 //!
 //! [`Action::TcpReply`]: protocol::node::Action::TcpReply
 //! [`Action::TcpClose`]: protocol::node::Action::TcpClose
@@ -28,13 +33,14 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
-use embassy_futures::select::{select3, Either3};
+use embassy_futures::select::{select, select3, Either, Either3};
 use embassy_net::tcp::TcpSocket;
 use embassy_net::{IpAddress, Stack};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::pipe::Pipe;
 use embassy_sync::signal::Signal;
+use protocol::modbus::tcp::MAX_TCP_ADU_LEN;
 use protocol::net::Ipv4;
 use protocol::node::Node;
 use protocol::time::Instant;
@@ -69,7 +75,14 @@ pub enum Event {
     /// The socket's connection has ended (the client closed it, it broke, or the gateway
     /// closed it), and its task waits to be released.
     Closed(usize),
+    /// The socket's send pipe has emptied: it has room for replies again.
+    Sent(usize),
 }
+
+/// How long a connection's end may wait for TCP to send its reset, or for the last replies to a
+/// client that closed its side: a client that vanished (no ARP answer any more) would otherwise
+/// hold the socket for good.
+const CLOSE_WAIT: embassy_time::Duration = embassy_time::Duration::from_secs(1);
 
 /// One socket's side of the [`Port`].
 struct Socket {
@@ -129,7 +142,17 @@ impl Port {
                     self.close_socket(socket);
                 }
             }
-            Event::Data(socket) => self.feed(socket, node, now),
+            Event::Data(socket) => {
+                self.feed(socket, node, now);
+            }
+            Event::Sent(socket) => {
+                if let Some(s) = self.sockets.get(socket) {
+                    if s.send.free_capacity() >= MAX_TCP_ADU_LEN {
+                        node.tcp_writable(socket, true);
+                    }
+                }
+                self.feed(socket, node, now);
+            }
             Event::Closed(socket) => {
                 node.tcp_closed(socket);
                 if let Some(s) = self.sockets.get(socket) {
@@ -142,26 +165,45 @@ impl Port {
         }
     }
 
-    /// Gives the node the received bytes it has room for.
-    pub fn feed(&self, socket: usize, node: &mut Node, now: Instant) {
+    /// Gives the node the received bytes it has room for (and drops those of a socket whose
+    /// connection the node no longer holds: refused, replaced, closed); whether it gave any.
+    pub fn feed(&self, socket: usize, node: &mut Node, now: Instant) -> bool {
         let Some(s) = self.sockets.get(socket) else {
-            return;
+            return false;
         };
+        if !node.tcp_connected(socket) {
+            s.receive.clear();
+            return false;
+        }
+        let mut fed = false;
         let mut buf = [0u8; 64];
         loop {
             let room = node.tcp_room(socket).min(buf.len());
             let Some(chunk) = buf.get_mut(..room).filter(|c| !c.is_empty()) else {
-                return;
+                return fed;
             };
             let Ok(n) = s.receive.try_read(chunk) else {
-                return;
+                return fed;
             };
             node.tcp_received(now, socket, chunk.get(..n).unwrap_or(&[]));
+            fed = true;
         }
     }
 
-    /// Queues the node's reply on `socket`, whole, or closes the connection (its client is not
-    /// reading: `false`); then gives the node what came meanwhile.
+    /// Feeds every socket (after the node has answered what it had: a frame that got no reply,
+    /// another protocol's or a malformed one, leaves room that no reply refills); whether any
+    /// bytes went to the node, which then has more to do.
+    pub fn refill(&self, node: &mut Node, now: Instant) -> bool {
+        let mut fed = false;
+        for socket in 0..SOCKETS {
+            fed |= self.feed(socket, node, now);
+        }
+        fed
+    }
+
+    /// Queues the node's reply on `socket`, whole, or closes the connection (`false`; it cannot
+    /// happen while the node is told, as here, when the pipe has no room for another reply);
+    /// then gives the node what came meanwhile.
     pub fn reply(&self, socket: usize, bytes: &[u8], node: &mut Node, now: Instant) -> bool {
         let Some(s) = self.sockets.get(socket) else {
             return false;
@@ -181,6 +223,11 @@ impl Port {
                 }
             }
         }
+        // Back-pressure: no more of this client's requests until its replies have left
+        // ([`Event::Sent`]); the other clients' are answered meanwhile.
+        if s.send.free_capacity() < MAX_TCP_ADU_LEN {
+            node.tcp_writable(socket, false);
+        }
         self.feed(socket, node, now);
         true
     }
@@ -193,9 +240,12 @@ impl Port {
         self.close_socket(socket);
     }
 
+    /// Tells the socket task to close, and empties its receive pipe (the task may be waiting
+    /// for room in it; the bytes are the closed client's).
     fn close_socket(&self, socket: usize) {
         if let Some(s) = self.sockets.get(socket) {
             s.close.signal(());
+            s.receive.clear();
         }
     }
 }
@@ -242,7 +292,8 @@ pub async fn serve(
                 .await;
             connected(&mut socket, port, s, index, &mut buf, &mut out).await;
             socket.abort();
-            let _ = socket.flush().await;
+            // The reset, if the client is still there to take it; never longer than CLOSE_WAIT.
+            let _ = embassy_time::with_timeout(CLOSE_WAIT, socket.flush()).await;
         }
         drop(socket);
         s.released.reset();
@@ -251,7 +302,9 @@ pub async fn serve(
     }
 }
 
-/// Moves bytes until the client closes, the connection breaks or the gateway closes it.
+/// Moves bytes until the client closes, the connection breaks or the gateway closes it. The
+/// close is looked at first, and around every wait: on a full receive pipe (the node holds a
+/// request it has not answered) and on a full TCP send buffer (a client that does not read).
 async fn connected(
     socket: &mut TcpSocket<'_>,
     port: &Port,
@@ -263,19 +316,67 @@ async fn connected(
     use embedded_io_async::Write;
     loop {
         let (mut reader, mut writer) = socket.split();
-        match select3(reader.read(buf), s.send.read(out), s.close.wait()).await {
-            Either3::First(Ok(n)) if n > 0 => {
-                s.receive.write_all(buf.get(..n).unwrap_or(&[])).await;
+        match select3(s.close.wait(), reader.read(buf), s.send.read(out)).await {
+            Either3::First(()) => return,
+            Either3::Second(Ok(n)) if n > 0 => {
+                let bytes = buf.get(..n).unwrap_or(&[]);
+                if let Either::First(()) = select(s.close.wait(), s.receive.write_all(bytes)).await
+                {
+                    return;
+                }
                 port.events.send(Event::Data(index)).await;
             }
-            // The client closed (0 bytes) or the connection broke.
-            Either3::First(_) => return,
-            Either3::Second(n) => {
-                if writer.write_all(out.get(..n).unwrap_or(&[])).await.is_err() {
+            // The client closed its side (0 bytes): its last requests are still answered.
+            Either3::Second(Ok(_)) => return finish(&mut writer, port, s, index, out).await,
+            // The connection broke.
+            Either3::Second(Err(_)) => return,
+            Either3::Third(n) => {
+                if !send(&mut writer, port, s, index, out.get(..n).unwrap_or(&[])).await {
                     return;
                 }
             }
-            Either3::Third(()) => return,
+        }
+    }
+
+    /// Writes `bytes` to the client unless the gateway closes first; `false` if it did, or the
+    /// connection broke. An emptied send pipe is reported ([`Event::Sent`]).
+    async fn send(
+        writer: &mut embassy_net::tcp::TcpWriter<'_>,
+        port: &Port,
+        s: &Socket,
+        index: usize,
+        bytes: &[u8],
+    ) -> bool {
+        match select(s.close.wait(), writer.write_all(bytes)).await {
+            Either::Second(Ok(())) => {
+                if s.send.is_empty() {
+                    port.events.send(Event::Sent(index)).await;
+                }
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// After the client's FIN: the replies to what it sent before, until none has come for
+    /// [`CLOSE_WAIT`].
+    async fn finish(
+        writer: &mut embassy_net::tcp::TcpWriter<'_>,
+        port: &Port,
+        s: &Socket,
+        index: usize,
+        out: &mut [u8],
+    ) {
+        loop {
+            let next = embassy_time::with_timeout(CLOSE_WAIT, s.send.read(out));
+            match select(s.close.wait(), next).await {
+                Either::Second(Ok(n)) => {
+                    if !send(writer, port, s, index, out.get(..n).unwrap_or(&[])).await {
+                        return;
+                    }
+                }
+                _ => return,
+            }
         }
     }
 }

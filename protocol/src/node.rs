@@ -398,7 +398,14 @@ impl Node {
             _ => return None,
         }
         let link = self.link_counters();
-        let mut model = self.gateway.registers(now, link);
+        let model = self.gateway.registers(now, link);
+        // TCPCONN and TCPLINK read the same over the serial line as over TCP.
+        #[cfg(feature = "tcp")]
+        let model = model.with_tcp(crate::plc::TcpView {
+            counters: self.tcp.server.counters(),
+            connections: self.tcp.server.connections(),
+        });
+        let mut model = model;
         let handled = self
             .slave
             .poll(&mut self.receiver, now, &mut model, &mut self.reply);
@@ -592,6 +599,23 @@ impl Node {
     /// closed it (asked by [`Action::TcpClose`], or a reply that did not fit).
     pub fn tcp_closed(&mut self, socket: usize) {
         self.tcp.server.closed(socket);
+    }
+
+    /// Whether `socket` can take a whole reply now (the caller's send buffer for it has room
+    /// for [`MAX_TCP_ADU_LEN`](crate::modbus::tcp::MAX_TCP_ADU_LEN) bytes): while it cannot, the
+    /// node answers none of its requests (the others' are answered meanwhile), so a client slow
+    /// to read its replies is held back, not cut off; the idle time still closes one that
+    /// never reads.
+    pub fn tcp_writable(&mut self, socket: usize, writable: bool) {
+        self.tcp.server.set_writable(socket, writable);
+        if writable {
+            self.dirty = true;
+        }
+    }
+
+    /// Whether a connection is open on `socket` (the caller drops bytes for one that is not).
+    pub fn tcp_connected(&self, socket: usize) -> bool {
+        self.tcp.server.is_open(socket)
     }
 
     /// What the TCP server has counted.

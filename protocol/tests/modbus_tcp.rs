@@ -392,3 +392,46 @@ fn axis_base_moves_the_axes_units_on_apply_and_never_onto_the_gateway_s() {
         Err(Exception::IllegalDataValue)
     );
 }
+
+/// Found by a review: TCPCONN and TCPLINK read 0 over the serial line.
+#[test]
+fn tcpconn_and_tcplink_read_the_same_over_the_serial_line() {
+    let mut rig = Rig::ready(1, |_| {});
+    assert!(rig.connect(0, PLC));
+    assert!(rig.connect(1, PLC));
+    let over_tcp = rig.tcp_read(0, 63, G_TCP, G_TCP_LEN).unwrap();
+    assert_eq!(rig.read(63, G_NET + 7, 1), Ok(vec![2]), "TCPCONN over RTU");
+    let over_rtu = rig.read(63, G_TCP, G_TCP_LEN).unwrap();
+    assert_eq!(over_rtu[1], 2, "accepted");
+    // One more frame counted: the TCP read above.
+    assert_eq!(over_rtu[11], over_tcp[11] + 1, "frames");
+}
+
+/// A socket whose send side is full gets no replies until it has room; the others are
+/// answered meanwhile, and its requests wait, none lost.
+#[test]
+fn a_socket_without_room_for_a_reply_waits_and_the_others_do_not() {
+    let mut rig = Rig::ready(1, |_| {});
+    assert!(rig.connect(0, PLC));
+    assert!(rig.connect(1, PLC));
+    rig.node.tcp_writable(0, false);
+    let two: Vec<u8> = (1..3)
+        .flat_map(|tid| frame(tid, 63, &read(G_UNIT_ID, 1)))
+        .collect();
+    rig.node.tcp_received(Instant(rig.now), 0, &two);
+    let replies = rig.send(1, &frame(9, 63, &read(G_UNIT_ID, 1)));
+    assert_eq!(replies.iter().map(|r| r.0).collect::<Vec<_>>(), vec![1]);
+    rig.run_for(100 * MS);
+    assert!(rig.tcp_replies.is_empty(), "nothing for the blocked socket");
+    rig.node.tcp_writable(0, true);
+    rig.run_for(MS);
+    let tids: Vec<u16> = rig
+        .tcp_replies
+        .iter()
+        .map(|(s, r)| {
+            assert_eq!(*s, 0);
+            u16::from_be_bytes([r[0], r[1]])
+        })
+        .collect();
+    assert_eq!(tids, vec![1, 2]);
+}

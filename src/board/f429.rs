@@ -57,6 +57,58 @@ use crate::io::Pins;
 use crate::pins::{LineBreak, PinId};
 use crate::serial::Rs485;
 
+/// The settings' flash, erased 32 bits at a time. embassy-stm32 0.6.0 never sets FLASH_CR.PSIZE
+/// for an erase, and its writes leave it at 0 (x8, the reset value), where a 16 KiB sector takes
+/// about 0.4 s (0.8 s at most) instead of 0.25 s (0.5 s) at x32 (STM32F429 datasheet, flash
+/// characteristics; 2.7-3.6 V allows x32), all of it with the interrupts masked: too close to the
+/// 0.68 s the IWDG may really be ([`super::Watchdog`]).
+pub struct Psize32<F>(pub F);
+
+impl<F: embedded_storage::nor_flash::ErrorType> embedded_storage::nor_flash::ErrorType
+    for Psize32<F>
+{
+    type Error = F::Error;
+}
+
+impl<F: embedded_storage::nor_flash::ReadNorFlash> embedded_storage::nor_flash::ReadNorFlash
+    for Psize32<F>
+{
+    const READ_SIZE: usize = F::READ_SIZE;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        self.0.read(offset, bytes)
+    }
+
+    fn capacity(&self) -> usize {
+        self.0.capacity()
+    }
+}
+
+impl<F: embedded_storage::nor_flash::NorFlash> embedded_storage::nor_flash::NorFlash
+    for Psize32<F>
+{
+    const WRITE_SIZE: usize = F::WRITE_SIZE;
+    const ERASE_SIZE: usize = F::ERASE_SIZE;
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        self.0.write(offset, bytes)
+    }
+
+    /// PSIZE is set in the unlocked FLASH_CR (embassy's own unlock then finds it unlocked, and
+    /// its lock after each sector keeps the field), and the register locked again after.
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        use embassy_stm32::pac::{flash::vals::Psize, FLASH};
+        if FLASH.cr().read().lock() {
+            FLASH.keyr().write_value(0x4567_0123);
+            FLASH.keyr().write_value(0xCDEF_89AB);
+        }
+        FLASH.cr().modify(|w| w.set_psize(Psize::PSIZE32));
+        let result = self.0.erase(from, to);
+        FLASH.cr().modify(|w| w.set_lock(true));
+        result
+    }
+}
+
 /// The board, as the gateway names it to the PLC (device identification).
 pub const MODEL_NAME: &str = "NUCLEO-F429ZI (STM32F429ZI)";
 /// System clock: 168 MHz, the highest the F429 runs without its over-drive mode, and one whose
@@ -198,6 +250,24 @@ fn mac_address() -> [u8; 6] {
     }
     let [a, b, c, d, e, ..] = hash.to_le_bytes();
     [0x02, a, b, c, d, e]
+}
+
+/// The LAN8742A's identifier, PHY ID 1 (register 2): Microchip's OUI bits 3-18 (LAN8742A data
+/// sheet, 4.2.3); ID 2 (register 3) holds the model, 0xC13x.
+const PHY_ID1: u16 = 0x0007;
+
+/// Whether the PHY answers at [`PHY_ADDRESS`] with its identifier within
+/// [`PHY_RESET_WAIT_MS`] (it leaves its own power-on reset with the board's; no PHY reads
+/// 0xFFFF: MDIO floats high with its pull-up).
+fn phy_answers(sma: &mut impl StationManagement) -> bool {
+    for _ in 0..PHY_RESET_WAIT_MS {
+        let (id1, id2) = (sma.smi_read(PHY_ADDRESS, 2), sma.smi_read(PHY_ADDRESS, 3));
+        if id1 == PHY_ID1 && id2 & 0xFFF0 == 0xC130 {
+            return true;
+        }
+        embassy_time::block_for(embassy_time::Duration::from_millis(1));
+    }
+    false
 }
 
 /// The LAN8742A through its SMI: reset, auto-negotiation advertising 100BASE-TX full duplex
@@ -359,21 +429,32 @@ pub fn board(
 
     // The seed before the MAC: the RNG runs from the PLL's 48 MHz (`clock_config`).
     let seed = Rng::new(p.RNG, Irqs).next_u64();
-    // The PHY's reset is waited for here (at most `PHY_RESET_WAIT_MS`), before the watchdog.
-    let device = eth::Ethernet::new_with_phy(
-        PACKET_QUEUE.take(),
-        p.ETH,
-        Irqs,
-        p.PA1,
-        p.PA7,
-        p.PC4,
-        p.PC5,
-        p.PG13,
-        p.PB13,
-        p.PG11,
-        mac_address(),
-        Lan8742a::new(Sma::new(p.ETH_SMA, p.PA2, p.PC1), PHY_ADDRESS),
-    );
+    // The MAC's DMA cannot leave its reset without the PHY's 50 MHz reference clock, and
+    // embassy-stm32 0.6.0 waits for it without bound: a board whose PHY does not answer on the
+    // management interface (clocked from HCLK, not by the PHY) gets no Ethernet, and keeps its
+    // RS485 side, instead of hanging here before the watchdog runs.
+    let mut sma = Sma::new(p.ETH_SMA, p.PA2, p.PC1);
+    let ethernet = if phy_answers(&mut sma) {
+        // The PHY's reset is waited for here (at most `PHY_RESET_WAIT_MS`), before the watchdog.
+        let device = eth::Ethernet::new_with_phy(
+            PACKET_QUEUE.take(),
+            p.ETH,
+            Irqs,
+            p.PA1,
+            p.PA7,
+            p.PC4,
+            p.PC5,
+            p.PG13,
+            p.PB13,
+            p.PG11,
+            mac_address(),
+            Lan8742a::new(sma, PHY_ADDRESS),
+        );
+        Some(Ethernet { device, seed })
+    } else {
+        error!("net: no LAN8742A answers at SMI address 0: no Ethernet");
+        None
+    };
 
     let board = Board {
         bus: Rs485::new(
@@ -392,7 +473,7 @@ pub fn board(
         ),
         watchdog: Watchdog::new(p.IWDG),
         settings_flash: settings_flash(p.FLASH),
-        ethernet: Some(Ethernet { device, seed }),
+        ethernet,
     };
     Ok((
         board,

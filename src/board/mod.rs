@@ -111,7 +111,7 @@ pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<Flash>;
 /// (`memory/f429zi.x` says why the small sectors).
 #[cfg(all(feature = "hw", feature = "board-f429"))]
 pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<
-    embassy_stm32::flash::Bank2Region1<'static, embassy_stm32::flash::Blocking>,
+    f429::Psize32<embassy_stm32::flash::Bank2Region1<'static, embassy_stm32::flash::Blocking>>,
 >;
 /// No flash interface in QEMU.
 #[cfg(feature = "emulator")]
@@ -255,7 +255,7 @@ pub(crate) fn settings_flash(
     #[cfg(feature = "board-l475")]
     let flash = l475::DcacheOff(flash);
     #[cfg(feature = "board-f429")]
-    let flash = flash.into_blocking_regions().bank2_region1;
+    let flash = f429::Psize32(flash.into_blocking_regions().bank2_region1);
     Some(embassy_embedded_hal::adapter::BlockingAsync::new(flash))
 }
 

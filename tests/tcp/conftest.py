@@ -21,7 +21,7 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 TARGET = os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target"))
 HOST_BIN = os.path.join(TARGET, "debug", "rc-gateway-host")
-MPS2_ELF = os.path.join(TARGET, "thumbv7em-none-eabihf", "release", "rc-gateway-mps2")
+MPS2_ELF = os.environ.get("RC_GATEWAY_MPS2_ELF", os.path.join(TARGET, "thumbv7em-none-eabihf", "release", "rc-gateway-mps2"))
 QEMU = os.environ.get("QEMU", "qemu-system-arm")
 READY_TIMEOUT = 120.0
 

@@ -319,3 +319,77 @@ def test_tcp_beside_an_rtu_line_serves_both(start_host_with):
         tcp.close()
     finally:
         os.close(fd)
+
+
+# ---------------------------------------------------------------- defects a review found
+
+
+def test_clients_that_flood_or_never_read_leave_every_socket_usable(gateway):
+    """Five clients each send 8 KiB of garbage (a length the gateway must refuse: closed), then
+    five pipeline requests and never read a reply: once they are gone, a correct client is
+    served on every socket again (no socket task left waiting on a full pipe or on a client)."""
+    junk = [Client(gateway.port) for _ in range(5)]
+    for c in junk:
+        try:
+            c.sock.sendall(b"\xff" * 8192)
+        except OSError:
+            pass  # already closed by the gateway: what should happen
+    for c in junk:
+        assert c.closed_by_peer(10.0), "a client sending garbage was kept"
+        c.close()
+    pdu = read_pdu(0x0510, 14)
+    mute = [Client(gateway.port) for _ in range(4)]
+    for c in mute:
+        c.sock.sendall(b"".join(c.frame(DIRECT, pdu, tid=i) for i in range(200)))
+    time.sleep(1.0)
+    for c in mute:
+        c.close()
+    deadline = time.monotonic() + 20
+    served = 0
+    while served < 6:
+        assert time.monotonic() < deadline, f"only {served} clients served after the others left"
+        try:
+            fresh = Client(gateway.port)
+            assert fresh.read(DIRECT, UNITID, 1) == [GATEWAY]
+            fresh.close()
+            served += 1
+        except (ConnectionError, OSError):
+            time.sleep(0.2)
+
+
+def test_big_pipelined_replies_all_arrive_in_order(gateway):
+    """Six reads of 125 registers in one segment: 6 x 257 bytes of replies, more than the
+    firmware's send pipe holds at once; the gateway holds the client's requests back until its
+    replies have left, it never cuts the connection."""
+    c = Client(gateway.port)
+    pdu = struct.pack(">BHH", 4, 0x0100, 125)  # FC04: AXISCFG of every axis (read-only view)
+    c.sock.sendall(b"".join(c.frame(DIRECT, pdu, tid=50 + i) for i in range(6)))
+    for i in range(6):
+        tid, unit, reply = c.reply()
+        assert (tid, unit, reply[0], reply[1]) == (50 + i, DIRECT, 4, 250), reply[:4]
+        assert len(reply) == 252
+    assert c.read(DIRECT, UNITID, 1) == [GATEWAY]
+    c.close()
+
+
+def test_a_request_after_a_frame_without_reply_is_answered(gateway):
+    """A long frame of another protocol and one with function code 0 get no reply; the request
+    behind each, in the same segment, is answered all the same."""
+    c = Client(gateway.port)
+    foreign = c.frame(DIRECT, bytes([3]) + bytes(252), tid=1, protocol=9)
+    not_a_request = c.frame(DIRECT, bytes([0]) + bytes(252), tid=2)
+    for lead in (foreign, not_a_request):
+        c.sock.sendall(lead + c.frame(DIRECT, read_pdu(UNITID, 1), tid=3))
+        tid, unit, pdu = c.reply()
+        assert (tid, pdu) == (3, bytes([3, 2, 0, GATEWAY])), (tid, pdu.hex())
+    c.close()
+
+
+def test_a_client_that_closes_its_side_still_gets_its_reply(gateway):
+    c = Client(gateway.port)
+    c.sock.sendall(c.frame(DIRECT, read_pdu(UNITID, 1), tid=77))
+    c.sock.shutdown(socket.SHUT_WR)
+    tid, unit, pdu = c.reply()
+    assert (tid, pdu) == (77, bytes([3, 2, 0, GATEWAY]))
+    assert c.closed_by_peer(5.0)
+    c.close()

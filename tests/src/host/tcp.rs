@@ -26,6 +26,9 @@ struct Connection {
     unread: Vec<u8>,
     /// Reply bytes not written yet.
     out: VecDeque<u8>,
+    /// The client has closed its side (FIN): what it sent before is still answered, then the
+    /// connection is closed.
+    eof: bool,
 }
 
 /// The listening socket and the connections.
@@ -91,14 +94,30 @@ impl TcpSide {
                     stream,
                     unread: Vec::new(),
                     out: VecDeque::new(),
+                    eof: false,
                 });
             }
         }
         for socket in 0..SOCKETS {
             self.read(now, socket, node);
             self.flush(socket, node);
+            self.finish(socket, node);
         }
         Ok(())
+    }
+
+    /// Closes a connection whose client has closed its side once everything it sent has been
+    /// answered and written.
+    fn finish(&mut self, socket: usize, node: &mut Node) {
+        let Some(Some(connection)) = self.connections.get(socket) else {
+            return;
+        };
+        let done = connection.unread.is_empty()
+            && connection.out.is_empty()
+            && node.tcp_room(socket) == protocol::modbus::tcp::MAX_TCP_ADU_LEN;
+        if connection.eof && done {
+            self.close(socket, node);
+        }
     }
 
     /// Offers the node what was read before, then reads more while it has room.
@@ -113,7 +132,8 @@ impl TcpSide {
                 connection.unread.drain(..taken);
             }
             let room = node.tcp_room(socket);
-            if !connection.unread.is_empty() || room == 0 {
+            // Past the client's FIN only what was read before is left to hand over.
+            if !connection.unread.is_empty() || room == 0 || connection.eof {
                 break;
             }
             let mut buf = [0u8; 512];
@@ -123,7 +143,7 @@ impl TcpSide {
                 .read(buf.get_mut(..want).unwrap_or(&mut []))
             {
                 Ok(0) => {
-                    ended = true;
+                    connection.eof = true;
                     break;
                 }
                 Ok(n) => connection
@@ -192,7 +212,8 @@ impl TcpSide {
     /// The descriptors to wait on, with whether output is pending.
     pub fn fds(&self) -> Vec<(BorrowedFd<'_>, bool)> {
         let mut fds = vec![(self.listener.as_fd(), false)];
-        for connection in self.connections.iter().flatten() {
+        // A client past its FIN is always readable (at its end): not waited on.
+        for connection in self.connections.iter().flatten().filter(|c| !c.eof) {
             fds.push((connection.stream.as_fd(), !connection.out.is_empty()));
         }
         fds

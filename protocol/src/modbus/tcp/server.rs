@@ -63,6 +63,9 @@ pub struct Server {
     close: u8,
     /// Where the next round of [`next_frame`](Server::next_frame) starts.
     turn: usize,
+    /// Sockets whose send side has no room for a reply now (bit n = socket n): their requests
+    /// wait ([`set_writable`](Server::set_writable)).
+    blocked: u8,
     counters: TcpCounters,
 }
 
@@ -85,6 +88,7 @@ impl Server {
             connections: [NONE; SOCKETS],
             close: 0,
             turn: 0,
+            blocked: 0,
             counters: TcpCounters {
                 accepted: 0,
                 refused: 0,
@@ -176,7 +180,26 @@ impl Server {
         self.drop_connection(socket);
         if socket < SOCKETS {
             self.close &= !(1 << socket);
+            self.blocked &= !(1 << socket);
         }
+    }
+
+    /// Whether `socket`'s send side has room for a whole reply: while it has not, its requests
+    /// wait (a client slow to read its replies gets no more of them until it does; the others'
+    /// are answered meanwhile). Every socket is writable when its connection opens.
+    pub fn set_writable(&mut self, socket: usize, writable: bool) {
+        if socket < SOCKETS {
+            if writable {
+                self.blocked &= !(1 << socket);
+            } else {
+                self.blocked |= 1 << socket;
+            }
+        }
+    }
+
+    /// Whether a connection is open on `socket`.
+    pub fn is_open(&self, socket: usize) -> bool {
+        self.connections.get(socket).is_some_and(Option::is_some)
     }
 
     /// The next whole request and its socket, taking turns between the connections; frames that
@@ -197,6 +220,9 @@ impl Server {
     fn ready_socket(&mut self) -> Option<usize> {
         for k in 0..SOCKETS {
             let socket = (self.turn + k) % SOCKETS;
+            if self.blocked & (1 << socket) != 0 {
+                continue;
+            }
             while let Some(connection) = self.connections.get_mut(socket).and_then(Option::as_mut) {
                 match connection.stream.peek() {
                     None => break,
@@ -239,7 +265,10 @@ impl Server {
     /// When something is due: [`Instant::ZERO`] (now) while a frame waits or a socket is to be
     /// closed, else the earliest idle time-out; `None`: nothing until bytes arrive.
     pub fn poll_at(&self, policy: &Policy) -> Option<Instant> {
-        if self.close != 0 || self.open_sockets().any(|(_, c)| c.stream.is_ready()) {
+        let blocked = self.blocked;
+        let ready =
+            |(socket, c): (usize, &Connection)| blocked & (1 << socket) == 0 && c.stream.is_ready();
+        if self.close != 0 || self.open_sockets().any(ready) {
             return Some(Instant::ZERO);
         }
         if policy.idle() == Duration::ZERO {
