@@ -350,7 +350,7 @@ impl Settings {
             .collect()
     }
 
-    /// The TOML text: [gateway], [network], then [axis.N] for every axis.
+    /// The TOML text: `[gateway]`, `[network]`, then `[axis.N]` for every axis.
     pub fn to_toml(&self) -> String {
         self.to_toml_with(&|_| String::new())
     }
