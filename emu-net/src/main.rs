@@ -236,6 +236,6 @@ fn trace(event: &rc_net::Event) {
     match event {
         rc_net::Event::Opened { socket, peer } => log!("socket {}: {} connected", socket, peer),
         rc_net::Event::Closed(socket) => log!("socket {}: ended", socket),
-        rc_net::Event::Data(_) | rc_net::Event::Sent(_) => {}
+        rc_net::Event::Data(_) | rc_net::Event::Sent(_) | rc_net::Event::Eof(_) => {}
     }
 }

@@ -33,6 +33,7 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+use core::sync::atomic::{AtomicBool, Ordering};
 use embassy_futures::select::{select, select3, Either, Either3};
 use embassy_net::tcp::TcpSocket;
 use embassy_net::{IpAddress, Stack};
@@ -77,11 +78,13 @@ pub enum Event {
     Closed(usize),
     /// The socket's send pipe has emptied: it has room for replies again.
     Sent(usize),
+    /// The client has closed its side (TCP FIN): once what it sent before is answered, the
+    /// connection ends.
+    Eof(usize),
 }
 
-/// How long a connection's end may wait for TCP to send its reset, or for the last replies to a
-/// client that closed its side: a client that vanished (no ARP answer any more) would otherwise
-/// hold the socket for good.
+/// How long a connection's end may wait for TCP to send its reset: a client that vanished (no
+/// ARP answer any more) would otherwise hold the socket for good.
 const CLOSE_WAIT: embassy_time::Duration = embassy_time::Duration::from_secs(1);
 
 /// One socket's side of the [`Port`].
@@ -90,6 +93,10 @@ struct Socket {
     send: Pipe<Cs, SEND_PIPE>,
     close: Signal<Cs, ()>,
     released: Signal<Cs, ()>,
+    /// The client has closed its side ([`Event::Eof`]): the gateway says when everything it
+    /// sent has been answered ([`Socket::answered`]).
+    eof: AtomicBool,
+    answered: Signal<Cs, ()>,
 }
 
 impl Socket {
@@ -99,6 +106,8 @@ impl Socket {
             send: Pipe::new(),
             close: Signal::new(),
             released: Signal::new(),
+            eof: AtomicBool::new(false),
+            answered: Signal::new(),
         }
     }
 }
@@ -153,12 +162,20 @@ impl Port {
                 }
                 self.feed(socket, node, now);
             }
+            Event::Eof(socket) => {
+                if let Some(s) = self.sockets.get(socket) {
+                    s.eof.store(true, Ordering::Relaxed);
+                }
+                self.feed(socket, node, now);
+            }
             Event::Closed(socket) => {
                 node.tcp_closed(socket);
                 if let Some(s) = self.sockets.get(socket) {
                     s.receive.clear();
                     s.send.clear();
                     s.close.reset();
+                    s.eof.store(false, Ordering::Relaxed);
+                    s.answered.reset();
                     s.released.signal(());
                 }
             }
@@ -197,6 +214,17 @@ impl Port {
         let mut fed = false;
         for socket in 0..SOCKETS {
             fed |= self.feed(socket, node, now);
+        }
+        if !fed {
+            // The node is idle: a client past its FIN whose every request has been answered
+            // (nothing in its pipe, nothing in the node) is done.
+            for (socket, s) in self.sockets.iter().enumerate() {
+                let nothing_left = s.receive.is_empty() && node.tcp_room(socket) == MAX_TCP_ADU_LEN;
+                if s.eof.load(Ordering::Relaxed) && nothing_left {
+                    s.eof.store(false, Ordering::Relaxed);
+                    s.answered.signal(());
+                }
+            }
         }
         fed
     }
@@ -284,15 +312,20 @@ pub async fn serve(
         socket.set_nagle_enabled(false);
         if socket.accept(PORT).await.is_ok() {
             s.close.reset();
+            s.answered.reset();
             port.events
                 .send(Event::Opened {
                     socket: index,
                     peer: peer_of(&socket),
                 })
                 .await;
-            connected(&mut socket, port, s, index, &mut buf, &mut out).await;
-            socket.abort();
-            // The reset, if the client is still there to take it; never longer than CLOSE_WAIT.
+            match connected(&mut socket, port, s, index, &mut buf, &mut out).await {
+                // The replies in TCP's buffer go out, then our FIN.
+                End::Graceful => socket.close(),
+                End::Abort => socket.abort(),
+            }
+            // The last bytes, our FIN or the reset, if the client is still there to take them;
+            // never longer than CLOSE_WAIT.
             let _ = embassy_time::with_timeout(CLOSE_WAIT, socket.flush()).await;
         }
         drop(socket);
@@ -300,6 +333,15 @@ pub async fn serve(
         port.events.send(Event::Closed(index)).await;
         s.released.wait().await;
     }
+}
+
+/// How a connection ends.
+enum End {
+    /// The client closed its side and every request of it has been answered: a FIN, after the
+    /// replies.
+    Graceful,
+    /// The gateway closed it, or it broke: a reset.
+    Abort,
 }
 
 /// Moves bytes until the client closes, the connection breaks or the gateway closes it. The
@@ -312,27 +354,27 @@ async fn connected(
     index: usize,
     buf: &mut [u8],
     out: &mut [u8],
-) {
+) -> End {
     use embedded_io_async::Write;
     loop {
         let (mut reader, mut writer) = socket.split();
         match select3(s.close.wait(), reader.read(buf), s.send.read(out)).await {
-            Either3::First(()) => return,
+            Either3::First(()) => return End::Abort,
             Either3::Second(Ok(n)) if n > 0 => {
                 let bytes = buf.get(..n).unwrap_or(&[]);
                 if let Either::First(()) = select(s.close.wait(), s.receive.write_all(bytes)).await
                 {
-                    return;
+                    return End::Abort;
                 }
                 port.events.send(Event::Data(index)).await;
             }
             // The client closed its side (0 bytes): its last requests are still answered.
             Either3::Second(Ok(_)) => return finish(&mut writer, port, s, index, out).await,
             // The connection broke.
-            Either3::Second(Err(_)) => return,
+            Either3::Second(Err(_)) => return End::Abort,
             Either3::Third(n) => {
                 if !send(&mut writer, port, s, index, out.get(..n).unwrap_or(&[])).await {
-                    return;
+                    return End::Abort;
                 }
             }
         }
@@ -358,24 +400,32 @@ async fn connected(
         }
     }
 
-    /// After the client's FIN: the replies to what it sent before, until none has come for
-    /// [`CLOSE_WAIT`].
+    /// After the client's FIN: the replies to what it sent before, until the gateway says every
+    /// request of it has been answered (or it closes), then what is left in the send pipe.
     async fn finish(
         writer: &mut embassy_net::tcp::TcpWriter<'_>,
         port: &Port,
         s: &Socket,
         index: usize,
         out: &mut [u8],
-    ) {
+    ) -> End {
+        port.events.send(Event::Eof(index)).await;
         loop {
-            let next = embassy_time::with_timeout(CLOSE_WAIT, s.send.read(out));
-            match select(s.close.wait(), next).await {
-                Either::Second(Ok(n)) => {
+            match select3(s.close.wait(), s.answered.wait(), s.send.read(out)).await {
+                Either3::First(()) => return End::Abort,
+                Either3::Second(()) => {
+                    while let Ok(n) = s.send.try_read(out) {
+                        if !send(writer, port, s, index, out.get(..n).unwrap_or(&[])).await {
+                            return End::Abort;
+                        }
+                    }
+                    return End::Graceful;
+                }
+                Either3::Third(n) => {
                     if !send(writer, port, s, index, out.get(..n).unwrap_or(&[])).await {
-                        return;
+                        return End::Abort;
                     }
                 }
-                _ => return,
             }
         }
     }
