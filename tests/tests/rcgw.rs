@@ -16,8 +16,13 @@ struct Gateway {
 
 impl Gateway {
     fn start(name: &str) -> Gateway {
+        Gateway::with_axes(name, 2)
+    }
+
+    fn with_axes(name: &str, sims: u8) -> Gateway {
+        let sims = sims.to_string();
         let mut child = Command::new(env!("CARGO_BIN_EXE_rc-gateway-host"))
-            .args(["--plc-pty", "--modbus-tcp", "127.0.0.1:0", "--sim", "2"])
+            .args(["--plc-pty", "--modbus-tcp", "127.0.0.1:0", "--sim", &sims])
             .args(["--no-control", "--watchdog-ms", "0", "--points"])
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
@@ -46,6 +51,20 @@ impl Gateway {
             pty,
             tcp,
             dir,
+        }
+    }
+
+    /// Once every simulated axis is online (they come online one after the other).
+    fn online(self) -> Gateway {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        loop {
+            let s = json(&self.tcp(), &["status"]);
+            let axes = s["axes"].as_array().cloned().unwrap_or_default();
+            if axes.iter().all(|a| a["link"] == "online") {
+                return self;
+            }
+            assert!(std::time::Instant::now() < deadline, "axes not online: {s}");
+            std::thread::sleep(std::time::Duration::from_millis(100));
         }
     }
 
@@ -372,15 +391,342 @@ fn bad_input_is_refused_with_the_port_unit_and_register() {
         2,
         &["8 [axis.N] tables: a backup of another axis count"],
     );
+    // A row beyond the stroke: skipped and reported, the rest restored, exit 2.
     let far = good.clone() + &POINTS.replace("80.00", "100.01");
     let far = gw.file("far.toml", &far);
     fails(
         &tcp,
         &["restore", &far],
         2,
-        &["[[axis.1.point]] #2 position_mm = 100.01: out of range"],
+        &[
+            "axis 1 point 7: not restored",
+            "position_mm = 100.01: outside 0.00-100.00",
+        ],
     );
     let settings_only = gw.file("settings.toml", "[gateway]\nretries = 1\n");
     fails(&tcp, &["restore", &settings_only], 2, &["[backup] missing"]);
     assert_eq!(before, ok(&tcp, &["config", "show"]));
+}
+
+// ------------------------------------------------------------------ the review's findings
+
+/// One Modbus TCP request to the gateway: the reply's PDU.
+fn modbus(addr: &str, unit: u8, pdu: &[u8]) -> Vec<u8> {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(addr).expect("connect");
+    let mut frame = vec![0, 1, 0, 0];
+    frame.extend_from_slice(&(pdu.len() as u16 + 1).to_be_bytes());
+    frame.push(unit);
+    frame.extend_from_slice(pdu);
+    s.write_all(&frame).expect("send");
+    let mut head = [0u8; 7];
+    s.read_exact(&mut head).expect("MBAP header");
+    let mut body = vec![0; usize::from(u16::from_be_bytes([head[4], head[5]])) - 1];
+    s.read_exact(&mut body).expect("PDU");
+    body
+}
+
+fn write_register(addr: &str, unit: u8, register: u16, value: u16) -> Vec<u8> {
+    let [a, b] = register.to_be_bytes();
+    let [c, d] = value.to_be_bytes();
+    modbus(addr, unit, &[6, a, b, c, d])
+}
+
+fn read_register(addr: &str, unit: u8, register: u16) -> u16 {
+    let [a, b] = register.to_be_bytes();
+    let r = modbus(addr, unit, &[3, a, b, 0, 1]);
+    assert_eq!(r.len(), 4, "{r:?}");
+    u16::from_be_bytes([r[2], r[3]])
+}
+
+/// Axis 0 (unit 1): servo on, homed, then a direct move to 90 mm at 1 mm/s (minutes).
+fn start_slow_move(addr: &str) {
+    write_register(addr, 1, 0x0D00, 0x1000);
+    std::thread::sleep(std::time::Duration::from_millis(200));
+    write_register(addr, 1, 0x0D00, 0x1010);
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    while read_register(addr, 1, 0x9F00) != 2 {
+        assert!(std::time::Instant::now() < deadline, "homing did not end");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let values: [u16; 7] = [0, 9000, 0, 10, 0, 100, 30];
+    let mut pdu = vec![0x10, 0x99, 0x00, 0, 7, 14];
+    pdu.extend(values.iter().flat_map(|v| v.to_be_bytes()));
+    assert_eq!(modbus(addr, 1, &pdu)[0], 0x10);
+    while read_register(addr, 1, 0x9007) & 1 << 5 == 0 {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the move did not start"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
+/// Finding 1: an APPLY needed while an axis moves writes nothing; `rcgw apply` recovers
+/// pending settings; `status` survives a pending AXISBASE.
+#[test]
+fn apply_waits_for_an_idle_bus_and_rcgw_apply_recovers() {
+    let gw = Gateway::with_axes("idle", 3).online();
+    let tcp = gw.tcp();
+    start_slow_move(&gw.tcp);
+    let change = gw.file("change.toml", "[gateway]\nretries = 3\nbus_rtim_ms = 5\n");
+    fails(
+        &tcp,
+        &["config", "apply", &change],
+        1,
+        &["axis 0 (unit 1) runs a command", "nothing written"],
+    );
+    let diff = ok(&tcp, &["config", "diff", &change]);
+    assert!(diff.contains("bus_rtim_ms: 3 -> 5"), "{diff}");
+    assert!(diff.contains("retries: 2 -> 3"), "{diff}");
+    fails(
+        &tcp,
+        &["apply"],
+        1,
+        &["APPLY not written", "axis 0 (unit 1)"],
+    );
+    // Stop the move; a pending AXISBASE (written by a PLC, not applied).
+    modbus(&gw.tcp, 1, &[5, 0x04, 0x2C, 0xFF, 0x00]);
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(5);
+    while read_register(&gw.tcp, 1, 0x9007) & 1 << 5 != 0 {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the move did not stop"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    assert_eq!(write_register(&gw.tcp, 63, 0x0020, 10)[0], 6);
+    let status = ok(&tcp, &["status"]);
+    assert!(status.contains("SETTINGS PENDING"), "{status}");
+    assert!(status.contains("rcgw apply"), "{status}");
+    let applied = json(&tcp, &["apply"]);
+    assert_eq!(
+        applied["axis_units"],
+        serde_json::json!([10, 11, 12]),
+        "{applied}"
+    );
+    let s = json(&tcp, &["status"]);
+    assert_eq!(s["axes"][0]["unit"], 10, "{s}");
+    assert_eq!(s["axes"][2]["link"], "online", "{s}");
+    assert_eq!(s["pending"], serde_json::json!([]), "{s}");
+}
+
+/// Finding 2: UNITID, AXISBASE and the axes enabled written in an order the gateway admits,
+/// in two steps with an APPLY between when one does not do.
+#[test]
+fn unit_base_and_axes_are_written_in_an_order_the_gateway_admits() {
+    let gw = Gateway::with_axes("order", 3).online();
+    let tcp = gw.tcp();
+    let moved = gw.file("moved.toml", "[gateway]\nunit_id = 5\naxis_base = 62\n");
+    let j = json(&tcp, &["config", "apply", &moved]);
+    assert_eq!(j["applied"], true, "{j}");
+    let mut five = gw.tcp();
+    five.extend(["--unit".into(), "5".into()]);
+    let s = json(&five, &["status"]);
+    assert_eq!(s["axes"][2]["unit"], 64, "{s}");
+    assert_eq!(s["axes"][2]["link"], "online", "{s}");
+    let back = gw.file("back.toml", "[gateway]\nunit_id = 63\naxis_base = 1\n");
+    ok(&five, &["config", "apply", &back]);
+    let three = gw.file(
+        "three.toml",
+        "[gateway]\nunit_id = 3\nretries = 1\n[axis.2]\nenabled = false\n",
+    );
+    let diff = ok(&tcp, &["config", "diff", &three]);
+    assert!(
+        diff.contains("in two steps: [axis.2] enabled first"),
+        "{diff}"
+    );
+    let j = json(&tcp, &["config", "apply", &three]);
+    assert_eq!(j["phases"], 2, "{j}");
+    let mut unit3 = gw.tcp();
+    unit3.extend(["--unit".into(), "3".into()]);
+    let s = json(&unit3, &["status"]);
+    assert_eq!(s["axes"].as_array().map(|a| a.len()), Some(2), "{s}");
+    assert_eq!(json(&unit3, &["config", "show"])["gateway"]["retries"], 1);
+}
+
+/// Findings 3 and 4: rows checked as the position table checks them, before anything is
+/// written; backup leaves out the rows restore would refuse.
+#[test]
+fn rows_are_checked_as_the_position_table_checks_them() {
+    let gw = Gateway::start("rows").online();
+    let tcp = gw.tcp();
+    let b0 = gw.path("b0.toml");
+    ok(&tcp, &["backup", &b0]);
+    let good = std::fs::read_to_string(&b0).expect("b0");
+    let before = ok(&tcp, &["config", "show"]);
+    // Rows of an axis the backup does not enable: refused, nothing written.
+    let other = good.replace("retries = 0", "retries = 2") + &POINTS.replace("axis.1.", "axis.5.");
+    let other = gw.file("other.toml", &other);
+    fails(
+        &tcp,
+        &["restore", &other],
+        2,
+        &["axis 5 is not enabled", "nothing written"],
+    );
+    assert_eq!(before, ok(&tcp, &["config", "show"]));
+    // An acceleration and a speed the controller cannot hold: skipped and said, the rest
+    // restored.
+    let wild = good.clone()
+        + &POINTS
+            .replace("accel_g = 0.20", "accel_g = 5")
+            .replace("speed_mm_s = 120.00", "speed_mm_s = 99999");
+    let wild = gw.file("wild.toml", &wild);
+    fails(
+        &tcp,
+        &["restore", &wild],
+        2,
+        &[
+            "2 row(s) skipped",
+            "axis 1 point 7: not restored",
+            "accel_g = 5.00",
+            "axis 1 point 2: not restored",
+            "speed_mm_s = 99999.00",
+        ],
+    );
+    // Seed point 7 at 80 mm, then reduce the stroke to 50 mm: backup leaves it out, says so,
+    // and restore takes the file.
+    let seeded = gw.file("seeded.toml", &(good + POINTS));
+    ok(&tcp, &["restore", &seeded]);
+    let short = gw.file("short.toml", "[axis.1]\nstroke_mm = 50\n");
+    ok(&tcp, &["config", "apply", &short]);
+    let b1 = gw.path("b1.toml");
+    let out = rcgw(&tcp, &["backup", &b1]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("axis 1 point 7: left out of the backup"),
+        "{}",
+        text(&out)
+    );
+    let file = std::fs::read_to_string(&b1).expect("b1");
+    assert!(file.contains("# point 7 left out"), "{file}");
+    assert!(!file.contains("point = 7"), "{file}");
+    ok(&tcp, &["restore", &b1]);
+}
+
+/// Finding 5: a backup that enables an axis now disabled: the dry run says the rows are
+/// compared after the APPLY; the restore compares them after it.
+#[test]
+fn restore_enables_an_axis_and_compares_its_rows_after_the_apply() {
+    let gw = Gateway::with_axes("enable", 3).online();
+    let tcp = gw.tcp();
+    let b0 = gw.path("b0.toml");
+    ok(&tcp, &["backup", &b0]);
+    let seeded = std::fs::read_to_string(&b0).expect("b0") + &POINTS.replace("axis.1.", "axis.2.");
+    let seeded = gw.file("seeded.toml", &seeded);
+    ok(&tcp, &["restore", &seeded]);
+    let b1 = gw.path("b1.toml");
+    ok(&tcp, &["backup", &b1]);
+    let off = gw.file("off.toml", "[axis.2]\nenabled = false\n");
+    ok(&tcp, &["config", "apply", &off]);
+    let dry = ok(&tcp, &["restore", &b1, "--dry-run"]);
+    assert!(
+        dry.contains("axis 2: enabled on APPLY; its 2 row(s) compared after it"),
+        "{dry}"
+    );
+    let report = ok(&gw.rtu(), &["restore", &b1]);
+    assert!(
+        report.contains("axis 2: 0 point(s) written and verified, 2 unchanged"),
+        "{report}"
+    );
+}
+
+/// Finding 6: a closed pipe on standard output ends the run cleanly.
+#[test]
+fn a_closed_pipe_ends_status_watch_cleanly() {
+    let gw = Gateway::start("pipe");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rcgw"))
+        .args(gw.tcp())
+        .args(["status", "--watch", "--interval", "0.05", "--count", "1000"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("rcgw");
+    let mut lines = BufReader::new(child.stdout.take().expect("stdout"));
+    for _ in 0..2 {
+        let mut line = String::new();
+        lines.read_line(&mut line).expect("a line");
+    }
+    drop(lines);
+    let out = child.wait_with_output().expect("wait");
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+}
+
+/// Finding 7: values and ranges in the file's units; finding 9: unknown and duplicate keys;
+/// finding 8: the reply time-out follows the line rate.
+#[test]
+fn messages_in_the_files_units_and_keys_checked() {
+    let gw = Gateway::start("messages");
+    let tcp = gw.tcp();
+    let bad = gw.file(
+        "units.toml",
+        "[gateway]\nbus_baud_bps = -9600\npio_jog_mm_s = 700\nretries = -1\n[axis.1]\nlead_mm = 0\n[axis.01]\nhome = \"far\"\n",
+    );
+    let out = rcgw(&tcp, &["config", "diff", &bad]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    for says in [
+        "bus_baud_bps = -9600: out of range (allowed: 9600, 14400, 19200, 28800, 38400, 57600, 76800, 115200 bit/s)",
+        "pio_jog_mm_s = 700: out of range (allowed: 0.01-655.35 mm/s)",
+        "retries = -1: out of range (allowed: 0-3)",
+        "lead_mm = 0: out of range (allowed: 0.01-655.35 mm)",
+        "[axis.01]: write the axis number as [axis.1]",
+    ] {
+        assert!(stderr.contains(says), "{says:?} not in {}", text(&out));
+    }
+    assert!(
+        !stderr.contains("70000") && !stderr.contains("-96 "),
+        "{}",
+        text(&out)
+    );
+    let b = gw.path("b.toml");
+    ok(&tcp, &["backup", &b]);
+    let good = std::fs::read_to_string(&b).expect("backup");
+    let point = gw.file("point.toml", &format!("point = 3\n{good}"));
+    fails(&tcp, &["restore", &point], 2, &["unknown key \"point\""]);
+    let formt = gw.file(
+        "formt.toml",
+        &good.replace("format = 1\n", "format = 1\nformt = 2\n"),
+    );
+    fails(
+        &tcp,
+        &["restore", &formt],
+        2,
+        &["[backup] formt: unknown key"],
+    );
+    let twice = gw.file("twice.toml", &format!("{good}\n[axis.01]\nlead_mm = 12\n"));
+    fails(
+        &tcp,
+        &["restore", &twice],
+        2,
+        &["[axis.01]: write the axis number as [axis.1]"],
+    );
+    // 1200 bit/s: a request and its reply of 15 bytes take 137 ms on the line.
+    let mut slow = gw.rtu();
+    slow.extend(["--baud".into(), "1200".into(), "--unit".into(), "99".into()]);
+    fails(&slow, &["status"], 1, &["no reply within 1137 ms"]);
+}
+
+/// Finding 10: restore --save --json reports the save; [network] addresses say when they take
+/// effect.
+#[test]
+fn restore_reports_the_save_and_network_changes_say_when() {
+    let gw = Gateway::start("save");
+    let tcp = gw.tcp();
+    let b = gw.path("b.toml");
+    ok(&tcp, &["backup", &b]);
+    let r = json(&tcp, &["restore", &b, "--save"]);
+    assert_eq!(r["saved"], true, "{r}");
+    assert!(r["save_count"].as_u64().is_some(), "{r}");
+    let net = gw.file(
+        "net.toml",
+        "[network]\nip_prefix_bits = 16\ntcp_idle_s = 30\n",
+    );
+    let diff = ok(&tcp, &["config", "diff", &net]);
+    assert!(
+        diff.contains("[network] ip_prefix_bits: 24 -> 16 (after SAVE and RESTART)"),
+        "{diff}"
+    );
+    assert!(diff.contains("[network] tcp_idle_s: 60 -> 30\n"), "{diff}");
 }

@@ -9,12 +9,14 @@
 //! not exposed here (the command channel writes any field; it converts and checks a field with
 //! a unit as this table does: `field_to_plc`, `field_from_plc`).
 
-use super::config::AxisConfig;
+use core::num::NonZeroU16;
+
+use super::config::{complement_of, home_of, stroke_of, AxisConfig};
 use super::refused::Refused;
 use super::registers::{join, split};
 use crate::jobs::{PointData, PointReadback};
 use crate::memory::PointField;
-use crate::units::{Accel, Length, Scale, Speed};
+use crate::units::{Accel, Lead, Length, Scale, Speed};
 use crate::{Acceleration, Pulses, Velocity};
 
 /// First register of the table.
@@ -124,4 +126,65 @@ pub(crate) fn point(values: &[u16], config: &AxisConfig) -> Result<PointData, Re
         band: band(join(reg(2), reg(3)), scale)?,
         max_acceleration: 0,
     })
+}
+
+/// An axis' configuration from its AXISCFG block (unit 63, 0x0100 + 8 n: enabled, lead,
+/// home, pulses/rev, stroke high, stroke low, complement), if every field is one the gateway
+/// takes.
+pub fn axis_config(axis_cfg: &[u16]) -> Option<AxisConfig> {
+    let reg = |i: usize| axis_cfg.get(i).copied();
+    let stroke = stroke_of(join(reg(4)?, reg(5)?))?;
+    Some(AxisConfig {
+        scale: Scale {
+            lead: Lead::from_hundredths(reg(1)?)?,
+            pulses_per_rev: NonZeroU16::new(reg(3)?)?,
+            home: home_of(reg(2)?)?,
+            complement: complement_of(reg(6)?)?,
+        },
+        stroke,
+    })
+}
+
+/// Whether the position table takes `row` (a whole row, 16 registers, in the PLC's units) for
+/// an axis configured as `config`: the check a PLC's write of the row gets (position within
+/// 0..=stroke, a speed and an acceleration the controller can hold, a band within range, the
+/// fields a Robo Cylinder row does not have 0), without writing anything.
+pub fn check_row(row: &[u16], config: &AxisConfig) -> Result<(), Refused> {
+    if row.len() != usize::from(ROW_LEN) {
+        return Err(Refused::OutOfRange);
+    }
+    point(row, config).map(|_| ())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(position: u32, speed: u32, accel: u16) -> [u16; 16] {
+        let [p0, p1] = split(position);
+        let [v0, v1] = split(speed);
+        [p0, p1, 0, 10, v0, v1, 0, 0, 0, 0, accel, accel, 0, 0, 0, 0]
+    }
+
+    #[test]
+    fn check_row_takes_what_the_table_takes() {
+        // The defaults: 6 mm lead, 800 pulses/rev, motor end, 100 mm stroke, two's complement.
+        let config = axis_config(&[1, 600, 7, 800, 0, 10_000, 2]);
+        assert_eq!(config, Some(AxisConfig::DEFAULT));
+        let config = AxisConfig::DEFAULT;
+        assert_eq!(check_row(&row(3350, 12_000, 30), &config), Ok(()));
+        assert_eq!(check_row(&row(10_000, 100, 30), &config), Ok(()));
+        // Beyond the stroke, negative, a speed or acceleration the controller cannot hold.
+        assert!(check_row(&row(10_001, 100, 30), &config).is_err());
+        assert!(check_row(&row((-1i32) as u32, 100, 30), &config).is_err());
+        assert!(check_row(&row(0, 0, 30), &config).is_err());
+        assert!(check_row(&row(0, 9_999_900, 30), &config).is_err());
+        assert!(check_row(&row(0, 100, 0), &config).is_err());
+        assert!(check_row(&row(0, 100, 500), &config).is_err());
+        // Not a whole row.
+        assert!(check_row(&[0; 8], &config).is_err());
+        // A configuration the gateway would refuse: lead 0, home 3.
+        assert_eq!(axis_config(&[1, 0, 7, 800, 0, 10_000, 2]), None);
+        assert_eq!(axis_config(&[1, 600, 3, 800, 0, 10_000, 2]), None);
+    }
 }

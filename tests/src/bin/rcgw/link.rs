@@ -29,11 +29,23 @@ impl fmt::Display for Fail {
     }
 }
 
-/// How long a reply may take.
-const REPLY_TIMEOUT: Duration = Duration::from_millis(1000);
+/// How long a reply may take beyond the time its frames take on the line (the gateway's own
+/// delay, a busy PC, a TCP round trip).
+const REPLY_MARGIN: Duration = Duration::from_millis(1000);
+
+/// How long a request and its reply of `bytes` in all take at `baud` (11 bits a character:
+/// start, 8 data, parity or a second stop bit, stop), plus [`REPLY_MARGIN`]: at 1200 bit/s a
+/// 64-register reply alone takes 1.2 s.
+pub fn reply_timeout(bytes: usize, baud: Option<u32>) -> Duration {
+    let line = baud.filter(|&b| b > 0).map_or(Duration::ZERO, |b| {
+        Duration::from_micros(bytes as u64 * 11 * 1_000_000 / u64::from(b))
+    });
+    REPLY_MARGIN + line
+}
 
 enum Wire {
-    Rtu(Box<dyn SerialPort>),
+    /// The port and its rate (bit/s).
+    Rtu(Box<dyn SerialPort>, u32),
     Tcp(TcpStream, u16),
 }
 
@@ -69,7 +81,7 @@ impl Link {
                 }
             })?;
         Ok(Link {
-            wire: Wire::Rtu(port),
+            wire: Wire::Rtu(port, baud),
             name: path.to_string(),
         })
     }
@@ -101,15 +113,16 @@ impl Link {
 
     /// Whether it is a serial line (FC08 answers only there).
     pub fn is_rtu(&self) -> bool {
-        matches!(self.wire, Wire::Rtu(_))
+        matches!(self.wire, Wire::Rtu(..))
     }
 
     /// A new rate and parity on the serial line (after an APPLY that changed them).
     pub fn set_line(&mut self, baud: u32, parity: Parity) -> Result<(), Fail> {
-        if let Wire::Rtu(port) = &mut self.wire {
+        if let Wire::Rtu(port, rate) = &mut self.wire {
             port.set_baud_rate(baud)
                 .and_then(|()| port.set_parity(parity))
                 .map_err(|e| Fail::Device(format!("{}: {e}", self.name)))?;
+            *rate = baud;
         }
         Ok(())
     }
@@ -127,14 +140,22 @@ impl Link {
             .emit(unit, &mut frame)
             .ok_or("request too long for a frame")?;
         let frame = frame.get(..len).unwrap_or(&[]);
+        // The longest reply the request can get: registers read, device identification, or
+        // an echo of 8 bytes.
+        let reply_len = match request {
+            Request::ReadHoldingRegisters { quantity, .. } => 5 + 2 * usize::from(*quantity),
+            Request::ReadDeviceId { .. } => 256,
+            _ => 8,
+        };
         match &mut self.wire {
-            Wire::Rtu(port) => {
+            Wire::Rtu(port, baud) => {
+                let timeout = reply_timeout(len + reply_len, Some(*baud));
                 let _ = port.clear(ClearBuffer::Input);
                 // t3.5 of silence before a frame, at any rate down to 9600 bit/s.
                 std::thread::sleep(Duration::from_millis(4));
                 port.write_all(frame).map_err(|e| e.to_string())?;
                 let _ = port.flush();
-                let reply = read_rtu(port.as_mut())?;
+                let reply = read_rtu(port.as_mut(), timeout)?;
                 let adu = Adu::new_checked(&reply).map_err(|e| format!("{e} in the reply"))?;
                 match client::answer(&adu, unit, function) {
                     Ok(Ok(body)) => Ok(Ok(body.to_vec())),
@@ -152,17 +173,18 @@ impl Link {
                 out.push(unit);
                 out.extend_from_slice(pdu);
                 stream.write_all(&out).map_err(|e| e.to_string())?;
-                let deadline = Instant::now() + REPLY_TIMEOUT;
+                let timeout = reply_timeout(len + reply_len, None);
+                let deadline = Instant::now() + timeout;
                 loop {
                     let mut header = [0u8; 7];
-                    read_exact_by(stream, &mut header, deadline)?;
+                    read_exact_by(stream, &mut header, deadline, timeout)?;
                     let [t0, t1, p0, p1, l0, l1, reply_unit] = header;
                     let length = usize::from(u16::from_be_bytes([l0, l1]));
                     if !(2..=254).contains(&length) {
                         return Err(format!("an MBAP header with length {length}"));
                     }
                     let mut body = vec![0u8; length - 1];
-                    read_exact_by(stream, &mut body, deadline)?;
+                    read_exact_by(stream, &mut body, deadline, timeout)?;
                     if u16::from_be_bytes([t0, t1]) != *transaction || [p0, p1] != [0, 0] {
                         continue; // a late reply to an earlier request
                     }
@@ -189,12 +211,17 @@ fn pdu_answer(pdu: &[u8], function: u8) -> Result<Result<Vec<u8>, Exception>, St
     }
 }
 
-fn read_exact_by(stream: &mut TcpStream, buf: &mut [u8], deadline: Instant) -> Result<(), String> {
+fn read_exact_by(
+    stream: &mut TcpStream,
+    buf: &mut [u8],
+    deadline: Instant,
+    timeout: Duration,
+) -> Result<(), String> {
     let mut got = 0;
     while got < buf.len() {
         let left = deadline.saturating_duration_since(Instant::now());
         if left.is_zero() {
-            return Err(format!("no reply within {} ms", REPLY_TIMEOUT.as_millis()));
+            return Err(format!("no reply within {} ms", timeout.as_millis()));
         }
         let _ = stream.set_read_timeout(Some(left));
         match stream.read(buf.get_mut(got..).unwrap_or(&mut [])) {
@@ -226,8 +253,8 @@ fn rtu_len(buf: &[u8]) -> Option<usize> {
 
 /// One reply: until its length is there, or (a function whose length the first bytes do not
 /// tell) a silence of 30 ms after the last byte.
-fn read_rtu(port: &mut dyn SerialPort) -> Result<Vec<u8>, String> {
-    let deadline = Instant::now() + REPLY_TIMEOUT;
+fn read_rtu(port: &mut dyn SerialPort, timeout: Duration) -> Result<Vec<u8>, String> {
+    let deadline = Instant::now() + timeout;
     let mut reply = Vec::new();
     let mut last_byte = Instant::now();
     let mut buf = [0u8; 256];
@@ -242,7 +269,7 @@ fn read_rtu(port: &mut dyn SerialPort) -> Result<Vec<u8>, String> {
         }
         if Instant::now() > deadline {
             return Err(if reply.is_empty() {
-                format!("no reply within {} ms", REPLY_TIMEOUT.as_millis())
+                format!("no reply within {} ms", timeout.as_millis())
             } else {
                 format!("an incomplete reply ({} bytes)", reply.len())
             });
@@ -336,6 +363,36 @@ impl Gw {
             }
             Err(e) => Err(e),
         })
+    }
+
+    /// Registers of a unit the gateway may not serve (an axis unit before an APPLY, or a pending
+    /// AXISBASE): `None` when it is not served (exception 0A or 02, or no reply on a serial
+    /// line, where the gateway stays silent for a unit it does not serve).
+    pub fn probe(
+        &mut self,
+        unit: u8,
+        address: u16,
+        quantity: u16,
+    ) -> Result<Option<Vec<u16>>, Fail> {
+        let request = Request::ReadHoldingRegisters { address, quantity };
+        let body = match self.link.exchange(unit, &request) {
+            Err(e) if e.starts_with("no reply") => return Ok(None),
+            Err(e) => return Err(Fail::Device(format!("{}: {e}", self.at(unit, address)))),
+            Ok(Err(Exception::GatewayPathUnavailable | Exception::IllegalDataAddress)) => {
+                return Ok(None)
+            }
+            Ok(Err(e)) => return Err(Fail::Device(format!("{}: {e}", self.at(unit, address)))),
+            Ok(Ok(body)) => body,
+        };
+        let values: Vec<u16> = client::registers(&body).collect();
+        if values.len() != usize::from(quantity) {
+            return Err(Fail::Device(format!(
+                "{}: {} registers in the reply, {quantity} asked",
+                self.at(unit, address),
+                values.len()
+            )));
+        }
+        Ok(Some(values))
     }
 
     /// Registers; an exception is an error.

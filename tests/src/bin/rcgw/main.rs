@@ -13,6 +13,20 @@
 //! Exit status 0 on success, 1 on a line or device error, 2 on bad input; every message names
 //! the port, the unit and the register.
 
+/// Text on standard output ([`emit`]).
+macro_rules! out {
+    ($($arg:tt)*) => {
+        $crate::emit(&format!($($arg)*))
+    };
+}
+
+/// A line on standard output ([`emit`]).
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        $crate::emit(&format!("{}\n", format_args!($($arg)*)))
+    };
+}
+
 mod link;
 mod points;
 mod settings;
@@ -90,6 +104,9 @@ enum Cmd {
         #[arg(long)]
         save: bool,
     },
+    /// Write APPLY and wait for the establishment: the pending settings (bus rate, RTIM, PLC
+    /// line, UNITID, AXISBASE, axes enabled) take effect, e.g. after a config apply that failed.
+    Apply,
     /// Counters: per axis, bus, PLC line, FC08; reset cause and config source.
     Diag,
     /// Acknowledge FAILSAFE.
@@ -123,7 +140,12 @@ enum ConfigCmd {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    match run(&cli) {
+    let result = run(&cli);
+    if result.is_err() && std::io::stderr().is_terminal() {
+        // The progress line, cleared before the message.
+        eprint!("\r\x1b[K");
+    }
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(Fail::Device(m)) => {
             eprintln!("rcgw: {m}");
@@ -133,6 +155,23 @@ fn main() -> ExitCode {
             eprintln!("rcgw: {m}");
             ExitCode::from(2)
         }
+    }
+}
+
+/// Text written to standard output. A closed pipe (`rcgw status --watch | head -2`) ends the
+/// run cleanly, exit 0: the reader has what it wanted.
+fn emit(text: &str) {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    if let Err(e) = stdout
+        .write_all(text.as_bytes())
+        .and_then(|()| stdout.flush())
+    {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("rcgw: standard output: {e}");
+        std::process::exit(1);
     }
 }
 
@@ -171,7 +210,7 @@ fn bad_file(path: &str, errors: Vec<String>) -> Fail {
 }
 
 fn print_json(value: &Value) {
-    println!(
+    outln!(
         "{}",
         serde_json::to_string_pretty(value).unwrap_or_default()
     );
@@ -184,7 +223,7 @@ fn run(cli: &Cli) -> Result<(), Fail> {
             action: ConfigCmd::Diff { file } | ConfigCmd::Apply { file, .. },
         } => {
             let doc = read_toml(file)?;
-            Settings::from_toml(&doc, &[]).map_err(|e| bad_file(file, e))?;
+            Settings::from_toml(&doc, &[], false).map_err(|e| bad_file(file, e))?;
         }
         Cmd::Restore { file, .. } => {
             load_backup(file)?;
@@ -210,6 +249,7 @@ fn run(cli: &Cli) -> Result<(), Fail> {
             dry_run,
             save,
         } => restore(&mut gw, cli.json, file, *dry_run, *save),
+        Cmd::Apply => apply_pending(&mut gw, cli.json),
         Cmd::Diag => diag(&mut gw, cli.json),
         Cmd::Ack => ack(&mut gw, cli.json),
         Cmd::Save => {
@@ -217,7 +257,7 @@ fn run(cli: &Cli) -> Result<(), Fail> {
             if cli.json {
                 print_json(&json!({"saved": true, "save_count": count}));
             } else {
-                println!("saved (SAVECOUNT {count})");
+                outln!("saved (SAVECOUNT {count})");
             }
             Ok(())
         }
@@ -226,7 +266,7 @@ fn run(cli: &Cli) -> Result<(), Fail> {
             if cli.json {
                 print_json(&json!({"restart": true}));
             } else {
-                println!("restart requested: the gateway restarts with its saved settings");
+                outln!("restart requested: the gateway restarts with its saved settings");
             }
             Ok(())
         }
@@ -235,7 +275,7 @@ fn run(cli: &Cli) -> Result<(), Fail> {
             if cli.json {
                 print_json(&json!({"factory_reset": true}));
             } else {
-                println!("factory reset: the stored settings are erased, the gateway restarts with the defaults");
+                outln!("factory reset: the stored settings are erased, the gateway restarts with the defaults");
             }
             Ok(())
         }
@@ -292,7 +332,17 @@ fn command_text(cmst: u16, cmer: u16, cmct: u16) -> String {
 
 fn axis_status(gw: &mut Gw, axis: u8) -> Result<Value, Fail> {
     let unit = gw.axis_unit(axis);
-    let ext = gw.read(unit, CMST, 4)?;
+    let Some(ext) = gw.probe(unit, CMST, 4)? else {
+        // Enabled (AXISCFG) but its unit not served: enabled, or AXISBASE changed, pending
+        // until APPLY.
+        return Ok(json!({
+            "axis": axis,
+            "unit": unit,
+            "link": "not served",
+            "last_command": "-",
+            "served": false,
+        }));
+    };
     let (cmst, cmer, link, cmct) = (ext[0], ext[1], ext[2], ext[3]);
     let mut v = json!({
         "axis": axis,
@@ -325,17 +375,12 @@ fn axis_status(gw: &mut Gw, axis: u8) -> Result<Value, Fail> {
 fn status_once(gw: &mut Gw) -> Result<Value, Fail> {
     let unit = gw.unit;
     let g = gw.read(unit, 0, 6)?;
-    let enabled = {
-        let mut all = gw.read(unit, G_AXIS_CONFIG, 64)?;
-        all.extend(gw.read(unit, G_AXIS_CONFIG + 64, 64)?);
-        (0..AXES as u8)
-            .filter(|&n| all.get(usize::from(n) * 8) == Some(&1))
-            .collect::<Vec<u8>>()
-    };
+    let enabled = Settings::read_enabled(gw)?;
     let mut axes = Vec::new();
     for n in enabled {
         axes.push(axis_status(gw, n)?);
     }
+    let pending = pending_settings(gw, &axes)?;
     let failsafe = g[4];
     let all_online = axes.iter().all(|a| a["link"] == "online");
     let alarm = axes.iter().any(|a| !a["alarm"].is_null());
@@ -359,7 +404,72 @@ fn status_once(gw: &mut Gw) -> Result<Value, Fail> {
             "alarm": if alarm_led { "on: FAILSAFE latched, an axis offline or in alarm" } else { "off" },
         },
         "axes": axes,
+        "pending": pending,
     }))
+}
+
+/// Signs that settings wait for APPLY (registers read the pending values): UNITID not the unit
+/// that answers, an enabled axis whose unit is not served.
+fn pending_settings(gw: &mut Gw, axes: &[Value]) -> Result<Vec<String>, Fail> {
+    let mut pending = Vec::new();
+    let unit_id = gw.get(G_UNIT_ID)?;
+    if gw.unit != 255 && u16::from(gw.unit) != unit_id {
+        pending.push(format!(
+            "UNITID reads {unit_id}, the gateway answers as unit {}",
+            gw.unit
+        ));
+    }
+    let unserved: Vec<String> = axes
+        .iter()
+        .filter(|a| a["served"] == false)
+        .map(|a| format!("axis {} (unit {})", a["axis"], a["unit"]))
+        .collect();
+    if !unserved.is_empty() {
+        pending.push(format!(
+            "enabled but not served: {} (enabled or AXISBASE {} written, not applied)",
+            unserved.join(", "),
+            gw.base
+        ));
+    }
+    Ok(pending)
+}
+
+/// The note on pending settings, for text output.
+fn pending_text(pending: &[String]) -> String {
+    if pending.is_empty() {
+        return String::new();
+    }
+    format!(
+        "SETTINGS PENDING: {}; `rcgw apply` makes them take effect (or SAVE and RESTART)\n",
+        pending.join("; ")
+    )
+}
+
+/// `rcgw apply`: APPLY, once nothing moves, and the establishment awaited.
+fn apply_pending(gw: &mut Gw, json: bool) -> Result<(), Fail> {
+    let enabled = Settings::read_enabled(gw)?;
+    if let Some(why) = settings::busy(gw, &enabled)? {
+        return Err(Fail::Device(format!(
+            "{} unit {}: APPLY not written: the gateway refuses it while anything moves or runs: {why}",
+            gw.link.name, gw.unit
+        )));
+    }
+    settings::apply(gw)?;
+    let enabled = Settings::read_enabled(gw)?;
+    let units: Vec<u8> = enabled.iter().map(|&n| gw.axis_unit(n)).collect();
+    if json {
+        print_json(
+            &json!({"applied": true, "unit": gw.unit, "axis_base": gw.base, "axes": enabled, "axis_units": units}),
+        );
+    } else {
+        outln!(
+            "APPLY done: gateway unit {}, axes {:?} at units {:?}; the bus was established again",
+            gw.unit,
+            enabled,
+            units
+        );
+    }
+    Ok(())
 }
 
 fn status_text(s: &Value) -> String {
@@ -384,6 +494,16 @@ fn status_text(s: &Value) -> String {
     } else {
         out += &format!("FAILSAFE: clear (trips {})\n", fs["trips"]);
     }
+    out += &pending_text(
+        &s["pending"]
+            .as_array()
+            .map(|p| {
+                p.iter()
+                    .filter_map(|x| x.as_str().map(String::from))
+                    .collect::<Vec<_>>()
+            })
+            .unwrap_or_default(),
+    );
     for led in ["run", "bus_link", "alarm"] {
         out += &format!(
             "LED {:<9} {}\n",
@@ -444,15 +564,15 @@ fn status(
         let s = status_once(gw)?;
         if json {
             if watch {
-                println!("{s}");
+                outln!("{s}");
             } else {
                 print_json(&s);
             }
         } else {
             if watch && std::io::stdout().is_terminal() {
-                print!("\x1b[2J\x1b[H");
+                out!("\x1b[2J\x1b[H");
             }
-            print!("{}", status_text(&s));
+            out!("{}", status_text(&s));
         }
         n += 1;
         if !watch || count.is_some_and(|c| n >= c) {
@@ -471,17 +591,18 @@ fn config(gw: &mut Gw, json: bool, action: &ConfigCmd) -> Result<(), Fail> {
             if json {
                 print_json(&now.to_json());
             } else {
-                println!(
+                outln!(
                     "# rcgw config show: gateway unit {} on {}",
-                    gw.unit, gw.link.name
+                    gw.unit,
+                    gw.link.name
                 );
-                print!("{}", now.to_toml());
+                out!("{}", now.to_toml());
             }
             Ok(())
         }
         ConfigCmd::Diff { file } | ConfigCmd::Apply { file, .. } => {
             let doc = read_toml(file)?;
-            let wanted = Settings::from_toml(&doc, &[]).map_err(|e| bad_file(file, e))?;
+            let wanted = Settings::from_toml(&doc, &[], false).map_err(|e| bad_file(file, e))?;
             if wanted.has_network() && !now.has_network() {
                 return Err(Fail::Input(format!(
                     "{file}: [network]: this gateway has no network settings ({} answers exception 02: a build without TCP)",
@@ -493,10 +614,11 @@ fn config(gw: &mut Gw, json: bool, action: &ConfigCmd) -> Result<(), Fail> {
                 return Err(bad_file(file, whole));
             }
             let changes = now.diff(&wanted);
+            let phases = settings::plan(&now, &changes).map_err(|e| bad_file(file, vec![e]))?;
             let apply = matches!(action, ConfigCmd::Apply { .. });
             let save = matches!(action, ConfigCmd::Apply { save: true, .. });
             let applied = if apply {
-                settings::write_changes(gw, &changes)?
+                settings::write_changes(gw, &phases)?
             } else {
                 false
             };
@@ -508,25 +630,39 @@ fn config(gw: &mut Gw, json: bool, action: &ConfigCmd) -> Result<(), Fail> {
             if json {
                 print_json(&json!({
                     "changes": changes.iter().map(|c| c.json()).collect::<Vec<_>>(),
+                    "phases": phases.len(),
                     "written": apply,
                     "applied": applied,
                     "saved": saved.is_some(),
                 }));
             } else {
                 if changes.is_empty() {
-                    println!("no change");
+                    outln!("no change");
                 }
                 for c in &changes {
-                    println!("{}", c.line());
+                    outln!("{}", c.line());
+                }
+                if let [first, _] = phases.as_slice() {
+                    outln!(
+                        "in two steps: {} first, then APPLY, then the rest (the gateway refuses them in one)",
+                        first
+                            .iter()
+                            .map(|c| format!("{} {}", settings::section_name(c.section), c.key))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    );
+                }
+                if changes.iter().any(|c| c.on_restart()) {
+                    outln!("[network] addresses take effect after SAVE and RESTART (--save, then rcgw restart)");
                 }
                 if apply && !changes.is_empty() {
-                    println!("{} setting(s) written", changes.len());
+                    outln!("{} setting(s) written", changes.len());
                 }
                 if applied {
-                    println!("APPLY done: the bus was established again");
+                    outln!("APPLY done: the bus was established again");
                 }
                 if let Some(count) = saved {
-                    println!("saved (SAVECOUNT {count})");
+                    outln!("saved (SAVECOUNT {count})");
                 }
             }
             Ok(())
@@ -550,6 +686,15 @@ fn load_backup(path: &str) -> Result<Backup, Fail> {
     match doc.get("backup").and_then(|b| b.as_table()) {
         None => errors.push("[backup] missing: not an rcgw backup".to_string()),
         Some(b) => {
+            for (key, value) in b {
+                match (key.as_str(), value) {
+                    ("format" | "version" | "axes" | "online", _) => {}
+                    ("identity", toml::Value::Table(_)) => {}
+                    _ => errors.push(format!(
+                        "[backup] {key}: unknown key (format, version, axes, online, [backup.identity])"
+                    )),
+                }
+            }
             if b.get("format").and_then(|f| f.as_integer()) != Some(FORMAT) {
                 errors.push(format!("[backup] format: {FORMAT} expected"));
             }
@@ -562,7 +707,7 @@ fn load_backup(path: &str) -> Result<Backup, Fail> {
             }
         }
     }
-    let settings = match Settings::from_toml(&doc, &["backup", "point"]) {
+    let settings = match Settings::from_toml(&doc, &["backup"], true) {
         Ok(s) => s,
         Err(e) => {
             errors.extend(e);
@@ -578,16 +723,11 @@ fn load_backup(path: &str) -> Result<Backup, Fail> {
         ));
     }
     for (n, table) in axes.into_iter().flatten() {
-        let Ok(n) = n.parse::<u8>() else { continue };
+        let Ok(n) = settings::axis_number(n) else {
+            continue;
+        };
         if let Some(list) = table.get("point") {
-            let stroke = settings
-                .values
-                .get(&(Section::Axis(n), "stroke_mm"))
-                .map(|r| {
-                    u32::from(r.first().copied().unwrap_or(0)) << 16
-                        | u32::from(r.get(1).copied().unwrap_or(0))
-                });
-            let rows = points::from_toml(n, list, stroke, &mut errors);
+            let rows = points::from_toml(n, list, &mut errors);
             points.push((n, rows));
         }
     }
@@ -620,11 +760,20 @@ fn backup(gw: &mut Gw, json: bool, file: &str) -> Result<(), Fail> {
     let version = format!("{}.{}.{}", v[0] >> 8, v[0] & 0xFF, v[1]);
     let identity = gw.identity()?;
     let mut online = Vec::new();
+    let mut unserved = Vec::new();
     for n in settings.enabled() {
         let axis_unit = gw.axis_unit(n);
-        if gw.read(axis_unit, LINK, 1)?.first() == Some(&1) {
-            online.push(n);
+        match gw.probe(axis_unit, LINK, 1)? {
+            Some(link) if link.first() == Some(&1) => online.push(n),
+            Some(_) => {}
+            None => unserved.push(format!("axis {n} (unit {axis_unit})")),
         }
+    }
+    if !unserved.is_empty() {
+        eprintln!(
+            "rcgw: settings pending: enabled but not served: {} (enabled or AXISBASE written, not applied): their point tables are not in the backup; `rcgw apply`, then back up again",
+            unserved.join(", ")
+        );
     }
     let show = std::io::stderr().is_terminal();
     let total = online.len() * usize::from(protocol::plc::table::ROWS);
@@ -640,6 +789,26 @@ fn backup(gw: &mut Gw, json: bool, file: &str) -> Result<(), Fail> {
         tables.push((n, rows));
     }
     progress(show, "");
+    // Rows the position table would refuse (a stroke reduced since, a negative position, no
+    // acceleration): left out, so that restore takes the file; said in it and on stderr.
+    let mut omitted: Vec<(u8, usize, String)> = Vec::new();
+    for (n, rows) in &mut tables {
+        let cfg = settings.axis_cfg(*n);
+        for (p, row) in rows.iter_mut().enumerate() {
+            if row.is_empty() {
+                continue;
+            }
+            if let Err(why) = points::check(row, &cfg) {
+                omitted.push((*n, p, format!("{} ({why})", row.text())));
+                *row = Row::default();
+            }
+        }
+    }
+    for (n, p, why) in &omitted {
+        eprintln!(
+            "rcgw: axis {n} point {p}: left out of the backup: the position table would refuse it: {why}"
+        );
+    }
     let mut text = format!(
         "# rcgw backup of gateway unit {unit}\n\n[backup]\nformat = {FORMAT}\nversion = \"{version}\"\naxes = {AXES}\nonline = [{}]\n\n[backup.identity]\n",
         online.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", ")
@@ -659,10 +828,19 @@ fn backup(gw: &mut Gw, json: bool, file: &str) -> Result<(), Fail> {
         text += &format!("{key} = {}\n", toml::Value::String(value.clone()));
     }
     text += &settings.to_toml_with(&|section| match section {
-        Section::Axis(n) => tables
-            .iter()
-            .find(|(a, _)| *a == n)
-            .map_or(String::new(), |(_, rows)| points::to_toml(n, rows)),
+        Section::Axis(n) => {
+            let mut text = tables
+                .iter()
+                .find(|(a, _)| *a == n)
+                .map_or(String::new(), |(_, rows)| points::to_toml(n, rows));
+            for (_, p, why) in omitted.iter().filter(|(a, _, _)| *a == n) {
+                text += &format!(
+                    "\n# point {p} left out: the position table would refuse it: {}\n",
+                    why.replace('\n', " ")
+                );
+            }
+            text
+        }
         _ => String::new(),
     });
     std::fs::write(file, &text).map_err(|e| Fail::Input(format!("{file}: {e}")))?;
@@ -671,25 +849,27 @@ fn backup(gw: &mut Gw, json: bool, file: &str) -> Result<(), Fail> {
         .map(|(n, rows)| {
             let no_speed: Vec<usize> = (0..rows.len())
                 .filter(|&p| rows[p].is_empty() && rows[p] != Row::default())
+                .filter(|p| !omitted.iter().any(|(a, q, _)| a == n && q == p))
                 .collect();
-            json!({"axis": n, "points": rows.iter().filter(|r| !r.is_empty()).count(), "without_speed": no_speed})
+            let left_out: Vec<usize> = omitted.iter().filter(|(a, _, _)| a == n).map(|(_, p, _)| *p).collect();
+            json!({"axis": n, "points": rows.iter().filter(|r| !r.is_empty()).count(), "without_speed": no_speed, "left_out": left_out})
         })
         .collect();
     if json {
         print_json(&json!({"file": file, "version": version, "online": online, "axes": counts}));
     } else {
-        println!("backup of gateway unit {unit} (firmware {version}) written to {file}");
+        outln!("backup of gateway unit {unit} (firmware {version}) written to {file}");
         for c in &counts {
-            println!("axis {}: {} point(s)", c["axis"], c["points"]);
+            outln!("axis {}: {} point(s)", c["axis"], c["points"]);
             if c["without_speed"].as_array().is_some_and(|a| !a.is_empty()) {
-                println!(
+                outln!(
                     "  points {} hold a position but no speed: not saved (the position table cannot write a row without a speed)",
                     c["without_speed"]
                 );
             }
         }
         if online.is_empty() {
-            println!("no axis online: no point table saved");
+            outln!("no axis online: no point table saved");
         }
     }
     Ok(())
@@ -699,66 +879,135 @@ fn restore(gw: &mut Gw, json: bool, file: &str, dry_run: bool, save: bool) -> Re
     let b = load_backup(file)?;
     let now = Settings::read(gw)?;
     let mut wanted = b.settings.clone();
-    if !now.has_network() {
+    let mut notes = Vec::new();
+    if !now.has_network() && wanted.has_network() {
         wanted.values.retain(|(s, _), _| *s != Section::Network);
+        notes.push(
+            "[network] of the backup left out: this gateway has no network settings (a build without Modbus TCP)"
+                .to_string(),
+        );
     }
     // The gateway unit and the PLC line are the ones this connection uses: a backup of another
     // gateway would take them over; they are restored too (that is the point of a backup).
-    let whole = now.merged(&wanted).check_whole();
+    let after = now.merged(&wanted);
+    let mut whole = after.check_whole();
+    for (n, rows) in &b.points {
+        if !rows.is_empty() && after.word(Section::Axis(*n), "enabled") != Some(1) {
+            whole.push(format!(
+                "[[axis.{n}.point]]: axis {n} is not enabled ([axis.{n}] enabled = false): its {} row(s) cannot be written",
+                rows.len()
+            ));
+        }
+    }
+    let changes = now.diff(&wanted);
+    let phases = settings::plan(&now, &changes).unwrap_or_else(|e| {
+        whole.push(e);
+        Vec::new()
+    });
     if !whole.is_empty() {
         return Err(bad_file(file, whole));
     }
-    let changes = now.diff(&wanted);
+    // Every row checked as the position table will check it, with the axis' settings as
+    // they will be, before anything is written: a row it would refuse is skipped.
+    let mut skipped = Vec::new();
+    let mut tables: Vec<(u8, Vec<(u16, Row)>)> = Vec::new();
+    for (n, rows) in &b.points {
+        let cfg = after.axis_cfg(*n);
+        let mut keep = Vec::new();
+        for (p, row) in rows {
+            match points::check(row, &cfg) {
+                Ok(()) => keep.push((*p, *row)),
+                Err(why) => skipped.push(format!(
+                    "axis {n} point {p}: not restored: the position table would refuse it: {why}"
+                )),
+            }
+        }
+        tables.push((*n, keep));
+    }
+    let was_enabled = now.enabled();
     let applied = if dry_run {
         false
     } else {
-        settings::write_changes(gw, &changes)?
+        settings::write_changes(gw, &phases)?
     };
     let mut report = Vec::new();
     let mut missing = Vec::new();
     let show = std::io::stderr().is_terminal() && !dry_run;
-    for (n, rows) in &b.points {
-        let axis_unit = gw.axis_unit(*n);
-        let online = gw.read(axis_unit, LINK, 1)?.first() == Some(&1);
-        if !online {
-            missing.push(format!(
-                "axis {n} (unit {axis_unit}): not online: its {} point(s) not restored",
-                rows.len()
-            ));
-            continue;
-        }
-        let mut written = Vec::new();
-        let mut unchanged = 0;
-        let mut kept = Vec::new();
-        let table = points::read_table(gw, *n, &mut |p| {
-            progress(show, &format!("restore: axis {n} reading point {p:>2}"));
-        })?;
-        for (point, row) in rows {
-            let current = table.get(usize::from(*point)).copied().unwrap_or_default();
-            if current == *row {
-                unchanged += 1;
+    let mut rows_of = |gw: &mut Gw, report: &mut Vec<Value>| -> Result<(), Fail> {
+        for (n, rows) in &tables {
+            if dry_run && !was_enabled.contains(n) {
+                report.push(json!({"axis": n, "enabled_on_apply": true, "rows": rows.len(), "written": [], "unchanged": 0, "not_in_backup": []}));
                 continue;
             }
-            progress(show, &format!("restore: axis {n} writing point {point:>2}"));
-            let mut entry = json!({"point": point, "from": if current.is_empty() { Value::Null } else { json!(current.text()) }, "to": row.text()});
-            if !dry_run {
-                let stored = points::write_row(gw, *n, *point, row)?;
-                if stored != *row {
-                    entry["stored"] = json!(stored.text());
+            let axis_unit = gw.axis_unit(*n);
+            // Not served (0A, 02, silence): not online. LINK 0 (unknown: its first exchange
+            // still under way, as right after a start or an APPLY): waited for, at most 3 s.
+            let deadline = std::time::Instant::now() + Duration::from_secs(3);
+            let online = loop {
+                match gw.probe(axis_unit, LINK, 1)? {
+                    Some(l) if l.first() == Some(&0) && std::time::Instant::now() < deadline => {
+                        std::thread::sleep(Duration::from_millis(50))
+                    }
+                    Some(l) => break l.first() == Some(&1),
+                    None => break false,
+                }
+            };
+            if !online {
+                missing.push(format!(
+                    "axis {n} (unit {axis_unit}): not online: its {} point(s) not restored",
+                    rows.len()
+                ));
+                continue;
+            }
+            let mut written = Vec::new();
+            let mut unchanged = 0;
+            let mut kept = Vec::new();
+            let table = points::read_table(gw, *n, &mut |p| {
+                progress(show, &format!("restore: axis {n} reading point {p:>2}"));
+            })?;
+            let entry_of = |written: &Vec<Value>, unchanged, kept: &Vec<usize>| json!({"axis": n, "written": written, "unchanged": unchanged, "not_in_backup": kept});
+            for (point, row) in rows {
+                let current = table.get(usize::from(*point)).copied().unwrap_or_default();
+                if current == *row {
+                    unchanged += 1;
+                    continue;
+                }
+                progress(show, &format!("restore: axis {n} writing point {point:>2}"));
+                let mut entry = json!({"point": point, "from": if current.is_empty() { Value::Null } else { json!(current.text()) }, "to": row.text()});
+                if !dry_run {
+                    match points::write_row(gw, *n, *point, row) {
+                        Ok(stored) => {
+                            if stored != *row {
+                                entry["stored"] = json!(stored.text());
+                            }
+                        }
+                        Err(e) => {
+                            report.push(entry_of(&written, unchanged, &kept));
+                            return Err(e);
+                        }
+                    }
+                }
+                written.push(entry);
+            }
+            for (point, row) in table.iter().enumerate() {
+                if !row.is_empty()
+                    && !b.points.iter().any(|(a, rows)| {
+                        a == n && rows.iter().any(|(p, _)| usize::from(*p) == point)
+                    })
+                {
+                    kept.push(point);
                 }
             }
-            written.push(entry);
+            report.push(entry_of(&written, unchanged, &kept));
         }
-        for (point, row) in table.iter().enumerate() {
-            if !row.is_empty() && !rows.iter().any(|(p, _)| usize::from(*p) == point) {
-                kept.push(point);
-            }
-        }
-        report.push(
-            json!({"axis": n, "written": written, "unchanged": unchanged, "not_in_backup": kept}),
-        );
-    }
+        Ok(())
+    };
+    let outcome = rows_of(gw, &mut report);
     progress(show, "");
+    let saved = match (&outcome, save && !dry_run) {
+        (Ok(()), true) => Some(settings::save(gw)?),
+        _ => None,
+    };
     if json {
         print_json(&json!({
             "dry_run": dry_run,
@@ -766,19 +1015,48 @@ fn restore(gw: &mut Gw, json: bool, file: &str, dry_run: bool, save: bool) -> Re
             "applied": applied,
             "axes": report,
             "not_restored": missing,
+            "skipped": skipped,
+            "notes": notes,
+            "saved": saved.is_some(),
+            "save_count": saved,
+            "complete": outcome.is_ok(),
         }));
     } else {
         let verb = if dry_run { "would change" } else { "changed" };
-        println!("settings: {} {verb}", changes.len());
+        outln!("settings: {} {verb}", changes.len());
         for c in &changes {
-            println!("  {}", c.line());
+            outln!("  {}", c.line());
+        }
+        if let [first, _] = phases.as_slice() {
+            outln!(
+                "  in two steps: {} first, then APPLY, then the rest",
+                first
+                    .iter()
+                    .map(|c| format!("{} {}", settings::section_name(c.section), c.key))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
+        if changes.iter().any(|c| c.on_restart()) {
+            outln!("  [network] addresses take effect after SAVE and RESTART");
+        }
+        for n in &notes {
+            outln!("  {n}");
         }
         if applied {
-            println!("  APPLY done: the bus was established again");
+            outln!("  APPLY done: the bus was established again");
         }
         for r in &report {
+            if r["enabled_on_apply"] == true {
+                outln!(
+                    "axis {}: enabled on APPLY; its {} row(s) compared after it",
+                    r["axis"],
+                    r["rows"]
+                );
+                continue;
+            }
             let written = r["written"].as_array().map_or(0, |w| w.len());
-            println!(
+            outln!(
                 "axis {}: {written} point(s) {}, {} unchanged",
                 r["axis"],
                 if dry_run {
@@ -789,35 +1067,47 @@ fn restore(gw: &mut Gw, json: bool, file: &str, dry_run: bool, save: bool) -> Re
                 r["unchanged"]
             );
             for w in r["written"].as_array().into_iter().flatten() {
-                println!(
+                outln!(
                     "  point {}: {} -> {}",
                     w["point"],
                     w["from"].as_str().unwrap_or("empty"),
                     w["to"].as_str().unwrap_or("")
                 );
                 if let Some(stored) = w["stored"].as_str() {
-                    println!("    stored as {stored} (the controller's resolution)");
+                    outln!("    stored as {stored} (the controller's resolution)");
                 }
             }
             for p in r["not_in_backup"].as_array().into_iter().flatten() {
-                println!("  point {p}: holds data the backup has empty: left as it is (a row cannot be emptied over Modbus)");
+                outln!("  point {p}: holds data the backup has empty: left as it is (a row cannot be emptied over Modbus)");
             }
         }
         for m in &missing {
-            println!("{m}");
+            outln!("{m}");
+        }
+        for k in &skipped {
+            outln!("{k}");
+        }
+        if let Some(count) = saved {
+            outln!("saved (SAVECOUNT {count})");
         }
     }
-    if save && !dry_run {
-        let count = settings::save(gw)?;
-        if !json {
-            println!("saved (SAVECOUNT {count})");
-        }
-    }
+    outcome.map_err(|e| match e {
+        Fail::Device(m) | Fail::Input(m) => Fail::Device(format!(
+            "{m}\n  restore stopped there: the report above is what was done"
+        )),
+    })?;
     if !missing.is_empty() {
         return Err(Fail::Device(format!(
             "{}: {} axis/axes of the backup not online: check their controllers, then restore again",
             gw.link.name,
             missing.len()
+        )));
+    }
+    if !skipped.is_empty() {
+        return Err(Fail::Input(format!(
+            "{file}: {} row(s) skipped (the position table would refuse them), the rest restored:\n  {}",
+            skipped.len(),
+            skipped.join("\n  ")
         )));
     }
     Ok(())
@@ -903,7 +1193,7 @@ fn diag(gw: &mut Gw, json: bool) -> Result<(), Fail> {
         print_json(&out);
         return Ok(());
     }
-    println!(
+    outln!(
         "gateway unit {unit} on {}: reset cause {}, settings from {} (unreadable at a start: {}), last save {}, saves {}, up {} s, FAILSAFE trips {}",
         gw.link.name,
         out["reset_cause"].as_str().unwrap_or(""),
@@ -914,7 +1204,7 @@ fn diag(gw: &mut Gw, json: bool) -> Result<(), Fail> {
         out["uptime_s"],
         out["failsafe_trips"]
     );
-    println!(
+    outln!(
         "{:<4} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:<8} last error",
         "axis",
         "frames",
@@ -927,7 +1217,7 @@ fn diag(gw: &mut Gw, json: bool) -> Result<(), Fail> {
         "link"
     );
     for a in out["axes"].as_array().into_iter().flatten() {
-        println!(
+        outln!(
             "{:<4} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:<8} {}",
             a["axis"].to_string(),
             a["frames"].to_string(),
@@ -948,12 +1238,12 @@ fn diag(gw: &mut Gw, json: bool) -> Result<(), Fail> {
             .flatten()
             .map(|(k, v)| format!("{} {v}", k.replace('_', " ")))
             .collect();
-        println!("{name}: {}", parts.join(", "));
+        outln!("{name}: {}", parts.join(", "));
     };
     line("bus", &out["bus"]);
     line("PLC line", &out["plc_line"]);
     if out["fc08"].is_null() {
-        println!("FC08: serial line only (not on TCP)");
+        outln!("FC08: serial line only (not on TCP)");
     } else {
         line("FC08", &out["fc08"]);
     }
@@ -969,7 +1259,7 @@ fn ack(gw: &mut Gw, json: bool) -> Result<(), Fail> {
         if json {
             print_json(&json!({"failsafe": 0, "acknowledged": false, "latched": false}));
         } else {
-            println!("FAILSAFE is clear: nothing to acknowledge");
+            outln!("FAILSAFE is clear: nothing to acknowledge");
         }
         return Ok(());
     }
@@ -995,7 +1285,7 @@ fn ack(gw: &mut Gw, json: bool) -> Result<(), Fail> {
             &json!({"failsafe": after, "was": before, "acknowledged": true, "latched": after != 0}),
         );
     } else {
-        println!("FAILSAFE acknowledged (was {before:#04x}, now {after:#04x})");
+        outln!("FAILSAFE acknowledged (was {before:#04x}, now {after:#04x})");
     }
     Ok(())
 }

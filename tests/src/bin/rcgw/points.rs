@@ -4,7 +4,7 @@
 use std::fmt::Write as _;
 use std::time::Duration;
 
-use protocol::plc::table::{BASE, ROWS, ROW_LEN};
+use protocol::plc::table::{self, BASE, ROWS, ROW_LEN};
 
 use crate::link::{Fail, Gw};
 use crate::settings::{hundredths, parse_hundredths};
@@ -38,7 +38,8 @@ impl Row {
         }
     }
 
-    fn registers(&self) -> [u16; 16] {
+    /// The row's 16 registers as the position table takes them.
+    pub fn registers(&self) -> [u16; 16] {
         let hi = |v: u32| (v >> 16) as u16;
         let lo = |v: u32| v as u16;
         let (p, b, s, a) = (self.position, self.band, self.speed, self.accel);
@@ -145,14 +146,80 @@ pub fn to_toml(axis: u8, rows: &[Row]) -> String {
     out
 }
 
-/// `[[axis.N.point]]` tables as rows by point, each checked: point 0-15 once, position 0 to
-/// the stroke, speed and acceleration more than 0, 2 decimals.
-pub fn from_toml(
-    axis: u8,
-    value: &toml::Value,
-    stroke: Option<u32>,
-    errors: &mut Vec<String>,
-) -> Vec<(u16, Row)> {
+/// Whether the gateway's position table takes `row` for an axis whose AXISCFG block reads
+/// `axis_cfg`: the protocol crate's own check of a row written (`check_row`), before anything
+/// is written. `Err`: what it would refuse, in the file's units.
+pub fn check(row: &Row, axis_cfg: &[u16]) -> Result<(), String> {
+    let Some(config) = table::axis_config(axis_cfg) else {
+        return Err("the axis' settings (lead, home, pulses/rev, stroke) are not valid".into());
+    };
+    if table::check_row(&row.registers(), &config).is_ok() {
+        return Ok(());
+    }
+    // Which field: each tried alone beside values the table takes.
+    let safe = Row {
+        position: 0,
+        band: 0,
+        speed: 100,
+        accel: 1,
+    };
+    let safe = Row {
+        accel: (1..=100)
+            .find(|&a| table::check_row(&Row { accel: a, ..safe }.registers(), &config).is_ok())
+            .unwrap_or(30),
+        ..safe
+    };
+    let ok = |r: Row| table::check_row(&r.registers(), &config).is_ok();
+    let mut why = Vec::new();
+    if !ok(Row {
+        position: row.position,
+        ..safe
+    }) {
+        why.push(format!(
+            "position_mm = {}: outside 0.00-{} (the axis' stroke)",
+            hundredths(i64::from(row.position as i32)),
+            hundredths(i64::from(config.stroke.0))
+        ));
+    }
+    if !ok(Row {
+        speed: row.speed,
+        ..safe
+    }) {
+        why.push(format!(
+            "speed_mm_s = {}: 0 or more than the controller can hold with lead {} mm",
+            hundredths(i64::from(row.speed)),
+            hundredths(i64::from(config.scale.lead.hundredths()))
+        ));
+    }
+    if !ok(Row {
+        accel: row.accel,
+        ..safe
+    }) {
+        why.push(format!(
+            "accel_g = {}: 0, too small or more than the controller can hold with lead {} mm",
+            hundredths(i64::from(row.accel)),
+            hundredths(i64::from(config.scale.lead.hundredths()))
+        ));
+    }
+    if !ok(Row {
+        band: row.band,
+        ..safe
+    }) {
+        why.push(format!(
+            "band_mm = {}: out of range",
+            hundredths(i64::from(row.band))
+        ));
+    }
+    if why.is_empty() {
+        why.push(format!("{}: refused", row.text()));
+    }
+    Err(why.join(", "))
+}
+
+/// `[[axis.N.point]]` tables as rows by point, each checked for its form: point 0-15 once,
+/// every key there, numbers with 2 decimals that fit their registers. What the gateway takes
+/// ([`check`]) is looked at separately, against the axis' settings.
+pub fn from_toml(axis: u8, value: &toml::Value, errors: &mut Vec<String>) -> Vec<(u16, Row)> {
     let mut rows: Vec<(u16, Row)> = Vec::new();
     let Some(list) = value.as_array() else {
         errors.push(format!(
@@ -195,10 +262,9 @@ pub fn from_toml(
                 }
             }
         };
-        let max_position = stroke.map_or(i64::from(i32::MAX), i64::from);
-        let position = get("position_mm", 0, max_position);
-        let speed = get("speed_mm_s", 1, i64::from(i32::MAX));
-        let accel = get("accel_g", 1, 65535);
+        let position = get("position_mm", i64::from(i32::MIN), i64::from(i32::MAX));
+        let speed = get("speed_mm_s", 0, i64::from(i32::MAX));
+        let accel = get("accel_g", 0, 65535);
         let band = get("band_mm", 0, i64::from(i32::MAX));
         let point = match table.get("point").and_then(|p| p.as_integer()) {
             Some(p) if (0..i64::from(ROWS)).contains(&p) => Some(p as u16),
@@ -217,7 +283,7 @@ pub fn from_toml(
             rows.push((
                 point,
                 Row {
-                    position: p as u32,
+                    position: p as i32 as u32,
                     band: b as u32,
                     speed: s as u32,
                     accel: a as u16,

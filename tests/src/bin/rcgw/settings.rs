@@ -50,14 +50,23 @@ struct Field {
     kind: Kind,
     /// Taken on APPLY (not at once).
     on_apply: bool,
+    /// The values the gateway takes, in the file's units, for messages.
+    range: &'static str,
 }
 
-const fn f(key: &'static str, address: u16, kind: Kind, on_apply: bool) -> Field {
+const fn f(
+    key: &'static str,
+    address: u16,
+    kind: Kind,
+    on_apply: bool,
+    range: &'static str,
+) -> Field {
     Field {
         key,
         address,
         kind,
         on_apply,
+        range,
     }
 }
 
@@ -68,38 +77,128 @@ const HOME: &[(&str, u16)] = &[("motor", 7), ("far", 8)];
 const ENCODING: &[(&str, u16)] = &[("ones-complement", 1), ("twos-complement", 2)];
 
 const GATEWAY: &[Field] = &[
-    f("unit_id", G_UNIT_ID, Kind::Int(1), true),
-    f("axis_base", G_AXIS_BASE, Kind::Int(1), true),
-    f("plc_baud_bps", G_PLC_BAUD, Kind::Int(100), true),
-    f("plc_parity", G_PLC_PARITY, Kind::Enum(PARITY), true),
-    f("bus_baud_bps", G_BUS_BAUD, Kind::Int(100), true),
-    f("bus_rtim_ms", G_BUS_RTIM, Kind::Int(1), true),
-    f("retries", G_RETRIES, Kind::Int(1), false),
-    f("watchdog_ms", G_WATCHDOG, Kind::Int(1), false),
-    f("watchdog_action", G_WD_ACTION, Kind::Enum(WD_ACTION), false),
-    f("pio_axis", G_PIO_AXIS, Kind::PioAxis, false),
-    f("pio_pattern", G_PIO_PATTERN, Kind::Int(1), false),
-    f("pio_start", G_PIO_START, Kind::Enum(PIO_START), false),
-    f("pio_jog_mm_s", G_PIO_JOG, Kind::Hundredths, false),
-    f("pio_inch_mm", G_PIO_INCH, Kind::Hundredths, false),
+    f(
+        "unit_id",
+        G_UNIT_ID,
+        Kind::Int(1),
+        true,
+        "1-247, not an enabled axis' unit",
+    ),
+    f("axis_base", G_AXIS_BASE, Kind::Int(1), true, "1-232"),
+    f(
+        "plc_baud_bps",
+        G_PLC_BAUD,
+        Kind::Int(100),
+        true,
+        "1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200 bit/s",
+    ),
+    f(
+        "plc_parity",
+        G_PLC_PARITY,
+        Kind::Enum(PARITY),
+        true,
+        "\"none\", \"odd\", \"even\"",
+    ),
+    f(
+        "bus_baud_bps",
+        G_BUS_BAUD,
+        Kind::Int(100),
+        true,
+        "9600, 14400, 19200, 28800, 38400, 57600, 76800, 115200 bit/s",
+    ),
+    f("bus_rtim_ms", G_BUS_RTIM, Kind::Int(1), true, "3-255 ms"),
+    f("retries", G_RETRIES, Kind::Int(1), false, "0-3"),
+    f(
+        "watchdog_ms",
+        G_WATCHDOG,
+        Kind::Int(1),
+        false,
+        "0, 50-60000 ms",
+    ),
+    f(
+        "watchdog_action",
+        G_WD_ACTION,
+        Kind::Enum(WD_ACTION),
+        false,
+        "\"stop\", \"latch\"",
+    ),
+    f(
+        "pio_axis",
+        G_PIO_AXIS,
+        Kind::PioAxis,
+        false,
+        "0-15 or \"none\"",
+    ),
+    f(
+        "pio_pattern",
+        G_PIO_PATTERN,
+        Kind::Int(1),
+        false,
+        "0, 1, 4, 5",
+    ),
+    f(
+        "pio_start",
+        G_PIO_START,
+        Kind::Enum(PIO_START),
+        false,
+        "\"level\", \"edge\"",
+    ),
+    f(
+        "pio_jog_mm_s",
+        G_PIO_JOG,
+        Kind::Hundredths,
+        false,
+        "0.01-655.35 mm/s",
+    ),
+    f(
+        "pio_inch_mm",
+        G_PIO_INCH,
+        Kind::Hundredths,
+        false,
+        "0.01-1.00 mm",
+    ),
 ];
 
 const AXIS: &[Field] = &[
-    f("enabled", 0, Kind::Bool, true),
-    f("lead_mm", 1, Kind::Hundredths, false),
-    f("home", 2, Kind::Enum(HOME), false),
-    f("pulses_per_rev", 3, Kind::Int(1), false),
-    f("stroke_mm", 4, Kind::Hundredths32, false),
-    f("encoding", 6, Kind::Enum(ENCODING), false),
+    f("enabled", 0, Kind::Bool, true, "true, false"),
+    f("lead_mm", 1, Kind::Hundredths, false, "0.01-655.35 mm"),
+    f("home", 2, Kind::Enum(HOME), false, "\"motor\", \"far\""),
+    f("pulses_per_rev", 3, Kind::Int(1), false, "1-65535"),
+    f(
+        "stroke_mm",
+        4,
+        Kind::Hundredths32,
+        false,
+        "0.00-21474836.47 mm",
+    ),
+    f(
+        "encoding",
+        6,
+        Kind::Enum(ENCODING),
+        false,
+        "\"ones-complement\", \"twos-complement\"",
+    ),
 ];
 
 const NETWORK: &[Field] = &[
-    f("ip_address", G_NET, Kind::Ipv4, false),
-    f("ip_prefix_bits", G_NET + 2, Kind::Int(1), false),
-    f("ip_router", G_NET + 3, Kind::Ipv4, false),
-    f("tcp_max_connections", G_NET + 5, Kind::Int(1), false),
-    f("tcp_idle_s", G_NET + 6, Kind::Int(1), false),
-    f("tcp_allow", G_NET + 8, Kind::Ipv4List, false),
+    f("ip_address", G_NET, Kind::Ipv4, false, "an IPv4 address"),
+    f("ip_prefix_bits", G_NET + 2, Kind::Int(1), false, "1-32"),
+    f(
+        "ip_router",
+        G_NET + 3,
+        Kind::Ipv4,
+        false,
+        "an IPv4 address, \"0.0.0.0\" for none",
+    ),
+    f("tcp_max_connections", G_NET + 5, Kind::Int(1), false, "1-4"),
+    f("tcp_idle_s", G_NET + 6, Kind::Int(1), false, "0-3600 s"),
+    f(
+        "tcp_allow",
+        G_NET + 8,
+        Kind::Ipv4List,
+        false,
+        "up to 4 IPv4 addresses",
+    ),
 ];
 
 /// Which section a setting is in.
@@ -143,6 +242,23 @@ pub struct Settings {
 
 fn field(section: Section, key: &str) -> Option<Field> {
     section.fields().iter().copied().find(|f| f.key == key)
+}
+
+/// A section's name as the file writes it (`[gateway]`).
+pub fn section_name(section: Section) -> String {
+    section.name()
+}
+
+/// An `[axis.N]` table's number: 0-15, written as a plain number (`[axis.01]` would be a
+/// second table for axis 1).
+pub fn axis_number(key: &str) -> Result<u8, String> {
+    match key.parse::<u8>() {
+        Ok(n) if usize::from(n) < AXES && n.to_string() == key => Ok(n),
+        Ok(n) if usize::from(n) < AXES => Err(format!(
+            "[axis.{key}]: write the axis number as [axis.{n}] (one table per axis)"
+        )),
+        _ => Err(format!("[axis.{key}]: no such axis (0-{})", AXES - 1)),
+    }
 }
 
 /// The TOML text of a setting's registers.
@@ -207,30 +323,44 @@ fn parse_ip(value: &toml::Value) -> Result<[u16; 2], String> {
     Ok([u16::from_be_bytes([a, b]), u16::from_be_bytes([c, d])])
 }
 
-/// A TOML value as the setting's registers, checked for its form (not yet its range).
-fn parse(kind: Kind, value: &toml::Value) -> Result<Vec<u16>, String> {
+/// A TOML value as the setting's registers, checked for its form and for fitting its
+/// registers (the gateway's own range rules come after: `GatewayWrite::parse`). A value out of
+/// range says so with the range in the file's units, before its form (decimals, multiples) is
+/// looked at.
+fn parse(field: Field, value: &toml::Value) -> Result<Vec<u16>, String> {
+    let range = || format!("out of range (allowed: {})", field.range);
     let int = || {
         value
             .as_integer()
             .ok_or_else(|| format!("{value} is not a whole number"))
     };
-    let word =
-        |v: i64, what: &str| u16::try_from(v).map_err(|_| format!("{v} is out of range ({what})"));
-    Ok(match kind {
+    // A number in 0.01 units, its magnitude checked before its decimals.
+    let hundredths = |max: i64| -> Result<i64, String> {
+        let x = match value {
+            toml::Value::Integer(i) => *i as f64,
+            toml::Value::Float(x) => *x,
+            _ => return Err(format!("{value} is not a number")),
+        };
+        if !(x * 100.0 >= -0.5 && x * 100.0 <= max as f64 + 0.5) {
+            return Err(range());
+        }
+        parse_hundredths(value)
+    };
+    Ok(match field.kind {
         Kind::Int(factor) => {
             let v = int()?;
+            let word = u16::try_from(v / i64::from(factor))
+                .ok()
+                .filter(|_| v >= 0)
+                .ok_or_else(range)?;
             if v % i64::from(factor) != 0 {
                 return Err(format!("{v} is not a multiple of {factor}"));
             }
-            vec![word(v / i64::from(factor), "0-65535")?]
+            vec![word]
         }
-        Kind::Hundredths => vec![word(parse_hundredths(value)?, "0.00-655.35")?],
+        Kind::Hundredths => vec![u16::try_from(hundredths(65_535)?).map_err(|_| range())?],
         Kind::Hundredths32 => {
-            let v = parse_hundredths(value)?;
-            let v = u32::try_from(v)
-                .ok()
-                .filter(|&v| i32::try_from(v).is_ok())
-                .ok_or_else(|| format!("{value} is out of range (0.00-21474836.47)"))?;
+            let v = u32::try_from(hundredths(i64::from(i32::MAX))?).map_err(|_| range())?;
             vec![(v >> 16) as u16, v as u16]
         }
         Kind::Bool => vec![u16::from(
@@ -250,7 +380,10 @@ fn parse(kind: Kind, value: &toml::Value) -> Result<Vec<u16>, String> {
         Kind::PioAxis => match value.as_str() {
             Some("none") => vec![0xFFFF],
             Some(_) => return Err(format!("{value} is not an axis 0-15 or \"none\"")),
-            None => vec![word(int()?, "an axis 0-15 or \"none\"")?],
+            None => vec![u16::try_from(int()?)
+                .ok()
+                .filter(|&a| usize::from(a) < AXES)
+                .ok_or_else(range)?],
         },
         Kind::Ipv4 => parse_ip(value)?.to_vec(),
         Kind::Ipv4List => {
@@ -269,22 +402,6 @@ fn parse(kind: Kind, value: &toml::Value) -> Result<Vec<u16>, String> {
             regs
         }
     })
-}
-
-/// The range a setting's register takes, for messages.
-fn range_text(section: Section, address: u16) -> String {
-    if let Section::Axis(_) = section {
-        return String::new();
-    }
-    MAP.iter()
-        .find(|e| {
-            e.unit == Unit::Gateway
-                && address
-                    .checked_sub(e.address)
-                    .is_some_and(|offset| offset < e.count)
-        })
-        .map(|e| format!(" (allowed: {} {})", e.range, e.units).replace(" )", ")"))
-        .unwrap_or_default()
 }
 
 impl Settings {
@@ -328,6 +445,34 @@ impl Settings {
             Err(e) => return Err(Fail::Device(format!("{}: {e}", gw.at(unit, G_NET)))),
         }
         Ok(Settings { values })
+    }
+
+    /// Axis `n`'s AXISCFG block as registers (enabled, lead, home, pulses/rev, stroke (2),
+    /// complement), 0 for a setting not held.
+    pub fn axis_cfg(&self, n: u8) -> Vec<u16> {
+        let section = Section::Axis(n);
+        let mut regs = vec![0u16; usize::from(G_AXIS_CONFIG_LEN)];
+        for field in AXIS {
+            if let Some(v) = self.values.get(&(section, field.key)) {
+                for (i, &w) in v.iter().enumerate() {
+                    if let Some(slot) = regs.get_mut(usize::from(field.address) + i) {
+                        *slot = w;
+                    }
+                }
+            }
+        }
+        regs
+    }
+
+    /// The axes enabled (AXISCFG: pending until APPLY), read.
+    pub fn read_enabled(gw: &mut Gw) -> Result<Vec<u8>, Fail> {
+        let unit = gw.unit;
+        let half = (AXES as u16 / 2) * G_AXIS_CONFIG_LEN;
+        let mut all = gw.read(unit, G_AXIS_CONFIG, half)?;
+        all.extend(gw.read(unit, G_AXIS_CONFIG + half, half)?);
+        Ok((0..AXES as u8)
+            .filter(|&n| all.get(usize::from(n) * usize::from(G_AXIS_CONFIG_LEN)) == Some(&1))
+            .collect())
     }
 
     /// Whether the gateway has the network block.
@@ -381,8 +526,13 @@ impl Settings {
 
     /// Settings from a parsed TOML document's `gateway`, `network` and `axis` tables, every
     /// value checked for its form and range. Every problem is reported, one line each.
-    /// `others` are the other top-level keys the caller reads itself.
-    pub fn from_toml(doc: &toml::Table, others: &[&str]) -> Result<Settings, Vec<String>> {
+    /// `others` are the other top-level keys the caller reads itself; `points`: a `point` list
+    /// is allowed in an `axis.N` table (a backup), nowhere else.
+    pub fn from_toml(
+        doc: &toml::Table,
+        others: &[&str],
+        points: bool,
+    ) -> Result<Settings, Vec<String>> {
         let mut errors = Vec::new();
         let mut values = BTreeMap::new();
         let mut sections: Vec<(Section, &toml::Table)> = Vec::new();
@@ -392,19 +542,15 @@ impl Settings {
                 ("network", toml::Value::Table(t)) => sections.push((Section::Network, t)),
                 ("axis", toml::Value::Table(axes)) => {
                     for (n, table) in axes {
-                        match (
-                            n.parse::<u8>().ok().filter(|&n| usize::from(n) < AXES),
-                            table,
-                        ) {
-                            (Some(n), toml::Value::Table(t)) => {
-                                sections.push((Section::Axis(n), t))
-                            }
-                            (None, _) => {
-                                errors.push(format!("[axis.{n}]: no such axis (0-{})", AXES - 1))
-                            }
+                        match (axis_number(n), table) {
+                            (Ok(n), toml::Value::Table(t)) => sections.push((Section::Axis(n), t)),
+                            (Err(e), _) => errors.push(e),
                             (_, _) => errors.push(format!("axis.{n}: not a table")),
                         }
                     }
+                }
+                (k @ ("gateway" | "network" | "axis"), _) => {
+                    errors.push(format!("{k}: not a table ([{k}])"))
                 }
                 (k, _) if others.contains(&k) => {}
                 (k, _) => errors.push(format!("unknown key \"{k}\" (expected {})", {
@@ -416,33 +562,38 @@ impl Settings {
         }
         for (section, table) in sections {
             for (key, value) in table {
-                if key == "point"
-                    && matches!(section, Section::Axis(_))
-                    && others.contains(&"point")
-                {
+                if key == "point" && points && matches!(section, Section::Axis(_)) {
                     continue;
                 }
                 let Some(field) = field(section, key) else {
                     let keys: Vec<&str> = section.fields().iter().map(|f| f.key).collect();
                     errors.push(format!(
-                        "{} {key}: unknown key (one of {})",
+                        "{} {key}: unknown key (one of {}{})",
                         section.name(),
-                        keys.join(", ")
+                        keys.join(", "),
+                        if points && matches!(section, Section::Axis(_)) {
+                            ", [[point]]"
+                        } else {
+                            ""
+                        }
                     ));
                     continue;
                 };
-                match parse(field.kind, value) {
+                let first = section.base() + field.address;
+                match parse(field, value) {
+                    Err(e) if e.starts_with("out of range") => errors.push(format!(
+                        "{} {key} = {value}: {e} (register {first:#06x})",
+                        section.name()
+                    )),
                     Err(e) => errors.push(format!("{} {key} = {value}: {e}", section.name())),
                     Ok(regs) => {
-                        let first = section.base() + field.address;
                         for (i, &v) in regs.iter().enumerate() {
                             let address = first + i as u16;
-                            if let Err(e) = GatewayWrite::parse(address, v) {
-                                let _ = e;
+                            if GatewayWrite::parse(address, v).is_err() {
                                 errors.push(format!(
-                                    "{} {key} = {value}: out of range{} (register {address:#06x})",
+                                    "{} {key} = {value}: out of range (allowed: {}) (register {address:#06x})",
                                     section.name(),
-                                    range_text(section, address)
+                                    field.range
                                 ));
                                 break;
                             }
@@ -486,12 +637,6 @@ impl Settings {
                     "[axis.{n}] enabled: its unit would be {axis_unit} (axis_base {base} + {n}), past 247"
                 ));
             }
-        }
-        if let Some(axis) = self
-            .word(Section::Gateway, "pio_axis")
-            .filter(|&a| a != 0xFFFF)
-        {
-            let _ = axis;
         }
         errors
     }
@@ -539,8 +684,19 @@ impl Change {
             self.key,
             self.from.as_deref().unwrap_or("(none)"),
             self.to,
-            if self.on_apply { " (on APPLY)" } else { "" }
+            if self.on_apply {
+                " (on APPLY)"
+            } else if self.on_restart() {
+                " (after SAVE and RESTART)"
+            } else {
+                ""
+            }
         )
+    }
+
+    /// Taken only at the next start (the network address settings).
+    pub fn on_restart(&self) -> bool {
+        self.section == Section::Network && self.key.starts_with("ip_")
     }
 
     pub fn json(&self) -> serde_json::Value {
@@ -551,51 +707,307 @@ impl Change {
             "from": self.from,
             "to": self.to,
             "on_apply": self.on_apply,
+            "on_restart": self.on_restart(),
         })
     }
 }
 
-/// Write `changes` in an order the gateway admits (axes disabled first, then AXISBASE and
-/// UNITID, then the rest), APPLY if one of them needs it and wait for the establishment.
-/// Returns whether it applied.
-pub fn write_changes(gw: &mut Gw, changes: &[Change]) -> Result<bool, Fail> {
-    let rank = |c: &Change| match (c.section, c.key) {
-        (Section::Axis(_), "enabled") if c.regs == [0] => 0,
-        (Section::Gateway, "axis_base") => 1,
-        (Section::Gateway, "unit_id") => 2,
-        (Section::Axis(_), "enabled") => 4,
-        _ => 3,
-    };
-    let mut ordered: Vec<&Change> = changes.iter().collect();
-    ordered.sort_by_key(|c| rank(c));
-    let unit = gw.unit;
-    for c in &ordered {
-        if c.key == "tcp_allow" {
-            // Each address in one FC10 of two registers.
-            for i in 0..4u16 {
-                let at = usize::from(2 * i);
-                gw.write(
-                    unit,
-                    c.address + 2 * i,
-                    c.regs.get(at..at + 2).unwrap_or(&[0, 0]),
-                )?;
-            }
-        } else {
-            gw.write(unit, c.address, &c.regs)?;
+/// The gateway's admit rules for UNITID, AXISBASE and an axis enabled (`gateway_unit.rs`),
+/// on the values as a write leaves them: UNITID and AXISBASE are checked against the pending
+/// unit and base and the axes running or pending; an axis enabled against the pending unit
+/// and base. APPLY makes the pending axes the running ones.
+#[derive(Clone, Debug)]
+struct Admit {
+    unit: u16,
+    base: u16,
+    /// Bit n: axis n enabled (AXISCFG, pending).
+    pending: u32,
+    /// Bit n: axis n on the bus (taken as the enabled axes read: nothing pending).
+    running: u32,
+}
+
+impl Admit {
+    fn of(now: &Settings) -> Admit {
+        let enabled = now.enabled().iter().fold(0u32, |m, &n| m | 1 << n);
+        Admit {
+            unit: now.word(Section::Gateway, "unit_id").unwrap_or(63),
+            base: now.word(Section::Gateway, "axis_base").unwrap_or(1),
+            pending: enabled,
+            running: enabled,
         }
     }
-    if !changes.iter().any(|c| c.on_apply) {
-        return Ok(false);
+
+    /// The axis of the running or pending axes that would be unit `unit` with `base`.
+    fn axis_at(&self, unit: u16, base: u16) -> Option<u16> {
+        (0..AXES as u16).find(|&n| (self.running | self.pending) & 1 << n != 0 && base + n == unit)
     }
-    apply(gw)?;
-    for c in changes {
+
+    /// One change written: refused with the reason, as the gateway would.
+    fn write(&mut self, c: &Change) -> Result<(), String> {
+        let value = c.regs.first().copied().unwrap_or(0);
         match (c.section, c.key) {
-            (Section::Gateway, "unit_id") => gw.unit = c.regs[0] as u8,
-            (Section::Gateway, "axis_base") => gw.base = c.regs[0] as u8,
+            (Section::Gateway, "unit_id") => {
+                if let Some(n) = self.axis_at(value, self.base) {
+                    return Err(format!(
+                        "UNITID {value} while axis {n} (enabled or on the bus until APPLY) is unit {value} (AXISBASE {} + {n})",
+                        self.base
+                    ));
+                }
+                self.unit = value;
+            }
+            (Section::Gateway, "axis_base") => {
+                if let Some(n) = self.axis_at(self.unit, value) {
+                    return Err(format!(
+                        "AXISBASE {value} while UNITID is {}: axis {n} (enabled or on the bus until APPLY) would be unit {}",
+                        self.unit, self.unit
+                    ));
+                }
+                self.base = value;
+            }
+            (Section::Axis(n), "enabled") if value == 1 => {
+                if self.base + u16::from(n) == self.unit {
+                    return Err(format!(
+                        "axis {n} enabled while it would be unit {} (AXISBASE {} + {n}), the gateway's UNITID",
+                        self.unit, self.base
+                    ));
+                }
+                self.pending |= 1 << n;
+            }
+            (Section::Axis(n), "enabled") => self.pending &= !(1 << n),
             _ => {}
         }
+        Ok(())
     }
-    Ok(true)
+
+    fn apply(&mut self) {
+        self.running = self.pending;
+    }
+}
+
+/// The changes in phases the gateway admits one write after the other, an APPLY after each
+/// phase but the last (which is followed by one only if a change of it is taken on APPLY).
+/// Axes disabled come first; UNITID, AXISBASE and the axes enabled in the order that does
+/// not collide (UNITID first when the new base would cover the current unit); when every
+/// order collides, two phases with an APPLY between. `Err`: no order works (nothing to be
+/// written), with the gateway's reason.
+pub fn plan(now: &Settings, changes: &[Change]) -> Result<Vec<Vec<Change>>, String> {
+    let is = |c: &Change, section: Section, key: &str| c.section == section && c.key == key;
+    let disables: Vec<Change> = changes
+        .iter()
+        .filter(|c| matches!(c.section, Section::Axis(_)) && c.key == "enabled" && c.regs == [0])
+        .cloned()
+        .collect();
+    let enables: Vec<Change> = changes
+        .iter()
+        .filter(|c| matches!(c.section, Section::Axis(_)) && c.key == "enabled" && c.regs != [0])
+        .cloned()
+        .collect();
+    let unit: Vec<Change> = changes
+        .iter()
+        .filter(|c| is(c, Section::Gateway, "unit_id"))
+        .cloned()
+        .collect();
+    let base: Vec<Change> = changes
+        .iter()
+        .filter(|c| is(c, Section::Gateway, "axis_base"))
+        .cloned()
+        .collect();
+    let rest: Vec<Change> = changes
+        .iter()
+        .filter(|c| {
+            c.key != "enabled"
+                && !is(c, Section::Gateway, "unit_id")
+                && !is(c, Section::Gateway, "axis_base")
+        })
+        .cloned()
+        .collect();
+    let groups: Vec<&Vec<Change>> = [&unit, &base, &enables]
+        .into_iter()
+        .filter(|g| !g.is_empty())
+        .collect();
+    let orders: Vec<Vec<usize>> = match groups.len() {
+        0 => vec![vec![]],
+        1 => vec![vec![0]],
+        2 => vec![vec![0, 1], vec![1, 0]],
+        _ => vec![
+            vec![0, 1, 2],
+            vec![0, 2, 1],
+            vec![1, 0, 2],
+            vec![1, 2, 0],
+            vec![2, 0, 1],
+            vec![2, 1, 0],
+        ],
+    };
+    let run = |state: &mut Admit, phase: &[Change]| -> Result<(), String> {
+        phase.iter().try_for_each(|c| state.write(c))
+    };
+    let mut first_reason = None;
+    // One phase if any order admits it, else two (the split after `k` groups, an APPLY there).
+    for two in [false, true] {
+        for order in &orders {
+            let splits: Vec<usize> = if two {
+                (0..groups.len()).collect()
+            } else {
+                vec![groups.len()]
+            };
+            for k in splits {
+                let mut phase1 = disables.clone();
+                let mut phase2 = Vec::new();
+                for (i, &g) in order.iter().enumerate() {
+                    let target = if i < k { &mut phase1 } else { &mut phase2 };
+                    target.extend(
+                        groups
+                            .get(g)
+                            .map_or(&[][..], |g| g.as_slice())
+                            .iter()
+                            .cloned(),
+                    );
+                }
+                if two && phase1.is_empty() {
+                    continue;
+                }
+                let mut state = Admit::of(now);
+                let outcome = run(&mut state, &phase1).and_then(|()| {
+                    if two {
+                        state.apply();
+                    }
+                    run(&mut state, &phase2)
+                });
+                match outcome {
+                    Ok(()) => {
+                        return Ok(if two {
+                            phase2.extend(rest.iter().cloned());
+                            vec![phase1, phase2]
+                        } else {
+                            phase1.extend(phase2);
+                            phase1.extend(rest.iter().cloned());
+                            vec![phase1]
+                        });
+                    }
+                    Err(e) => {
+                        first_reason.get_or_insert(e);
+                    }
+                }
+            }
+        }
+    }
+    Err(format!(
+        "the gateway would refuse these settings in every order of writing them (with an APPLY between or not): {}; change UNITID, AXISBASE and the axes enabled in separate steps",
+        first_reason.unwrap_or_default()
+    ))
+}
+
+/// The first enabled axis (bit n of `axes`) that moves or runs a command, or a synchronized
+/// start that runs: APPLY is refused then (`bus_idle`), so nothing is written. `None`: idle.
+pub fn busy(gw: &mut Gw, axes: &[u8]) -> Result<Option<String>, Fail> {
+    if gw.get(G_SYNC_STATUS)? == 1 {
+        return Ok(Some("a synchronized start runs (SYNCSTAT 1)".into()));
+    }
+    for &n in axes {
+        let unit = gw.axis_unit(n);
+        let Some(ext) = gw.probe(unit, CMST, 1)? else {
+            continue;
+        };
+        if ext.first() == Some(&1) {
+            return Ok(Some(format!(
+                "axis {n} (unit {unit}) runs a command (CMST 1)"
+            )));
+        }
+        if let Ok(dsse) = gw.try_read(unit, DSSE, 1)? {
+            if dsse.first().is_some_and(|d| d & 1 << 5 != 0) {
+                return Ok(Some(format!("axis {n} (unit {unit}) moves (DSSE MOVE)")));
+            }
+        }
+    }
+    Ok(None)
+}
+
+/// The changes written, for a message after a failure: those an APPLY already took, those
+/// written since, and which of them wait for APPLY.
+fn written_text(applied: &[Change], written: &[Change]) -> String {
+    let mut out = String::new();
+    if !applied.is_empty() {
+        out += &format!("applied before the failure ({}):", applied.len());
+        for c in applied {
+            out += &format!("\n    {}", c.line());
+        }
+        out += "\n  ";
+    }
+    if written.is_empty() {
+        out += "nothing written since the last APPLY";
+        return out;
+    }
+    out += &format!("written before the failure ({}):", written.len());
+    for c in written {
+        out += &format!("\n    {}", c.line());
+    }
+    let pending: Vec<String> = written
+        .iter()
+        .filter(|c| c.on_apply)
+        .map(|c| format!("{} {}", c.section.name(), c.key))
+        .collect();
+    if !pending.is_empty() {
+        out += &format!(
+            "\n  pending until APPLY (registers read them, the gateway does not run them yet): {}; `rcgw apply` once nothing moves, or write the file again",
+            pending.join(", ")
+        );
+    }
+    out
+}
+
+/// Write `phases` ([`plan`]), an APPLY after each phase but the last and after the last if a
+/// change of it is taken on APPLY, each waited for. Before the first write, when an APPLY
+/// will be needed: the bus idle ([`busy`]), or nothing is written. On a failure after the
+/// first write, the error says what was written and what waits for APPLY.
+/// Returns whether it applied.
+pub fn write_changes(gw: &mut Gw, phases: &[Vec<Change>]) -> Result<bool, Fail> {
+    let needs_apply = phases.len() > 1 || phases.iter().flatten().any(|c| c.on_apply);
+    if needs_apply {
+        let unit = gw.unit;
+        let enabled = Settings::read_enabled(gw)?;
+        if let Some(why) = busy(gw, &enabled)? {
+            return Err(Fail::Device(format!(
+                "{} unit {unit}: the settings need an APPLY, which the gateway refuses while anything moves or runs: {why}; nothing written (stop the axes, then try again)",
+                gw.link.name
+            )));
+        }
+    }
+    let mut written: Vec<Change> = Vec::new();
+    let mut done: Vec<Change> = Vec::new();
+    let mut applied = false;
+    let fail = |e: Fail, done: &[Change], written: &[Change]| match e {
+        Fail::Device(m) | Fail::Input(m) => {
+            Fail::Device(format!("{m}\n  {}", written_text(done, written)))
+        }
+    };
+    for (i, phase) in phases.iter().enumerate() {
+        let unit = gw.unit;
+        for c in phase {
+            let result = if c.key == "tcp_allow" {
+                // Each address in one FC10 of two registers.
+                (0..4u16).try_for_each(|i| {
+                    let at = usize::from(2 * i);
+                    gw.write(
+                        unit,
+                        c.address + 2 * i,
+                        c.regs.get(at..at + 2).unwrap_or(&[0, 0]),
+                    )
+                })
+            } else {
+                gw.write(unit, c.address, &c.regs)
+            };
+            result.map_err(|e| fail(e, &done, &written))?;
+            written.push(c.clone());
+        }
+        let last = i + 1 == phases.len();
+        if !last || phase.iter().any(|c| c.on_apply) {
+            apply(gw).map_err(|e| fail(e, &done, &written))?;
+            // Applied: nothing written so far waits any more.
+            done.append(&mut written);
+            applied = true;
+        }
+    }
+    Ok(applied)
 }
 
 /// APPLY, then the PLC line as it now is (RTU), and the establishment awaited.
@@ -605,14 +1017,17 @@ pub fn apply(gw: &mut Gw) -> Result<(), Fail> {
     let establishments = |regs: &[u16]| u32::from(regs[6]) << 16 | u32::from(regs[7]);
     let line = gw.read(unit, G_PLC_BAUD, 3)?;
     let (pending_unit, pending_base) = (line[2], gw.get(G_AXIS_BASE)?);
-    let enabled: Vec<u8> = {
-        let mut all = gw.read(unit, G_AXIS_CONFIG, 64)?;
-        all.extend(gw.read(unit, G_AXIS_CONFIG + 64, 64)?);
-        (0..AXES as u8)
-            .filter(|&n| all.get(usize::from(n) * 8) == Some(&1))
-            .collect()
-    };
-    gw.write(unit, G_APPLY, &[1])?;
+    let enabled = Settings::read_enabled(gw)?;
+    match gw.try_write(unit, G_APPLY, &[1])? {
+        Ok(()) => {}
+        Err(Exception::IllegalDataValue) => {
+            return Err(Fail::Device(format!(
+                "{}: APPLY refused (exception 03): something moves, runs or waits on the bus, or an establishment runs",
+                gw.at(unit, G_APPLY)
+            )))
+        }
+        Err(e) => return Err(Fail::Device(format!("{}: {e} writing 1", gw.at(unit, G_APPLY)))),
+    }
     if gw.link.is_rtu() {
         let parity = match line[1] {
             1 => serialport::Parity::Odd,
