@@ -64,7 +64,7 @@ scripts/emu-test.sh
 step "firmware soak in QEMU, 2 minutes: a seeded random PLC against 4 faulty simulated axes, checked against the simulator (scripts/soak.sh)"
 scripts/soak.sh --minutes 2 --seed 24
 
-step "size: flash, static RAM and stack of both boards against their budgets (the F103's enforced)"
+step "size: flash, static RAM and stack of every board against its budget (the F103's and the F429's enforced)"
 scripts/size-report.sh --check
 
 step "demo: README's run-without-hardware command (the firmware in QEMU, 4 simulated axes)"
