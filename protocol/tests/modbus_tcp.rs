@@ -435,3 +435,77 @@ fn a_socket_without_room_for_a_reply_waits_and_the_others_do_not() {
         .collect();
     assert_eq!(tids, vec![1, 2]);
 }
+
+// ---------------------------------------------------------------- properties
+
+mod properties {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// A valid frame: any transaction id, unit and PDU of 1-253 bytes.
+    fn frames() -> impl Strategy<Value = Vec<u8>> {
+        (
+            any::<u16>(),
+            any::<u8>(),
+            proptest::collection::vec(any::<u8>(), 1..=253),
+        )
+            .prop_map(|(tid, unit, pdu)| {
+                let mut f = tid.to_be_bytes().to_vec();
+                f.extend_from_slice(&[0, 0]);
+                f.extend_from_slice(&((pdu.len() + 1) as u16).to_be_bytes());
+                f.push(unit);
+                f.extend_from_slice(&pdu);
+                f
+            })
+    }
+
+    proptest! {
+        /// However a stream of valid frames is cut into segments, the same frames come out, in
+        /// order, and the bytes the stream cannot take yet are offered again.
+        #[test]
+        fn frames_survive_any_segmentation(
+            frames in proptest::collection::vec(frames(), 1..6),
+            cuts in proptest::collection::vec(1usize..300, 1..40),
+        ) {
+            let bytes: Vec<u8> = frames.concat();
+            let mut s = Stream::new();
+            let mut out = Vec::new();
+            let (mut at, mut cut) = (0, cuts.iter().cycle());
+            while at < bytes.len() || s.is_ready() {
+                let end = (at + cut.next().copied().unwrap_or(1)).min(bytes.len());
+                at += s.push(&bytes[at..end]);
+                while let Some(frame) = s.take() {
+                    out.push(frame.expect("a valid frame").as_bytes().to_vec());
+                }
+            }
+            prop_assert_eq!(out, frames);
+        }
+
+        /// Arbitrary bytes, in arbitrary segments: nothing panics, every item is a frame or a
+        /// counted error, and the stream always has room once its front is taken.
+        #[test]
+        fn any_bytes_never_panic(
+            bytes in proptest::collection::vec(any::<u8>(), 0..2000),
+            cuts in proptest::collection::vec(1usize..300, 1..40),
+        ) {
+            let mut s = Stream::new();
+            let (mut at, mut cut) = (0, cuts.iter().cycle());
+            for _ in 0..10_000 {
+                if at >= bytes.len() && !s.is_ready() {
+                    break;
+                }
+                let end = (at + cut.next().copied().unwrap_or(1)).min(bytes.len());
+                at += s.push(&bytes[at..end]);
+                while let Some(item) = s.take() {
+                    if let Ok(frame) = item {
+                        prop_assert!(frame.as_bytes().len() >= 8 && frame.as_bytes().len() <= 260);
+                    } else {
+                        // A length error leaves nothing to resynchronise on: a connection closes.
+                        s.clear();
+                    }
+                }
+                prop_assert!(s.room() > 0 || s.is_ready());
+            }
+        }
+    }
+}
