@@ -58,7 +58,9 @@ pub const RECEIVE_PIPE: usize = 512;
 /// lets this fill up is not reading its replies.
 pub const SEND_PIPE: usize = 1024;
 
-/// Events queued for the gateway task, at most (a socket task waits when it is full).
+/// Events queued for the gateway task, at most (a socket task waits when it is full): per
+/// socket at most one Data and one Sent (`Socket::data_queued`), and the connection's Opened,
+/// Eof and Closed, one after the other.
 const EVENTS: usize = 4 * SOCKETS;
 
 /// What a socket task tells the gateway task.
@@ -97,6 +99,11 @@ struct Socket {
     /// sent has been answered ([`Socket::answered`]).
     eof: AtomicBool,
     answered: Signal<Cs, ()>,
+    /// An [`Event::Data`] / [`Event::Sent`] is queued and not handled yet: at most one of each
+    /// per socket waits in the channel, so that it never fills (a trickling client would
+    /// otherwise queue one per read).
+    data_queued: AtomicBool,
+    sent_queued: AtomicBool,
 }
 
 impl Socket {
@@ -108,6 +115,8 @@ impl Socket {
             released: Signal::new(),
             eof: AtomicBool::new(false),
             answered: Signal::new(),
+            data_queued: AtomicBool::new(false),
+            sent_queued: AtomicBool::new(false),
         }
     }
 }
@@ -152,10 +161,14 @@ impl Port {
                 }
             }
             Event::Data(socket) => {
+                if let Some(s) = self.sockets.get(socket) {
+                    s.data_queued.store(false, Ordering::Relaxed);
+                }
                 self.feed(socket, node, now);
             }
             Event::Sent(socket) => {
                 if let Some(s) = self.sockets.get(socket) {
+                    s.sent_queued.store(false, Ordering::Relaxed);
                     if s.send.free_capacity() >= MAX_TCP_ADU_LEN {
                         node.tcp_writable(socket, true);
                     }
@@ -176,20 +189,23 @@ impl Port {
                     s.close.reset();
                     s.eof.store(false, Ordering::Relaxed);
                     s.answered.reset();
+                    s.data_queued.store(false, Ordering::Relaxed);
+                    s.sent_queued.store(false, Ordering::Relaxed);
                     s.released.signal(());
                 }
             }
         }
     }
 
-    /// Gives the node the received bytes it has room for (and drops those of a socket whose
-    /// connection the node no longer holds: refused, replaced, closed); whether it gave any.
+    /// Gives the node the received bytes it has room for; whether it gave any. Bytes of a
+    /// socket the node holds no connection on stay: they are a new client's whose Opened is
+    /// still queued (the gateway task may have awaited its bus meanwhile), or a closed one's,
+    /// which its close empties (`close_socket`, [`Event::Closed`]).
     pub fn feed(&self, socket: usize, node: &mut Node, now: Instant) -> bool {
         let Some(s) = self.sockets.get(socket) else {
             return false;
         };
         if !node.tcp_connected(socket) {
-            s.receive.clear();
             return false;
         }
         let mut fed = false;
@@ -216,12 +232,14 @@ impl Port {
             fed |= self.feed(socket, node, now);
         }
         if !fed {
-            // The node is idle: a client past its FIN whose every request has been answered
-            // (nothing in its pipe, nothing in the node) is done.
+            // The node is idle: a client past its FIN whose every whole request has been
+            // answered (nothing in its pipe, no whole frame in the node: a fragment never
+            // completes now) is done, and no longer counted as connected (TCPCONN).
             for (socket, s) in self.sockets.iter().enumerate() {
-                let nothing_left = s.receive.is_empty() && node.tcp_room(socket) == MAX_TCP_ADU_LEN;
+                let nothing_left = s.receive.is_empty() && !node.tcp_pending(socket);
                 if s.eof.load(Ordering::Relaxed) && nothing_left {
                     s.eof.store(false, Ordering::Relaxed);
+                    node.tcp_closed(socket);
                     s.answered.signal(());
                 }
             }
@@ -345,8 +363,10 @@ enum End {
 }
 
 /// Moves bytes until the client closes, the connection breaks or the gateway closes it. The
-/// close is looked at first, and around every wait: on a full receive pipe (the node holds a
-/// request it has not answered) and on a full TCP send buffer (a client that does not read).
+/// close is looked at first. Bytes read from the client wait in `buf` while the receive pipe is
+/// full (the node holds requests it has not answered), and meanwhile the replies keep going out:
+/// the node answers only once they have ([`Event::Sent`]), so reading and sending must never
+/// wait on each other.
 async fn connected(
     socket: &mut TcpSocket<'_>,
     port: &Port,
@@ -355,28 +375,47 @@ async fn connected(
     buf: &mut [u8],
     out: &mut [u8],
 ) -> End {
-    use embedded_io_async::Write;
+    // `buf[start..end]`: read from the client, not in the receive pipe yet.
+    let (mut start, mut end) = (0, 0);
     loop {
         let (mut reader, mut writer) = socket.split();
-        match select3(s.close.wait(), reader.read(buf), s.send.read(out)).await {
-            Either3::First(()) => return End::Abort,
-            Either3::Second(Ok(n)) if n > 0 => {
-                let bytes = buf.get(..n).unwrap_or(&[]);
-                if let Either::First(()) = select(s.close.wait(), s.receive.write_all(bytes)).await
-                {
-                    return End::Abort;
-                }
-                port.events.send(Event::Data(index)).await;
+        let inbound = async {
+            match buf.get(start..end).filter(|b| !b.is_empty()) {
+                Some(bytes) => Inbound::Piped(s.receive.write(bytes).await),
+                None => Inbound::Read(reader.read(buf).await),
             }
+        };
+        match select3(s.close.wait(), inbound, s.send.read(out)).await {
+            Either3::First(()) => return End::Abort,
+            Either3::Second(Inbound::Piped(n)) => {
+                start += n;
+                data(port, s, index).await;
+            }
+            Either3::Second(Inbound::Read(Ok(n))) if n > 0 => (start, end) = (0, n),
             // The client closed its side (0 bytes): its last requests are still answered.
-            Either3::Second(Ok(_)) => return finish(&mut writer, port, s, index, out).await,
+            Either3::Second(Inbound::Read(Ok(_))) => {
+                return finish(&mut writer, port, s, index, out).await
+            }
             // The connection broke.
-            Either3::Second(Err(_)) => return End::Abort,
+            Either3::Second(Inbound::Read(Err(_))) => return End::Abort,
             Either3::Third(n) => {
                 if !send(&mut writer, port, s, index, out.get(..n).unwrap_or(&[])).await {
                     return End::Abort;
                 }
             }
+        }
+    }
+
+    /// What the inbound side did: bytes put in the receive pipe, or a read from the client.
+    enum Inbound {
+        Piped(usize),
+        Read(Result<usize, embassy_net::tcp::Error>),
+    }
+
+    /// Tells the gateway bytes wait in the receive pipe, unless it has been told already.
+    async fn data(port: &Port, s: &Socket, index: usize) {
+        if !s.data_queued.swap(true, Ordering::Relaxed) {
+            port.events.send(Event::Data(index)).await;
         }
     }
 
@@ -389,9 +428,10 @@ async fn connected(
         index: usize,
         bytes: &[u8],
     ) -> bool {
+        use embedded_io_async::Write;
         match select(s.close.wait(), writer.write_all(bytes)).await {
             Either::Second(Ok(())) => {
-                if s.send.is_empty() {
+                if s.send.is_empty() && !s.sent_queued.swap(true, Ordering::Relaxed) {
                     port.events.send(Event::Sent(index)).await;
                 }
                 true

@@ -618,6 +618,13 @@ impl Node {
         self.tcp.server.is_open(socket)
     }
 
+    /// Whether a whole request on `socket` waits to be answered (one held back by
+    /// [`tcp_writable`](Node::tcp_writable), or not polled yet). A partial one does not count:
+    /// after the client's FIN it never completes.
+    pub fn tcp_pending(&self, socket: usize) -> bool {
+        self.tcp.server.has_frame(socket)
+    }
+
     /// What the TCP server has counted.
     pub fn tcp_counters(&self) -> crate::modbus::tcp::TcpCounters {
         self.tcp.server.counters()

@@ -358,17 +358,21 @@ def test_clients_that_flood_or_never_read_leave_every_socket_usable(gateway):
 
 
 def test_big_pipelined_replies_all_arrive_in_order(gateway):
-    """Six reads of 125 registers in one segment: 6 x 257 bytes of replies, more than the
-    firmware's send pipe holds at once; the gateway holds the client's requests back until its
-    replies have left, it never cuts the connection."""
+    """100 reads of 125 registers in one segment (25 KB of replies), then 400 small ones: far
+    more than the firmware's pipes hold at once. The gateway holds the client's requests back
+    until its replies have left and keeps reading meanwhile; it never cuts the connection or
+    stops answering (a review found both)."""
     c = Client(gateway.port)
     pdu = struct.pack(">BHH", 4, 0x0100, 125)  # FC04: AXISCFG of every axis (read-only view)
-    c.sock.sendall(b"".join(c.frame(DIRECT, pdu, tid=50 + i) for i in range(6)))
-    for i in range(6):
+    c.sock.sendall(b"".join(c.frame(DIRECT, pdu, tid=i) for i in range(100)))
+    for i in range(100):
         tid, unit, reply = c.reply()
-        assert (tid, unit, reply[0], reply[1]) == (50 + i, DIRECT, 4, 250), reply[:4]
+        assert (tid, unit, reply[0], reply[1]) == (i, DIRECT, 4, 250), (i, reply[:4])
         assert len(reply) == 252
-    assert c.read(DIRECT, UNITID, 1) == [GATEWAY]
+    c.sock.sendall(b"".join(c.frame(DIRECT, read_pdu(UNITID, 1), tid=1000 + i) for i in range(400)))
+    for i in range(400):
+        tid, unit, reply = c.reply()
+        assert (tid, reply) == (1000 + i, bytes([3, 2, 0, GATEWAY])), (i, tid)
     c.close()
 
 
@@ -393,3 +397,21 @@ def test_a_client_that_closes_its_side_still_gets_its_reply(gateway):
     assert (tid, pdu) == (77, bytes([3, 2, 0, GATEWAY]))
     assert c.closed_by_peer(5.0)
     c.close()
+
+
+def test_a_fin_after_a_partial_frame_ends_the_connection_at_once(gateway):
+    """A request, three stray bytes, then FIN: the request is answered and the connection
+    closed; the fragment can never complete. TCPCONN counts only the connections still open."""
+    watch = Client(gateway.port)
+    c = Client(gateway.port)
+    c.sock.sendall(c.frame(DIRECT, read_pdu(UNITID, 1), tid=5) + b"\x00\x01\x00")
+    c.sock.shutdown(socket.SHUT_WR)
+    tid, unit, pdu = c.reply()
+    assert (tid, pdu) == (5, bytes([3, 2, 0, GATEWAY]))
+    assert c.closed_by_peer(5.0), "a client past its FIN with a fragment was kept"
+    c.close()
+    deadline = time.monotonic() + 5
+    while watch.read(DIRECT, 0x0607, 1) != [1]:
+        assert time.monotonic() < deadline, "TCPCONN still counts the closed client"
+        time.sleep(0.05)
+    watch.close()

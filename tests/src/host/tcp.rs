@@ -112,9 +112,9 @@ impl TcpSide {
         let Some(Some(connection)) = self.connections.get(socket) else {
             return;
         };
-        let done = connection.unread.is_empty()
-            && connection.out.is_empty()
-            && node.tcp_room(socket) == protocol::modbus::tcp::MAX_TCP_ADU_LEN;
+        // A fragment left in the node never completes after the FIN: only whole requests count.
+        let done =
+            connection.unread.is_empty() && connection.out.is_empty() && !node.tcp_pending(socket);
         if connection.eof && done {
             self.close(socket, node);
         }

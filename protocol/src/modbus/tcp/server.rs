@@ -202,6 +202,14 @@ impl Server {
         self.connections.get(socket).is_some_and(Option::is_some)
     }
 
+    /// Whether a whole frame (or bytes that are to be refused) waits on `socket`.
+    pub fn has_frame(&self, socket: usize) -> bool {
+        self.connections
+            .get(socket)
+            .and_then(Option::as_ref)
+            .is_some_and(|c| c.stream.is_ready())
+    }
+
     /// The next whole request and its socket, taking turns between the connections; frames that
     /// are not requests are counted and dropped on the way (a length out of range also closes
     /// its connection).
