@@ -212,8 +212,8 @@ pub async fn run(
                         // reply left of it.
                         watchdog.pet();
                         match store {
-                            Store::Save(record) => {
-                                let saved = settings.save(&record);
+                            Store::Save => {
+                                let saved = settings.save(&node.settings_record());
                                 node.stored(saved);
                             }
                             Store::FactoryReset | Store::Restart => {

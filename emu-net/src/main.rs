@@ -211,7 +211,7 @@ async fn gateway_task(node: &'static mut Node) -> ! {
                         log!("socket {}: closed by the node", socket);
                         PORT.close(socket, node)
                     }
-                    Action::Store(Store::Save(_)) => {
+                    Action::Store(Store::Save) => {
                         saves += 1;
                         node.stored(Ok(saves));
                     }

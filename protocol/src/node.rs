@@ -102,8 +102,8 @@
 //!                 board.bus_write_and_flush(&protocol::frame::COMM_CHANGE)
 //!             }
 //!             Action::PlcLine(line) => board.set_plc_line(line.baud),
-//!             Action::Store(Store::Save(record)) => {
-//!                 let saved = board.write_settings(&record);
+//!             Action::Store(Store::Save) => {
+//!                 let saved = board.write_settings(&node.settings_record());
 //!                 node.stored(saved);
 //!             }
 //!             Action::Store(Store::FactoryReset | Store::Restart) => board.restart(),
@@ -452,6 +452,13 @@ impl Node {
                 None
             }
         }
+    }
+
+    /// The settings record to store for [`Store::Save`]: the settings in force with the
+    /// pending ones. Asked for when the save is carried out, not carried in the action: 213
+    /// bytes less in every action and in the node.
+    pub fn settings_record(&self) -> [u8; crate::plc::settings::RECORD_LEN] {
+        self.gateway.settings_record()
     }
 
     /// How the save asked for by [`Action::Store`] went: the new save count, or a failure

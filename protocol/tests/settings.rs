@@ -247,8 +247,8 @@ fn save_stores_the_settings_with_the_pending_ones() {
     assert_eq!(rig.read(63, G_SAVE_STATUS, 3), Ok(vec![0, 0, 0]));
     rig.write(63, G_SAVE, &[1]).unwrap();
     rig.run_for(10 * MS);
-    let record = match rig.stores.as_slice() {
-        [(_, Store::Save(record))] => *record,
+    let record = match (rig.stores.as_slice(), rig.saved.as_slice()) {
+        ([(_, Store::Save)], [record]) => *record,
         other => panic!("one save expected: {other:?}"),
     };
     let saved = Settings::decode(&record).unwrap();
@@ -290,8 +290,8 @@ fn a_saved_stroke_of_zero_loads() {
     rig.write(63, G_AXIS_CONFIG + 8 + 4, &[0, 0]).unwrap();
     rig.write(63, G_SAVE, &[1]).unwrap();
     rig.run_for(10 * MS);
-    let record = match rig.stores.as_slice() {
-        [(_, Store::Save(record))] => *record,
+    let record = match (rig.stores.as_slice(), rig.saved.as_slice()) {
+        ([(_, Store::Save)], [record]) => *record,
         other => panic!("one save expected: {other:?}"),
     };
     let saved = Settings::decode(&record).expect("the saved record loads");

@@ -112,7 +112,7 @@ impl NodeHarness {
                     self.node.tcp_closed(socket);
                 }
                 Some(Action::Store(store)) => {
-                    if let protocol::plc::Store::Save(_) = store {
+                    if let protocol::plc::Store::Save = store {
                         let saves = self.stores.len() as u32 + 1;
                         self.node.stored(Ok(saves));
                     }

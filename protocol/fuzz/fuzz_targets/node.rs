@@ -196,7 +196,7 @@ fn drain(node: &mut Node, now: u64, owed: &mut AxisSet, asked: &mut bool, tcp: &
                 assert!(crc::is_valid(reply), "reply CRC");
                 *asked = false;
             }
-            Action::Store(Store::Save(_)) => node.stored(Ok(1)),
+            Action::Store(Store::Save) => node.stored(Ok(1)),
             // The board restarts.
             Action::Store(Store::FactoryReset | Store::Restart) => return false,
             Action::Line(_) | Action::PlcLine(_) => {}

@@ -149,6 +149,12 @@ impl Gateway {
         self.persist.request.take()
     }
 
+    /// The settings record a SAVE stores ([`Store::Save`]): the settings in force with the
+    /// pending ones (those APPLY or the next start takes).
+    pub fn settings_record(&self) -> [u8; super::settings::RECORD_LEN] {
+        self.persist.record(&self.config)
+    }
+
     /// The firmware's answer to a save: the new save count, or a failure (SAVESTAT).
     pub fn stored(&mut self, result: Result<u32, ()>) {
         self.persist.saved(result);

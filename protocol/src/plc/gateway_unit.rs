@@ -233,7 +233,7 @@ impl Gateway {
                 self.engine
                     .reconfigure(pending.bus.axes, pending.bus.baud, pending.bus.rtim);
             }
-            GatewayWrite::Save => self.persist.save(&self.config),
+            GatewayWrite::Save => self.persist.save(),
             GatewayWrite::Restart => self.persist.request = Some(Store::Restart),
             GatewayWrite::FactoryReset => self.persist.request = Some(Store::FactoryReset),
             GatewayWrite::PioAxis(axis) => self.config.pio_axis = axis,

@@ -319,6 +319,8 @@ pub struct Rig {
     pub plc_lines: Vec<(u64, protocol::plc::PlcLine)>,
     /// Flash requests (each save succeeds), with their time.
     pub stores: Vec<(u64, protocol::plc::Store)>,
+    /// The records saved, as the firmware would write them, in order.
+    pub saved: Vec<[u8; protocol::plc::settings::RECORD_LEN]>,
     replies: Vec<Vec<u8>>,
     /// Modbus TCP replies, with their socket, in order.
     pub tcp_replies: Vec<(usize, Vec<u8>)>,
@@ -336,6 +338,7 @@ impl Rig {
             lines: Vec::new(),
             plc_lines: Vec::new(),
             stores: Vec::new(),
+            saved: Vec::new(),
             replies: Vec::new(),
             tcp_replies: Vec::new(),
             tcp_closes: Vec::new(),
@@ -384,7 +387,8 @@ impl Rig {
                 Some(Action::Reply(bytes)) => self.replies.push(bytes.to_vec()),
                 Some(Action::PlcLine(line)) => self.plc_lines.push((self.now, line)),
                 Some(Action::Store(store)) => {
-                    if let protocol::plc::Store::Save(_) = store {
+                    if let protocol::plc::Store::Save = store {
+                        self.saved.push(self.node.settings_record());
                         let saves = self.stores.len() as u32 + 1;
                         self.node.stored(Ok(saves));
                     }

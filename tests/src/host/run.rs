@@ -152,7 +152,7 @@ impl Host {
                 Some(Action::Store(store)) => {
                     // A PC has no settings flash: a save is kept for the run (and counted), a
                     // restart or factory reset is only logged.
-                    if let protocol::plc::Store::Save(_) = store {
+                    if let protocol::plc::Store::Save = store {
                         self.saves += 1;
                         self.node.stored(Ok(self.saves));
                     }

@@ -645,11 +645,7 @@ fn config(gw: &mut Gw, json: bool, action: &ConfigCmd) -> Result<(), Fail> {
                 if let [first, _] = phases.as_slice() {
                     outln!(
                         "in two steps: {} first, then APPLY, then the rest (the gateway refuses them in one)",
-                        first
-                            .iter()
-                            .map(|c| format!("{} {}", settings::section_name(c.section), c.key))
-                            .collect::<Vec<_>>()
-                            .join(", ")
+                        keys(first)
                     );
                 }
                 if changes.iter().any(|c| c.on_restart()) {
@@ -1030,11 +1026,7 @@ fn restore(gw: &mut Gw, json: bool, file: &str, dry_run: bool, save: bool) -> Re
         if let [first, _] = phases.as_slice() {
             outln!(
                 "  in two steps: {} first, then APPLY, then the rest",
-                first
-                    .iter()
-                    .map(|c| format!("{} {}", settings::section_name(c.section), c.key))
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                keys(first)
             );
         }
         if changes.iter().any(|c| c.on_restart()) {
@@ -1288,4 +1280,13 @@ fn ack(gw: &mut Gw, json: bool) -> Result<(), Fail> {
         outln!("FAILSAFE acknowledged (was {before:#04x}, now {after:#04x})");
     }
     Ok(())
+}
+
+/// The settings of a write's first phase, as the file names them: `[gateway] unit_id, ...`.
+fn keys(changes: &[settings::Change]) -> String {
+    changes
+        .iter()
+        .map(|c| format!("{} {}", settings::section_name(c.section), c.key))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
