@@ -24,8 +24,11 @@
 //!   a corrupted response ends the attempt at once (the line is free), without waiting for Trt;
 //!   up to [`Config::retries`] resends; `m` is never resent (its outcome is reported unknown and
 //!   the position re-read), `t` is not resent, and a W4 is resent only after its T4;
-//! - order: a stop (`d`) before everything (never behind another axis' retry), then a pending
-//!   retry, then job frames, then polling (`schedule`);
+//! - order: every axis' first stop (`d`) before everything (before any resend, the
+//!   establishment's next step, a rejoin or a poll; axes that answer first), then resends of
+//!   stops, then a pending retry, then job frames, then polling (`schedule`);
+//! - a stop is never given up: one that gets no answer leaves the axis owed it, and the next
+//!   frame the axis answers is that stop ([`Engine::stop_owed`]);
 //! - a job never runs late: one for an axis that is offline fails at once, and an axis that
 //!   goes offline takes its running and waiting jobs with it ([`JobError::Offline`]);
 //! - at start, the communication establishment procedure (§6-1, `establish`) if configured,
@@ -115,6 +118,10 @@ struct InFlight {
     /// When the command was handed over to go on the wire.
     sent: Instant,
     attempt: u8,
+    /// The frame is the stop the axis is owed, sent in place of `origin`'s (see
+    /// [`Engine::stop_owed`]): its answer clears the debt and moves `origin` on by nothing, its
+    /// loss counts as `origin`'s.
+    stands_in: bool,
 }
 
 /// Why an attempt failed.
@@ -133,6 +140,8 @@ pub struct Engine {
     axes: AxisMap<AxisState>,
     active: AxisMap<Option<Active>>,
     stops: AxisMap<Option<(JobId, u8)>>,
+    /// Axes owed a stop: theirs got no answer ([`Engine::stop_owed`]).
+    owed: AxisSet,
     queue: Deque<(JobId, Job), QUEUE_LEN>,
     events: Deque<Event, EVENT_LEN>,
     in_flight: Option<InFlight>,
@@ -179,6 +188,7 @@ impl Engine {
             axes: AxisMap::new(AxisState::new(rtim)),
             active: AxisMap::new(None),
             stops: AxisMap::new(None),
+            owed: AxisSet::EMPTY,
             queue: Deque::new(),
             events: Deque::new(),
             in_flight: None,
@@ -223,6 +233,16 @@ impl Engine {
     /// Whether `axis` answers at the bus' settings.
     pub fn online(&self, axis: Axis) -> bool {
         self.axes[axis].link == Link::Online
+    }
+
+    /// Whether `axis` is owed a stop: one was due and got no answer after its resends (the
+    /// axis was offline, or the wire cut). The debt stands until the axis answers a `d`: every
+    /// frame the engine would send it meanwhile (a probe, a rejoin's try, an establishment
+    /// step, a poll) goes out as `d` instead, so the first frame it answers is its stop. A stop
+    /// is never given up; an axis taken off the bus is no longer owed one (it may be another
+    /// master's now).
+    pub fn stop_owed(&self, axis: Axis) -> bool {
+        self.owed.contains(axis)
     }
 
     /// Bus-level counters.
@@ -292,6 +312,7 @@ impl Engine {
     /// with them (a break first, so every axis takes them).
     pub fn reconfigure(&mut self, axes: AxisSet, baud: Baud, rtim: crate::Rtim) {
         self.config.axes = axes;
+        self.owed = AxisSet(self.owed.0 & axes.0);
         self.config.baud = baud;
         self.config.rtim = rtim;
         self.config.establish = true;
@@ -371,6 +392,11 @@ impl Engine {
             state.counters.rejections = state.counters.rejections.wrapping_add(1);
             state.last_error = Some(LinkError::Rejected(code));
         }
+        if flight.request.command == Command::CancelMotion {
+            // Any answer to a `d` pays an owed stop: the axis has heard it (its status says
+            // the rest, and a controller that refuses `d` must not lose its polls for ever).
+            self.owed = self.owed.without(axis);
+        }
         if flight.origin != Origin::Rejoin {
             // Online means answering at the bus rate; a rejoin talks at the power-up rate.
             self.set_link(now, axis, Link::Online);
@@ -393,6 +419,11 @@ impl Engine {
             if approach.needs_read() && self.hot(axis) {
                 self.schedule.position_due(axis);
             }
+        }
+        if flight.stands_in {
+            // Its origin's frame did not go: the job, establishment step or rejoin step sends
+            // it next (the stop's answer moved nothing on but the status).
+            return;
         }
         if flight.origin == Origin::Job && reply.rejection().is_none() {
             let at = self.axes[axis].position;
@@ -507,13 +538,8 @@ impl Engine {
         if now < self.free_at {
             return Output::Idle(Some(self.free_at));
         }
-        if self.phase.is_some() {
-            if let Some(output) = self.establish_step(now) {
-                return output;
-            }
-        }
-        // A stop goes before everything: before a frame parked for a baud change and before the
-        // broadcasts of a rejoin.
+        // A stop goes before everything: before the establishment's next step, a frame parked
+        // for a baud change and the broadcasts of a rejoin.
         let next = match self.next_stop() {
             Some(stop) => {
                 if let Some((request, origin, attempt)) = self.pending.take() {
@@ -527,6 +553,11 @@ impl Engine {
                 stop
             }
             None => {
+                if self.phase.is_some() {
+                    if let Some(output) = self.establish_step(now) {
+                        return output;
+                    }
+                }
                 if let Some(output) = self.rejoin_line_action(now) {
                     return output;
                 }
@@ -540,10 +571,12 @@ impl Engine {
             }
         };
         // Each transaction at its rate: a rejoining axis at the power-up rate, the rest at ours.
-        let baud = if next.1 == Origin::Rejoin {
-            crate::line::BAUD_AFTER_BREAK
-        } else {
-            self.config.baud
+        // During §6-1 a stop goes at the rate the procedure has the line at: the axes listen
+        // there until its broadcast.
+        let baud = match next.1 {
+            Origin::Rejoin => crate::line::BAUD_AFTER_BREAK,
+            _ if self.phase.is_some() => self.line_baud,
+            _ => self.config.baud,
         };
         if self.line_baud != baud {
             self.line_baud = baud;

@@ -69,6 +69,8 @@ pub struct BusCounters {
     pub queue_full: u32,
     /// Times the establishment procedure ran.
     pub establishments: u32,
+    /// Stops that got no answer, so their axis is owed one ([`Engine::stop_owed`](super::Engine::stop_owed)).
+    pub stops_owed: u32,
 }
 
 impl BusCounters {
@@ -77,5 +79,6 @@ impl BusCounters {
         events_lost: 0,
         queue_full: 0,
         establishments: 0,
+        stops_owed: 0,
     };
 }

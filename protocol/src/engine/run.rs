@@ -90,17 +90,26 @@ impl Engine {
         }
     }
 
-    /// The next stop (`d`) waiting to go, if any.
+    /// The next stop (`d`) waiting to go, if any: every axis' first before any resend, and of
+    /// the first ones those of the axes that answer before the others (a dead axis' costs a
+    /// time-out), each group in axis order.
     pub(super) fn next_stop(&mut self) -> Option<Next> {
-        Axis::all().find_map(|axis| {
-            self.stops[axis].take().map(|(id, attempt)| {
-                (
-                    Request::new(axis, Command::CancelMotion),
-                    Origin::Stop(id),
-                    attempt,
-                )
-            })
-        })
+        let rank = |engine: &Engine, axis: Axis| match engine.stops[axis] {
+            Some((_, 0)) if engine.online(axis) => Some(0),
+            Some((_, 0)) => Some(1),
+            Some(_) => Some(2),
+            None => None,
+        };
+        let axis = Axis::all()
+            .filter_map(|axis| rank(self, axis).map(|r| (r, axis)))
+            .min_by_key(|&(r, axis)| (r, axis.get()))
+            .map(|(_, axis)| axis)?;
+        let (id, attempt) = self.stops[axis].take()?;
+        Some((
+            Request::new(axis, Command::CancelMotion),
+            Origin::Stop(id),
+            attempt,
+        ))
     }
 
     /// Start the waiting jobs whose axis is free; a job for an axis that does not answer fails

@@ -73,6 +73,14 @@ impl Engine {
         origin: Origin,
         attempt: u8,
     ) -> Output {
+        // An axis owed a stop hears nothing else first.
+        let stands_in =
+            self.owed.contains(request.axis) && request.command != Command::CancelMotion;
+        let request = if stands_in {
+            Request::new(request.axis, Command::CancelMotion)
+        } else {
+            request
+        };
         let baud = self.line_baud;
         let state = &mut self.axes[request.axis];
         state.counters.frames_sent = state.counters.frames_sent.wrapping_add(1);
@@ -105,6 +113,7 @@ impl Engine {
             earliest_reply,
             sent: now,
             attempt,
+            stands_in,
         });
         Output::Transmit(frame)
     }
@@ -121,7 +130,10 @@ impl Engine {
             }
             Failure::Corrupted => self.free_at = now + timing::HOST_GAP,
         }
+        // (A stand-in for an owed stop is not resent: the owed axis is offline, and its next
+        // probe is the next try.)
         let may_retry = flight.attempt < self.config.retries
+            && !flight.stands_in
             && flight.request.command.resendable()
             && !matches!(
                 flight.origin,
@@ -158,6 +170,9 @@ impl Engine {
             Origin::Stop(id) => {
                 self.job_failed(id, axis, JobError::Timeout);
                 self.set_link(now, axis, Link::Offline);
+                // Not given up: owed until the axis answers one.
+                self.owed = self.owed.with(axis);
+                self.bus.stops_owed = self.bus.stops_owed.wrapping_add(1);
             }
             Origin::Establish => {
                 self.set_link(now, axis, Link::Offline);

@@ -6,7 +6,7 @@
 //! on the axis (its travel, its units, whether it is at rest or online) before anything
 //! happens: an invalid write never reaches the bus.
 
-use super::command::Motion;
+use super::command::{Motion, Reason};
 use super::gateway::Gateway;
 use super::map::*;
 use super::refused::Refused;
@@ -48,7 +48,7 @@ impl Gateway {
             }
             CMST => Ok(plc.state as u16),
             CMER => Ok(plc.reason),
-            LINK => Ok(link_code(state.link)),
+            LINK => Ok(link_code(state.link, self.engine.stop_owed(axis))),
             CMCT => Ok(plc.taken),
             DRG1 => Ok(plc.drg1.bits()),
             POSR => Ok(u16::from(plc.posr.get())),
@@ -91,27 +91,30 @@ impl Gateway {
         false
     }
 
-    /// A write to DRG1: levels (SON, STP, EMG) and rising edges (ALRS, HOME, CSTR).
+    /// A write to DRG1: levels (SON, STP, EMG) and rising edges (ALRS, HOME, CSTR). A stop in
+    /// it (STP or EMG coming on, SON going off) is taken first ([`stop_first`](Self::stop_first));
+    /// without one, every command the write causes must be possible, or the write has no effect
+    /// (refused) and the PLC can repeat it.
     fn write_drg1(&mut self, axis: Axis, value: Drg1) -> Result<(), Refused> {
         let old = self.axes[axis];
         let rising = |bit: u16| value.has(bit) && !old.drg1.has(bit);
         let son_changed = value.son() != old.son();
-        // Every command this write causes must be possible, or the write has no effect
-        // (refused) and the PLC can repeat it; a stop needs no room and is always taken.
-        let needed = usize::from(son_changed)
-            + usize::from(rising(DRG1_ALRS))
-            + usize::from(rising(DRG1_HOME))
-            + usize::from(rising(DRG1_CSTR));
-        if needed > 0 && !self.engine.online(axis) {
-            return Err(Refused::Offline);
-        }
-        if needed > 0 && self.engine.room(axis) < needed {
-            return Err(Refused::Busy);
+        let stops = stop_edge(old.drg1, value);
+        if stops {
+            self.stop_first(axis);
+        } else {
+            let needed = usize::from(son_changed)
+                + usize::from(rising(DRG1_ALRS))
+                + usize::from(rising(DRG1_HOME))
+                + usize::from(rising(DRG1_CSTR));
+            if needed > 0 && !self.engine.online(axis) {
+                return Err(Refused::Offline);
+            }
+            if needed > 0 && self.engine.room(axis) < needed {
+                return Err(Refused::Busy);
+            }
         }
         self.axes[axis].drg1 = value;
-        if value.paused() && !old.paused() {
-            self.command_written(axis, JobKind::Stop)?;
-        }
         if son_changed {
             self.command_written(axis, JobKind::Servo(value.son()))?;
         }
@@ -126,6 +129,36 @@ impl Gateway {
             self.command_written(axis, JobKind::MoveToPoint(old.posr, None))?;
         }
         Ok(())
+    }
+
+    /// The stop a write carries, before anything else in it: it needs no queue room and is
+    /// taken whether the axis answers or not (an axis that does not is owed it until it does:
+    /// [`Engine::stop_owed`](crate::engine::Engine::stop_owed)). It also empties the axis'
+    /// queue, so the rest of the write finds room.
+    fn stop_first(&mut self, axis: Axis) {
+        // `command` never refuses a stop for an axis on the bus.
+        let _ = self.command(axis, JobKind::Stop);
+    }
+
+    /// Whether `write` stops the axis now: STP or EMG coming on, SON going off, or the STOP
+    /// coil.
+    fn write_stops(&self, axis: Axis, write: &AxisWrite<'_>) -> bool {
+        let old = self.axes[axis].drg1;
+        match *write {
+            AxisWrite::Drg1(value) => stop_edge(old, value),
+            AxisWrite::Coils(address, values) => {
+                values
+                    .iter()
+                    .enumerate()
+                    .any(|(i, on)| match nth(address, i) {
+                        Some(COIL_STOP) => on,
+                        Some(COIL_STP) => on && !old.has(DRG1_STP),
+                        Some(COIL_SON) => !on && old.son(),
+                        _ => false,
+                    })
+            }
+            _ => false,
+        }
     }
 
     pub(super) fn home_direction(&self, axis: Axis) -> HomeDirection {
@@ -177,8 +210,28 @@ impl Gateway {
         })
     }
 
-    /// A parsed write to an axis unit (FC05/06/0F/10), carried out.
+    /// A parsed write to an axis unit (FC05/06/0F/10), carried out. A write that stops the axis
+    /// is never refused for what follows its stop: an axis that does not answer, a full queue
+    /// or a busy axis fails that part in CMST (CMER 11 or 9) and the write stands, so the PLC
+    /// sees its stop taken (a value the map cannot take is still 02/03, before anything).
     pub(super) fn axis_write(&mut self, axis: Axis, write: &AxisWrite<'_>) -> Result<(), Refused> {
+        let stops = self.write_stops(axis, write);
+        let result = self.axis_write_parts(axis, write);
+        match result {
+            Err(refused @ (Refused::Offline | Refused::QueueFull | Refused::Busy)) if stops => {
+                let reason = if refused == Refused::Offline {
+                    Reason::Offline
+                } else {
+                    Reason::QueueFull
+                };
+                self.axes[axis].fail(reason.code(0));
+                Ok(())
+            }
+            other => other,
+        }
+    }
+
+    fn axis_write_parts(&mut self, axis: Axis, write: &AxisWrite<'_>) -> Result<(), Refused> {
         match *write {
             AxisWrite::Drg1(value) => self.write_drg1(axis, value),
             AxisWrite::Position(point) => {
@@ -241,7 +294,7 @@ impl Gateway {
                 let plc = self.axes[axis];
                 let (bit, level) = match (a, stops) {
                     (COIL_STOP, true) if on => {
-                        self.command_written(axis, JobKind::Stop)?;
+                        self.stop_first(axis);
                         continue;
                     }
                     (COIL_STP, true) => (DRG1_STP, on),
@@ -283,9 +336,17 @@ impl Gateway {
     }
 }
 
-/// LINK: 0 unknown, 1 online, 2 offline.
-pub(super) fn link_code(link: Link) -> u16 {
+/// Whether a DRG1 write from `old` to `new` stops the axis: STP or EMG coming on, or SON
+/// going off.
+fn stop_edge(old: Drg1, new: Drg1) -> bool {
+    (new.paused() && !old.paused()) || (old.son() && !new.son())
+}
+
+/// LINK: 0 unknown, 1 online, 2 offline, 3 a stop owed (it got no answer: the axis is offline,
+/// and the first frame it answers will be its stop).
+pub(super) fn link_code(link: Link, stop_owed: bool) -> u16 {
     match link {
+        _ if stop_owed => 3,
         Link::Unknown => 0,
         Link::Online => 1,
         Link::Offline => 2,

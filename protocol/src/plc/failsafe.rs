@@ -6,13 +6,22 @@
 //! - the **stop input** (a 24 V safety input, active when OFF): its activation trips at once,
 //!   and no motion may start while it stays active.
 //!
-//! The latch is acknowledged as a safety relay's manual reset is (IEC 60204-1 practice): only
-//! once its cause is gone, and until then no motion starts. A PLC acknowledges by writing 0 to
-//! FAILSAFE, a machine wired by 24 V only by a RES pulse on the discrete inputs; either is
-//! refused while the stop input is still active, and a RES pulse while the PLC watchdog's
-//! silence lasts (a Modbus write ends that cause by being a request). A latched watchdog cause
-//! holds motion only when the watchdog's action stops the axes: with "latch only" the PLC
-//! chose to keep them running.
+//! The latch is acknowledged as a manual reset is: once its cause is gone, and until then no
+//! motion starts. A PLC acknowledges by writing 0 to FAILSAFE, a machine wired by 24 V only by a
+//! RES pulse on the discrete inputs; either is refused while the stop input is still active.
+//! A latched watchdog cause holds motion only when the watchdog's action stops the axes: with
+//! "latch only" the PLC chose to keep them running.
+//!
+//! **No latch a wire-only machine cannot clear.** The watchdog is armed by the first request of
+//! any master, a commissioning PC's included; when that PC is unplugged at hand-over, the
+//! watchdog trips and its silence never ends on a machine driven by wires alone. So a RES
+//! pulse acknowledges a watchdog latch while the silence lasts, and **disarms** the watchdog
+//! until a master speaks again (its next request arms it, as at start). Nothing driven over
+//! Modbus can start meanwhile: that needs a master's write, which re-arms it. (A Modbus write
+//! of 0 to FAILSAFE ends the silence by being a request.)
+//!
+//! These are functional stops of the gateway's own, not a safety function: see README's
+//! Fail-safe section.
 //!
 //! This type only decides; the gateway carries out the stops (before anything else on the bus).
 
@@ -109,17 +118,24 @@ impl FailSafe {
         self.count = self.count.wrapping_add(1);
     }
 
-    /// Whether the latch may be acknowledged now: no cause present. `by_request`: by a Modbus
-    /// write, which ends the watchdog's cause by being a request; else by the discrete inputs.
-    pub(super) fn may_acknowledge(&self, by_request: bool) -> bool {
-        !self.stop_input && (by_request || !self.tripped)
+    /// Whether the latch may be acknowledged now: the stop input is not active (the watchdog's
+    /// silence does not refuse it: see the module documentation).
+    pub(super) fn may_acknowledge(&self) -> bool {
+        !self.stop_input
     }
 
-    /// Acknowledge the latch ([`may_acknowledge`](Self::may_acknowledge)); nothing changes if
-    /// a cause is still present.
+    /// Acknowledge the latch ([`may_acknowledge`](Self::may_acknowledge)); nothing changes while
+    /// the stop input is active. `by_request`: by a Modbus write (a request: the watchdog is
+    /// armed by it); else by a RES pulse, which disarms a watchdog that tripped until a master
+    /// speaks again.
     pub(super) fn acknowledge(&mut self, by_request: bool) {
-        if self.may_acknowledge(by_request) {
-            self.latched = 0;
+        if !self.may_acknowledge() {
+            return;
+        }
+        self.latched = 0;
+        if !by_request && self.tripped {
+            self.tripped = false;
+            self.last_plc = None;
         }
     }
 
@@ -184,17 +200,28 @@ mod tests {
     }
 
     #[test]
-    fn the_watchdog_cause_ends_with_a_request_not_with_a_res_pulse() {
+    fn a_res_pulse_acknowledges_a_silent_watchdog_and_disarms_it_until_a_master_speaks() {
+        // The commissioning PC armed it and was unplugged: a wire-only machine's way out.
         let mut f = tripped();
+        assert!(f.engaged());
         f.acknowledge(false);
-        assert_eq!(f.latched(), CAUSE_WATCHDOG, "the PLC is still silent");
-        f.acknowledge(true);
-        assert_eq!(f.latched(), 0, "a Modbus write is a request");
-        // Once the PLC has talked again, a RES pulse acknowledges too.
+        assert_eq!(f.latched(), 0, "acknowledged while the silence lasts");
+        assert!(!f.engaged());
+        assert_eq!(f.deadline(LIMIT), None, "disarmed");
+        let late = Instant(3_600_000_000);
+        assert_eq!(f.check(late, LIMIT, WatchdogAction::StopAll), None);
+        // The next master's request arms it again, as at start.
+        f.activity(late);
+        assert_eq!(
+            f.check(Instant(late.0 + 2_000_000), LIMIT, WatchdogAction::StopAll),
+            Some(Trip::StopAll)
+        );
+        // A Modbus write acknowledges and is itself a request (armed).
         let mut f = tripped();
         f.activity(Instant(2_100_000));
-        f.acknowledge(false);
+        f.acknowledge(true);
         assert_eq!(f.latched(), 0);
+        assert!(f.deadline(LIMIT).is_some());
     }
 
     #[test]

@@ -50,6 +50,8 @@ pub struct Gateway {
     pub(super) now: Instant,
     /// The engine's lost-event count when the gateway last looked.
     events_lost: u32,
+    /// Axes that refused a broadcast write (BUS).
+    pub(super) broadcast_refusals: u32,
     /// The bus master (last: see [`Gateway::new`]).
     pub(super) engine: Engine,
 }
@@ -73,6 +75,7 @@ impl Gateway {
             plc_line_changed: false,
             now: Instant::ZERO,
             events_lost: 0,
+            broadcast_refusals: 0,
             engine: Engine::new(config.bus),
         }
     }
@@ -115,8 +118,9 @@ impl Gateway {
         self.failsafe.activity(quiet_from);
     }
 
-    /// The stop input (a safety input, wired like PIO *STP): `active` when it is OFF. Its
-    /// activation stops every axis (fail-safe) and no motion starts while it stays active.
+    /// The stop input (wired like PIO *STP; a functional stop, not a safety function): `active`
+    /// when it is OFF. Its activation stops every axis (fail-safe) and no motion starts while it
+    /// stays active.
     pub fn set_stop_input(&mut self, now: Instant, active: bool) {
         self.now = now;
         if self.failsafe.set_stop_input(active) {
@@ -270,8 +274,10 @@ impl Gateway {
         self.failsafe.holds_motion(self.config.watchdog_action)
     }
 
-    /// A RES pulse on the discrete inputs while the PIO axis shows no alarm: the fail-safe's
-    /// acknowledgement by wire, refused (nothing changes) while a cause is present.
+    /// A RES pulse on the discrete inputs (PIOAXIS set, its axis online and showing no alarm):
+    /// the fail-safe's acknowledgement by wire, refused (nothing changes) while the stop input
+    /// is active; it acknowledges a watchdog latch during the master's silence too, and
+    /// disarms the watchdog until a master speaks again ([`failsafe`](super::failsafe)).
     pub fn acknowledge_by_wire(&mut self) {
         self.failsafe.acknowledge(false);
     }

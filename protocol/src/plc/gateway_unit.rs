@@ -108,7 +108,14 @@ impl Gateway {
                 }
                 if let Some(offset) = a.checked_sub(G_BUS).filter(|&o| o < G_BUS_LEN) {
                     let c = self.engine.bus_counters();
-                    let values = [c.unsolicited, c.events_lost, c.queue_full, c.establishments];
+                    let values = [
+                        c.unsolicited,
+                        c.events_lost,
+                        c.queue_full,
+                        c.establishments,
+                        c.stops_owed,
+                        self.broadcast_refusals,
+                    ];
                     return Ok(counter_register(&values, offset));
                 }
                 return Err(Refused::NoSuchAddress);
@@ -129,7 +136,7 @@ impl Gateway {
             c.rejections,
         ];
         match offset {
-            DIAG_LINK => link_code(state.link),
+            DIAG_LINK => link_code(state.link, self.engine.stop_owed(axis)),
             DIAG_LAST_ERROR => match state.last_error {
                 None => 0,
                 Some(LinkError::Timeout) => 0x0100,
@@ -176,7 +183,7 @@ impl Gateway {
         let admitted = match write {
             GatewayWrite::Apply => self.bus_idle(),
             // As a safety relay's reset: only once the cause is gone (`failsafe`).
-            GatewayWrite::AckFailsafe => self.failsafe.may_acknowledge(true),
+            GatewayWrite::AckFailsafe => self.failsafe.may_acknowledge(),
             GatewayWrite::UnitId(unit) => {
                 let axes = AxisSet(self.config.bus.axes.0 | self.persist.axes.0);
                 axis_of(unit, self.persist.axis_base, axes).is_none()

@@ -213,10 +213,10 @@ pub const G_RESPONSE_LEN: u16 = 5;
 pub const G_DIAG: u16 = 0x0400;
 /// Registers per axis in the diagnostics block.
 pub const G_DIAG_LEN: u16 = 16;
-/// Bus counters (4 x u32).
+/// Bus counters (6 x u32).
 pub const G_BUS: u16 = 0x0500;
 /// Registers of the bus counters.
-pub const G_BUS_LEN: u16 = 8;
+pub const G_BUS_LEN: u16 = 12;
 /// PLC-link (Modbus) counters (7 x u32).
 pub const G_PLC: u16 = 0x0510;
 /// Registers of the PLC-link counters.
@@ -332,8 +332,8 @@ pub const MAP: &[Entry] = &[
       "Last command: 0 idle, 1 taken, 2 done, 3 failed", Gateway),
     e(Unit::Axis, Status, CMER, 1, "CMER", "code", "", false,
       "Why the last command failed: high byte reason, low byte RC warning/alarm code", Gateway),
-    e(Unit::Axis, Status, LINK, 1, "LINK", "", "0-2", false,
-      "Link to the axis: 0 unknown, 1 online, 2 offline", Gateway),
+    e(Unit::Axis, Status, LINK, 1, "LINK", "", "0-3", false,
+      "Link to the axis: 0 unknown, 1 online, 2 offline, 3 offline and owed a stop (its stop got no answer: the first frame it answers will be the stop)", Gateway),
     e(Unit::Axis, Status, CMCT, 1, "CMCT", "count", "", false,
       "Commands taken so far (wrapping)", Gateway),
     e(Unit::Axis, Holding, DRG1, 1, "DRG1", "bits", "", true,
@@ -383,7 +383,7 @@ pub const MAP: &[Entry] = &[
     e(Unit::Gateway, Holding, G_REQUEST, G_REQUEST_LEN, "REQ", "0.01 mm, 0.01 mm/s, 0.01 G", "PCMD 0..stroke", true, "Command channel request: code (1 read field, 2 write field, 3 read as the controller stores it), axis, point, field (offset from 0x400), value high, value low; a value out of range is refused (exception 03)", Gateway),
     e(Unit::Gateway, Status, G_RESPONSE, G_RESPONSE_LEN, "RESP", "", "", false, "Command channel response: code (|0x8000 on error), error (as CMER), value high, value low (as the controller now holds it), V5 write count (0xFFFF: value already stored, nothing written)", Gateway),
     e(Unit::Gateway, Status, G_DIAG, G_DIAG_LEN * AXES, "DIAG", "count", "", false, "Per axis n at 0x0400+16n: frames sent, replies, time-outs, BCC errors, bad replies, retries, rejections (u32 each), link, last error", Gateway),
-    e(Unit::Gateway, Status, G_BUS, G_BUS_LEN, "BUS", "count", "", false, "Unsolicited frames, events lost, queue full, establishments (u32 each)", Gateway),
+    e(Unit::Gateway, Status, G_BUS, G_BUS_LEN, "BUS", "count", "", false, "Unsolicited frames, events lost, queue full, establishments, stops owed (a stop got no answer), broadcast refusals (u32 each)", Gateway),
     e(Unit::Gateway, Status, G_PLC, G_PLC_LEN, "PLCLINK", "count", "", false, "Modbus frames, CRC errors, exceptions, replies, other units, broadcasts, malformed (u32 each; RTU and TCP together)", Gateway),
     #[cfg(feature = "tcp")]
     e(Unit::Gateway, Holding, G_NET, 2, "IPADDR", "IPv4", "a.b, c.d", true, "Ethernet board: its address, high byte first (default 192.168.1.100); taken at the next start (SAVE, RESTART)", Gateway),

@@ -11,7 +11,6 @@ use super::map::{DRG1, POSR};
 use super::refused::Refused;
 use super::table;
 use super::write::{nth, AxisWrite};
-use crate::engine::JobKind;
 use crate::modbus::{
     BitTable, Bits, BitsMut, DataModel, Exception, Identity, RegisterTable, SlaveCounters,
     BROADCAST,
@@ -117,24 +116,20 @@ fn exception(refused: Refused) -> Exception {
     }
 }
 
-/// A broadcast write (unit 0), parsed once and checked before any effect: every axis on the
-/// bus that answers takes it (POSR, which only stores, every axis); one that does not only
-/// gets the stop, if the write stops (a stop can only help).
+/// A broadcast write (unit 0), parsed once and checked before any effect, then given to every
+/// axis on the bus as if written to it alone: a stop in it is taken by each (owed by one that
+/// does not answer), and the rest is judged per axis. It never ends early: an axis that
+/// refuses (one that does not answer a command, a full queue) is counted (BUS, broadcast
+/// refusals) and the next axis still gets the write. (A broadcast gets no reply.)
 fn broadcast(
     gateway: &mut Gateway,
     write: Result<AxisWrite<'_>, Refused>,
 ) -> Result<(), Exception> {
     let write = write.map_err(exception)?;
-    let to_all = matches!(write, AxisWrite::Position(_));
     for axis in gateway.config.bus.axes.iter() {
-        if to_all || gateway.engine.online(axis) {
-            gateway.axis_write(axis, &write)
-        } else if write.stops() {
-            gateway.command(axis, JobKind::Stop)
-        } else {
-            Ok(())
+        if gateway.axis_write(axis, &write).is_err() {
+            gateway.broadcast_refusals = gateway.broadcast_refusals.wrapping_add(1);
         }
-        .map_err(exception)?;
     }
     Ok(())
 }

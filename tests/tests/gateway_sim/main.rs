@@ -11,6 +11,7 @@ mod direct_move;
 mod gateway_settings;
 mod held_son;
 mod position_table;
+mod stops;
 mod sync_start;
 
 use protocol::line::Baud;

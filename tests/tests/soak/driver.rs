@@ -371,7 +371,10 @@ impl Soak {
             self.resolve(End::Corrupted);
         }
         let a = request.axis;
-        self.attribute(now, request);
+        // A `d` to an axis owed a stop (its own got no answer) stands in for whatever the
+        // engine would have sent it: no job's frame.
+        let owed = self.h.engine.stop_owed(a);
+        self.attribute(now, request, owed);
 
         let stats0 = self.h.bus.stats().clone();
         let sched0 = self

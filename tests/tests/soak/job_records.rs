@@ -256,8 +256,9 @@ impl Soak {
             })
     }
 
-    /// Which job sent this frame; counts `m` transmissions.
-    pub(crate) fn attribute(&mut self, now: u64, request: Request) {
+    /// Which job sent this frame; counts `m` transmissions. `owed`: the axis is owed a stop, so
+    /// a `d` to it that no stop job sent stands in for another frame (`Engine::stop_owed`).
+    pub(crate) fn attribute(&mut self, now: u64, request: Request, owed: bool) {
         let i = usize::from(request.axis.get());
         match request.command {
             Command::Status => return,
@@ -269,6 +270,7 @@ impl Soak {
                 }
                 return;
             }
+            Command::CancelMotion if owed => return,
             _ => {}
         }
         if let Command::MoveRelative(d) = request.command {

@@ -182,7 +182,8 @@ impl Bus {
                 continue;
             };
             let axis = controller.axis();
-            if source == Source::Axis(axis) || talking.contains(&axis) {
+            let cut = self.cut.get(slot).copied().unwrap_or(false);
+            if cut || source == Source::Axis(axis) || talking.contains(&axis) {
                 continue;
             }
             if controller.receive(t, value, baud).is_none() {

@@ -135,6 +135,9 @@ pub struct Bus {
     host_busy_until: u64,
     controllers: Vec<Option<Controller>>,
     silent: [bool; 16],
+    /// Axes whose wire is cut: they hear nothing and answer nothing (and go on doing what they
+    /// were doing).
+    cut: [bool; 16],
     transmissions: Vec<Transmission>,
     next_id: u64,
     /// (time, axis, power on?)
@@ -154,6 +157,7 @@ impl Bus {
             host_busy_until: 0,
             controllers: (0..16).map(|_| None).collect(),
             silent: [false; 16],
+            cut: [false; 16],
             transmissions: Vec::new(),
             next_id: 0,
             power_events: Vec::new(),
@@ -239,6 +243,14 @@ impl Bus {
     pub fn set_silent(&mut self, axis: Axis, silent: bool) {
         if let Some(slot) = self.silent.get_mut(usize::from(axis.get())) {
             *slot = silent;
+        }
+    }
+
+    /// Cut the wire to `axis` (it hears nothing and answers nothing, and an axis in motion
+    /// keeps moving), or mend it.
+    pub fn set_cut(&mut self, axis: Axis, cut: bool) {
+        if let Some(slot) = self.cut.get_mut(usize::from(axis.get())) {
+            *slot = cut;
         }
     }
 

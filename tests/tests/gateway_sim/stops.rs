@@ -1,0 +1,224 @@
+//! A stop is never refused, lost or late (issue 33): taken first and unconditionally in every
+//! face, and owed to an axis that did not answer it until the axis answers again.
+
+use protocol::engine::WAITING_PER_AXIS;
+use protocol::modbus::Exception;
+use protocol::pio::PioInputs;
+use protocol::plc::map::*;
+use protocol::time::Instant;
+use protocol::Command;
+use rc_host::node_harness::NodeHarness;
+
+use crate::{axis, coil, gateway, home, read, unit, write, MS, S};
+
+/// A move that runs for most of a minute (90 mm at 2 mm/s): what a held jog is to the bus.
+const SLOW_MOVE: [u16; 7] = [0, 90_00, 0, 10, 0, 2_00, 30];
+
+/// Axes 0..n homed, with the PLC watchdog off (so that only the stop under test stops).
+fn homed(n: u8) -> NodeHarness {
+    let mut h = gateway(n);
+    write(&mut h, 63, G_WATCHDOG, &[0]).unwrap();
+    for a in 0..n {
+        home(&mut h, a);
+    }
+    h
+}
+
+fn moving(h: &NodeHarness, a: u8) -> bool {
+    h.bus.controller(axis(a)).unwrap().moving()
+}
+
+/// `d`s sent to axis `a` at or after `since`.
+fn stops_sent(h: &NodeHarness, a: u8, since: u64) -> usize {
+    h.sent
+        .iter()
+        .filter(|(t, r)| *t >= since && r.axis == axis(a) && r.command == Command::CancelMotion)
+        .count()
+}
+
+/// Fill axis `a`'s queue with CSTR edges (one move running, the rest waiting) until it has no
+/// room.
+fn fill_queue(h: &mut NodeHarness, a: u8) {
+    for _ in 0..=WAITING_PER_AXIS {
+        write(h, unit(a), DRG1, &[DRG1_SON | DRG1_CSTR]).unwrap();
+        write(h, unit(a), DRG1, &[DRG1_SON]).unwrap();
+    }
+    assert_eq!(h.node.gateway().engine().room(axis(a)), 0, "queue full");
+}
+
+/// Issue 33's first reproduction: with the queue full, the usual e-stop word (STP with SON
+/// dropping) answered 04 and sent nothing. Now the stop goes first, the servo-off after it.
+#[test]
+fn a_stop_with_son_dropping_is_taken_when_the_queue_is_full() {
+    let mut h = homed(1);
+    fill_queue(&mut h, 0);
+    let at = h.now;
+    assert_eq!(write(&mut h, unit(0), DRG1, &[DRG1_STP]), Ok(()));
+    assert_eq!(read(&mut h, unit(0), DRG1, 1).unwrap(), [DRG1_STP]);
+    h.run_for(200 * MS);
+    assert!(stops_sent(&h, 0, at) >= 1, "the stop went out");
+    let servo_off = h
+        .sent
+        .iter()
+        .any(|(t, r)| *t >= at && r.axis == axis(0) && r.command == Command::Servo(false));
+    assert!(servo_off, "SON off was taken after the stop");
+    assert!(!h.node.gateway().engine().busy(axis(0)), "queue emptied");
+    assert!(!moving(&h, 0));
+}
+
+/// Issue 33's second reproduction: a broadcast STP ended at the first axis that refused it,
+/// leaving the next one's move queued. Now every axis takes it.
+#[test]
+fn a_broadcast_stop_reaches_every_axis_even_when_one_refuses_the_rest() {
+    let mut h = homed(2);
+    fill_queue(&mut h, 0);
+    write(&mut h, unit(1), DIRECT, &SLOW_MOVE).unwrap();
+    write(&mut h, unit(1), DRG1, &[DRG1_SON | DRG1_CSTR]).unwrap();
+    h.run_for(100 * MS);
+    assert!(moving(&h, 1));
+    let at = h.now;
+    write(&mut h, 0, DRG1, &[DRG1_STP]).unwrap();
+    h.run_for(300 * MS);
+    for a in 0..2 {
+        assert_eq!(
+            read(&mut h, unit(a), DRG1, 1).unwrap(),
+            [DRG1_STP],
+            "axis {a}"
+        );
+        assert!(stops_sent(&h, a, at) >= 1, "axis {a} got its stop");
+        assert!(
+            !h.node.gateway().engine().busy(axis(a)),
+            "axis {a}: nothing queued"
+        );
+        assert!(!moving(&h, a), "axis {a} at rest");
+    }
+}
+
+/// A write with a stop to an axis that does not answer is not refused: the stop is owed.
+#[test]
+fn a_stop_to_an_offline_axis_is_taken_and_owed() {
+    let mut h = homed(2);
+    h.bus.set_cut(axis(1), true);
+    h.run_for(2 * S);
+    assert_eq!(read(&mut h, unit(1), LINK, 1).unwrap(), [2], "offline");
+    // SON dropping with STP: before, 04 (Offline) and no stop at all.
+    assert_eq!(write(&mut h, unit(1), DRG1, &[DRG1_STP]), Ok(()));
+    h.run_for(S);
+    assert_eq!(read(&mut h, unit(1), LINK, 1).unwrap(), [3], "owed a stop");
+    // A command without a stop is still refused while it does not answer.
+    assert_eq!(
+        write(&mut h, unit(1), DRG1, &[DRG1_SON | DRG1_HOME]),
+        Err(Exception::ServerDeviceFailure)
+    );
+}
+
+/// The owed stop: a move running (a held jog, as the bus sees it), the wire cut, the stop
+/// applied by `stop` and unanswered; the wire mended with the controller still moving. The
+/// first frame the axis gets after that is `d`, it ends at rest, and LINK reads 3 meanwhile.
+fn owed_stop_is_the_first_frame_after_the_wire_is_mended(
+    pio: bool,
+    stop: impl FnOnce(&mut NodeHarness),
+) {
+    let mut h = homed(2);
+    if pio {
+        write(&mut h, 63, G_PIO_AXIS, &[0]).unwrap();
+        h.inputs = Some(PioInputs::from_bits(
+            PioInputs::STP_N.bits() | PioInputs::SON.bits(),
+        ));
+        h.run_for(200 * MS);
+    }
+    write(&mut h, unit(0), DIRECT, &SLOW_MOVE).unwrap();
+    h.run_for(500 * MS);
+    assert!(moving(&h, 0), "the move runs");
+    h.bus.set_cut(axis(0), true);
+    stop(&mut h);
+    h.run_for(2 * S);
+    assert_eq!(read(&mut h, unit(0), LINK, 1).unwrap(), [3], "owed a stop");
+    assert!(moving(&h, 0), "nothing reached it");
+    let mended = h.now;
+    h.bus.set_cut(axis(0), false);
+    h.run_for(5 * S);
+    let first = h
+        .sent
+        .iter()
+        .find(|(t, r)| *t >= mended && r.axis == axis(0))
+        .map(|(_, r)| r.command);
+    assert_eq!(
+        first,
+        Some(Command::CancelMotion),
+        "the first frame is the stop"
+    );
+    assert!(!moving(&h, 0), "at rest");
+    assert_eq!(
+        read(&mut h, unit(0), LINK, 1).unwrap(),
+        [1],
+        "online, nothing owed"
+    );
+}
+
+#[test]
+fn an_unanswered_drg1_stop_is_owed_until_the_axis_answers() {
+    owed_stop_is_the_first_frame_after_the_wire_is_mended(false, |h| {
+        write(h, unit(0), DRG1, &[DRG1_SON | DRG1_STP]).unwrap();
+    });
+}
+
+#[test]
+fn an_unanswered_stop_coil_is_owed_until_the_axis_answers() {
+    owed_stop_is_the_first_frame_after_the_wire_is_mended(false, |h| {
+        coil(h, unit(0), COIL_STOP, true).unwrap();
+    });
+}
+
+#[test]
+fn an_unanswered_broadcast_stop_is_owed_until_the_axis_answers() {
+    owed_stop_is_the_first_frame_after_the_wire_is_mended(false, |h| {
+        write(h, 0, DRG1, &[DRG1_SON | DRG1_STP]).unwrap();
+    });
+}
+
+#[test]
+fn an_unanswered_stop_input_stop_is_owed_until_the_axis_answers() {
+    owed_stop_is_the_first_frame_after_the_wire_is_mended(false, |h| {
+        h.node.set_stop_input(Instant(h.now), true);
+    });
+}
+
+#[test]
+fn an_unanswered_pio_stp_stop_is_owed_until_the_axis_answers() {
+    owed_stop_is_the_first_frame_after_the_wire_is_mended(true, |h| {
+        h.inputs = Some(PioInputs::from_bits(PioInputs::SON.bits()));
+    });
+}
+
+/// The stop input opens: every axis' first stop goes before any other frame, the resends of
+/// the ones that got no answer included (an offline axis' resend used to go before the next
+/// axis' first stop).
+#[test]
+fn every_first_stop_goes_before_any_resend_or_poll() {
+    let mut h = homed(4);
+    h.bus.set_cut(axis(0), true);
+    h.bus.set_cut(axis(2), true);
+    h.run_for(2 * S);
+    let at = h.now;
+    h.node.set_stop_input(Instant(h.now), true);
+    h.run_for(S);
+    let after: Vec<_> = h
+        .sent
+        .iter()
+        .filter(|(t, _)| *t >= at)
+        .map(|(_, r)| *r)
+        .collect();
+    let firsts: Vec<u8> = after.iter().take(4).map(|r| r.axis.get()).collect();
+    assert!(
+        after
+            .iter()
+            .take(4)
+            .all(|r| r.command == Command::CancelMotion),
+        "four stops first: {after:?}"
+    );
+    let mut sorted = firsts.clone();
+    sorted.sort_unstable();
+    assert_eq!(sorted, [0, 1, 2, 3], "one to each axis: {firsts:?}");
+    assert_eq!(&firsts[..2], &[1, 3], "the axes known to answer first");
+}
