@@ -13,8 +13,12 @@
 //!
 //! Checks, besides "nothing panics":
 //! - every frame for the bus is a valid frame (BCC) of a command to an axis on the bus;
-//! - once the stop input goes active, nothing that moves an axis goes out until every axis on
-//!   the bus has had its stop (`d`);
+//! - once the stop input goes active, every axis on the bus gets its first stop (`d`) before
+//!   any other frame: nothing but `d`s go out until each has had one, and none of them a second
+//!   (a resend) before the others' first, unless something may have stopped it again since
+//!   (bytes from the PLC or a TCP client, PIO inputs, an armed watchdog);
+//! - nothing, not even a stop, goes to an axis after it leaves the bus (a PLC may take one off;
+//!   it may be another gateway's now);
 //! - and every one of them does get it: after the input's end, time passes with a silent bus
 //!   until no stop is owed (to an axis still on the bus), at most a minute;
 //! - a reply for the PLC only follows bytes from the PLC (none unasked), and is a whole Modbus
@@ -67,8 +71,10 @@ fuzz_target!(|data: &[u8]| {
     let mut tcp = Tcp::default();
     let mut now = 0u64;
     let mut stop_active = false;
-    // The axes still owed their stop since the stop input went active.
+    // The axes still owed their first stop since the stop input went active.
     let mut owed = AxisSet::EMPTY;
+    // The PLC or a TCP client sent bytes since the stop input went active.
+    let mut talked = false;
     // PLC bytes received since the last reply.
     let mut asked = false;
 
@@ -80,18 +86,26 @@ fuzz_target!(|data: &[u8]| {
             1 => {
                 let bytes = take(&mut rest, n);
                 asked |= !bytes.is_empty();
+                talked |= !bytes.is_empty();
                 node.plc_received(Instant(now), bytes);
             }
             2 => {
                 let b = take(&mut rest, 2);
                 let bits = u16::from(b.first().copied().unwrap_or(0))
                     | u16::from(b.get(1).copied().unwrap_or(0)) << 8;
+                // The PIO's inputs stop its axis too (*STP, a jog released).
+                talked |= node.gateway().config().pio_axis.is_some();
                 node.sample_inputs(Instant(now), PioInputs::from_bits(bits));
             }
             3 => {
                 let active = op & 0x08 != 0;
                 if active && !stop_active {
                     owed = node.gateway().config().bus.axes;
+                    // A request still being received, or an armed watchdog (it may trip and
+                    // stop every axis again), may bring new stops too.
+                    talked = asked
+                        || tcp.asked.iter().any(|&a| a)
+                        || node.gateway().watchdog_deadline().is_some();
                 }
                 stop_active = active;
                 node.set_stop_input(Instant(now), active);
@@ -113,6 +127,7 @@ fuzz_target!(|data: &[u8]| {
                 let socket = n % SOCKETS;
                 let len = usize::from(take(&mut rest, 1).first().copied().unwrap_or(0));
                 let bytes = take(&mut rest, len);
+                talked |= !bytes.is_empty();
                 let taken = node.tcp_received(Instant(now), socket, bytes);
                 assert!(taken <= bytes.len());
                 if tcp.open[socket] && taken > 0 {
@@ -125,7 +140,7 @@ fuzz_target!(|data: &[u8]| {
                 tcp.open[socket] = false;
             }
         }
-        if !drain(&mut node, now, &mut owed, &mut asked, &mut tcp) {
+        if !drain(&mut node, now, &mut owed, talked, &mut asked, &mut tcp) {
             return;
         }
     }
@@ -143,7 +158,7 @@ fuzz_target!(|data: &[u8]| {
             "stops still owed to {still:?} a minute after the input ended"
         );
         now = node.poll_at().map_or(end, |at| at.0.clamp(now + 1, end));
-        if !drain(&mut node, now, &mut owed, &mut asked, &mut tcp) {
+        if !drain(&mut node, now, &mut owed, talked, &mut asked, &mut tcp) {
             return;
         }
     }
@@ -158,7 +173,14 @@ struct Tcp {
 
 /// Poll the node at `now` until it has nothing to do, checking each action; `false` when the
 /// board restarts.
-fn drain(node: &mut Node, now: u64, owed: &mut AxisSet, asked: &mut bool, tcp: &mut Tcp) -> bool {
+fn drain(
+    node: &mut Node,
+    now: u64,
+    owed: &mut AxisSet,
+    talked: bool,
+    asked: &mut bool,
+    tcp: &mut Tcp,
+) -> bool {
     for _ in 0..256 {
         let bus_axes = node.gateway().config().bus.axes;
         let Some(action) = node.poll(Instant(now)) else {
@@ -174,20 +196,20 @@ fn drain(node: &mut Node, now: u64, owed: &mut AxisSet, asked: &mut bool, tcp: &
                     request.axis,
                     bus_axes
                 );
+                *owed = AxisSet(owed.0 & bus_axes.0);
                 if *owed != AxisSet::EMPTY {
-                    // Nothing that moves an axis until every axis has had its stop. (Not
-                    // "nothing but stops": a stop that got no answer is resent before the
-                    // next axis' first one, and an establishment or a rejoin that is under
-                    // way sends its frames first; this target found both.)
-                    assert!(
-                        !request.command.moves(),
-                        "{:?} before the stops still owed to {:?}",
-                        request,
-                        owed
+                    // Every first stop before any other frame, and before any resend.
+                    assert_eq!(
+                        request.command,
+                        Command::CancelMotion,
+                        "{request:?} before the first stops still owed to {owed:?}"
                     );
-                    if request.command == Command::CancelMotion {
-                        *owed = owed.without(request.axis);
-                    }
+                    assert!(
+                        owed.contains(request.axis) || talked,
+                        "a second stop to {:?} before the first stops still owed to {owed:?}",
+                        request.axis
+                    );
+                    *owed = owed.without(request.axis);
                 }
             }
             Action::Reply(reply) => {
