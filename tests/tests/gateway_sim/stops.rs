@@ -36,10 +36,11 @@ fn stops_sent(h: &NodeHarness, a: u8, since: u64) -> usize {
         .count()
 }
 
-/// Fill axis `a`'s queue with CSTR edges (one move running, the rest waiting) until it has no
-/// room.
+/// Fill axis `a`'s queue: a slow move running, CSTR edges waiting behind it until it has no
+/// room (and keeps none: the move runs for most of a minute).
 fn fill_queue(h: &mut NodeHarness, a: u8) {
-    for _ in 0..=WAITING_PER_AXIS {
+    write(h, unit(a), DIRECT, &SLOW_MOVE).unwrap();
+    for _ in 0..WAITING_PER_AXIS {
         write(h, unit(a), DRG1, &[DRG1_SON | DRG1_CSTR]).unwrap();
         write(h, unit(a), DRG1, &[DRG1_SON]).unwrap();
     }
@@ -221,4 +222,194 @@ fn every_first_stop_goes_before_any_resend_or_poll() {
     sorted.sort_unstable();
     assert_eq!(sorted, [0, 1, 2, 3], "one to each axis: {firsts:?}");
     assert_eq!(&firsts[..2], &[1, 3], "the axes known to answer first");
+}
+
+mod property {
+    //! From any reachable state, a write that contains a stop leaves its axis stopped or owing
+    //! a stop, is never refused, and the axis ends at rest once it can hear.
+
+    use proptest::prelude::*;
+
+    use super::*;
+
+    /// What a PLC (and a cabinet) did before the stop.
+    #[derive(Clone, Debug)]
+    enum Op {
+        Drg1(u8, u16),
+        Direct(u8, u16, u16),
+        Posr(u8, u16),
+        Coil(u8, u16, bool),
+        Cut(u8, bool),
+        Wait(u16),
+    }
+
+    /// The write that carries the stop.
+    #[derive(Clone, Copy, Debug)]
+    enum StopWrite {
+        Stp,
+        Emg,
+        SonOff,
+        StopCoil,
+        StpCoil,
+        SonCoilOff,
+        Broadcast,
+    }
+
+    fn op() -> impl Strategy<Value = Op> {
+        let axis = 0u8..2;
+        prop_oneof![
+            (axis.clone(), 0u16..=u16::MAX).prop_map(|(a, v)| Op::Drg1(a, v & DRG1_SUPPORTED)),
+            (axis.clone(), 0u16..100, 1u16..200).prop_map(|(a, mm, v)| Op::Direct(a, mm, v)),
+            (axis.clone(), 0u16..5).prop_map(|(a, p)| Op::Posr(a, p)),
+            (
+                axis.clone(),
+                prop::sample::select(vec![COIL_SON, COIL_ALRS, COIL_STP, COIL_HOME, COIL_STOP]),
+                any::<bool>()
+            )
+                .prop_map(|(a, c, on)| Op::Coil(a, c, on)),
+            (axis, any::<bool>()).prop_map(|(a, cut)| Op::Cut(a, cut)),
+            (0u16..3000).prop_map(Op::Wait),
+        ]
+    }
+
+    fn stop_write() -> impl Strategy<Value = StopWrite> {
+        prop::sample::select(vec![
+            StopWrite::Stp,
+            StopWrite::Emg,
+            StopWrite::SonOff,
+            StopWrite::StopCoil,
+            StopWrite::StpCoil,
+            StopWrite::SonCoilOff,
+            StopWrite::Broadcast,
+        ])
+    }
+
+    fn apply(h: &mut NodeHarness, cut: &mut [bool; 2], op: &Op) {
+        // Refusals are part of the state reached: ignored.
+        let _ = match *op {
+            Op::Drg1(a, v) => write(h, unit(a), DRG1, &[v]),
+            Op::Direct(a, mm, v) => {
+                write(h, unit(a), DIRECT, &[0, mm * 100, 0, 10, 0, v * 100, 30])
+            }
+            Op::Posr(a, p) => write(h, unit(a), POSR, &[p]),
+            Op::Coil(a, c, on) => coil(h, unit(a), c, on),
+            Op::Cut(a, c) => {
+                cut[usize::from(a)] = c;
+                h.bus.set_cut(axis(a), c);
+                Ok(())
+            }
+            Op::Wait(ms) => {
+                h.run_for(u64::from(ms) * MS);
+                Ok(())
+            }
+        };
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+        #[test]
+        fn a_write_with_a_stop_leaves_its_axis_stopped_or_owing_one(
+            ops in prop::collection::vec(op(), 0..10),
+            stop in stop_write(),
+            a in 0u8..2,
+        ) {
+            let mut h = homed(2);
+            let mut cut = [false; 2];
+            for op in &ops {
+                apply(&mut h, &mut cut, op);
+            }
+            // Make the stop an edge from where DRG1 is now (the unpausing write may be refused:
+            // then the stop write below carries no edge, and the case says nothing).
+            let now = read(&mut h, unit(a), DRG1, 1).unwrap()[0];
+            let plain = now & !(DRG1_STP | DRG1_EMG | DRG1_CSTR | DRG1_HOME | DRG1_ALRS);
+            match stop {
+                StopWrite::Stp | StopWrite::Emg | StopWrite::StpCoil | StopWrite::Broadcast => {
+                    let _ = write(&mut h, unit(a), DRG1, &[plain]);
+                }
+                StopWrite::SonOff | StopWrite::SonCoilOff => {
+                    let _ = write(&mut h, unit(a), DRG1, &[plain | DRG1_SON]);
+                }
+                StopWrite::StopCoil => {}
+            }
+            let drg1 = read(&mut h, unit(a), DRG1, 1).unwrap()[0];
+            let edge = match stop {
+                StopWrite::Stp | StopWrite::Emg | StopWrite::StpCoil | StopWrite::Broadcast => {
+                    drg1 & (DRG1_STP | DRG1_EMG) == 0
+                }
+                StopWrite::SonOff | StopWrite::SonCoilOff => drg1 & DRG1_SON != 0,
+                StopWrite::StopCoil => true,
+            };
+            prop_assume!(edge);
+            let at = h.now;
+            let answer = match stop {
+                StopWrite::Stp => write(&mut h, unit(a), DRG1, &[drg1 | DRG1_STP | DRG1_CSTR]),
+                StopWrite::Emg => write(&mut h, unit(a), DRG1, &[(drg1 | DRG1_EMG | DRG1_HOME) & !DRG1_SON]),
+                StopWrite::SonOff => write(&mut h, unit(a), DRG1, &[(drg1 & !DRG1_SON) | DRG1_ALRS]),
+                StopWrite::StopCoil => coil(&mut h, unit(a), COIL_STOP, true),
+                StopWrite::StpCoil => coil(&mut h, unit(a), COIL_STP, true),
+                StopWrite::SonCoilOff => coil(&mut h, unit(a), COIL_SON, false),
+                StopWrite::Broadcast => write(&mut h, 0, DRG1, &[DRG1_STP]),
+            };
+            prop_assert_eq!(answer, Ok(()), "a write with a stop is never refused");
+            h.run_for(3 * S);
+            prop_assert!(stops_sent(&h, a, at) >= 1, "its stop went out");
+            if cut[usize::from(a)] {
+                prop_assert!(h.node.gateway().engine().stop_owed(axis(a)), "owed while cut");
+                prop_assert_eq!(read(&mut h, unit(a), LINK, 1).unwrap(), vec![3]);
+            } else {
+                prop_assert!(!moving(&h, a), "stopped");
+            }
+            // Once it can hear, it ends at rest.
+            h.bus.set_cut(axis(a), false);
+            h.run_for(5 * S);
+            prop_assert!(!moving(&h, a), "at rest once it hears");
+            prop_assert!(!h.node.gateway().engine().stop_owed(axis(a)));
+        }
+    }
+}
+
+/// The hand-over (issue 33, item 4): a commissioning PC's requests armed the PLC watchdog and
+/// the PC is unplugged; the watchdog trips on a machine driven by its wires alone. One RES pulse
+/// acknowledges it (before, RES was refused for as long as the silence lasted: for ever), the
+/// watchdog stays disarmed while no master speaks, and the wires drive the axis again.
+#[test]
+fn one_res_pulse_clears_the_watchdog_latch_a_commissioning_pc_left_behind() {
+    let pins = |bits: &[PioInputs]| PioInputs::from_bits(bits.iter().fold(0, |b, p| b | p.bits()));
+    let mut h = gateway(1);
+    // Commissioning over Modbus: the wire-driven axis named, the watchdog at its default.
+    write(&mut h, 63, G_PIO_AXIS, &[0]).unwrap();
+    h.inputs = Some(pins(&[PioInputs::STP_N, PioInputs::SON]));
+    h.run_for(300 * MS);
+    assert_eq!(read(&mut h, 63, G_WATCHDOG, 1).unwrap(), [1000]);
+    // The PC is unplugged: silence.
+    h.run_for(3 * S);
+    assert_eq!(h.node.gateway().failsafe() & 1, 1, "the watchdog tripped");
+    let before = h.sent.len();
+    h.inputs = Some(pins(&[PioInputs::STP_N, PioInputs::SON, PioInputs::HOME]));
+    h.run_for(100 * MS);
+    let homing = |h: &NodeHarness, from: usize| {
+        h.sent[from..]
+            .iter()
+            .any(|(_, r)| matches!(r.command, Command::Home(_)))
+    };
+    assert!(!homing(&h, before), "held by the latch");
+    // One RES pulse, the master still silent.
+    h.inputs = Some(pins(&[PioInputs::STP_N, PioInputs::SON, PioInputs::RES]));
+    h.run_for(50 * MS);
+    h.inputs = Some(pins(&[PioInputs::STP_N, PioInputs::SON]));
+    h.run_for(50 * MS);
+    assert_eq!(h.node.gateway().failsafe(), 0, "acknowledged by the pulse");
+    assert_eq!(h.node.gateway().watchdog_deadline(), None, "disarmed");
+    // The wires drive it, and nothing trips while no master speaks.
+    let before = h.sent.len();
+    h.inputs = Some(pins(&[PioInputs::STP_N, PioInputs::SON, PioInputs::HOME]));
+    h.run_for(5 * S);
+    assert!(homing(&h, before), "HOME by wire runs");
+    assert_eq!(h.node.gateway().failsafe(), 0, "no new trip while silent");
+    // A master that comes back arms it again.
+    read(&mut h, 63, G_FAILSAFE, 1).unwrap();
+    assert!(
+        h.node.gateway().watchdog_deadline().is_some(),
+        "armed again"
+    );
 }

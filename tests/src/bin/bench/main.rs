@@ -24,6 +24,9 @@
 //! 4. **Position age** of a moving axis (time since its last R4 PNOW reply, sampled every 1 ms
 //!    while it moves) while 16 axes are polled at 115.2 kbit/s, vs the status cycle.
 //!
+//! 5-6. Four moving axes (`movers`). 7. **Stop latency** through the whole gateway, per face
+//!    (`stops`): source -> the axis' `d` on the wire, against issue 33's bound.
+//!
 //! ```text
 //! cargo run --release -p rc-host --bin bench            # table
 //! cargo run --release -p rc-host --bin bench -- --json  # one JSON object
@@ -36,6 +39,7 @@ mod measure;
 mod movers;
 mod report;
 mod scenarios;
+mod stops;
 mod table;
 
 use std::process::ExitCode;

@@ -8,6 +8,7 @@ use serde_json::{json, Value};
 use crate::measure::{config, round3, transaction, trt, Row};
 use crate::movers::{movers, Ends, Moves, FASTER, MOVERS, SLOWER, TRAVEL_PERCENT};
 use crate::scenarios::{dead_axis, position_age, request_latency, status_cycle};
+use crate::stops::{stop_latency, Face};
 use crate::{Args, AXES, DEAD, MOVER, MS, S, WINDOW};
 
 pub(crate) struct Report {
@@ -24,6 +25,11 @@ const CYCLE_TARGET: f64 = 1.02;
 const MOVE_COMPLETE_TARGET: f64 = 3.0;
 const IDLE_AGE_TARGET: f64 = 2.0;
 const DEAD_AXIS_TARGET: f64 = 1.5;
+/// Issue 33's stop latency target: each stop within its bound (its face's delay, the transaction
+/// on the wire, one transaction per stop ahead of it).
+const STOP_TARGET: f64 = 1.0;
+/// Stops per face in scenario 7.
+const STOP_ROUNDS: u32 = 100;
 /// The MCU's CPU load target, percent.
 const CPU_LOAD_TARGET: f64 = 5.0;
 
@@ -349,6 +355,62 @@ pub(crate) fn run(args: &Args) -> Result<Report, String> {
         paced.push((name, result));
     }
 
+    // 7.
+    let mut stops = Vec::new();
+    for face in Face::ALL {
+        let r = stop_latency(face, args.seed, STOP_ROUNDS)?;
+        for (suffix, label, value) in [
+            ("p50", "p50", r.latency.p50),
+            ("p99", "p99", r.latency.p99),
+            ("max", "max", r.latency.max),
+        ] {
+            rows.push(Row {
+                id: leak(format!("stop_{}_{suffix}", face.id())),
+                scenario: "7 stop -> wire",
+                what: format!("{}, 16 axes, 4 moving, {label}", face.id()),
+                measured_us: value as f64,
+                limit_us: t115 as f64,
+                limit_is: "T",
+                target: None,
+            });
+        }
+        rows.push(Row {
+            id: leak(format!("stop_{}_max_ratio", face.id())),
+            scenario: "7 stop -> wire",
+            what: format!(
+                "{}, worst sample over its bound (delay + (1 + stops ahead) x T)",
+                face.id()
+            ),
+            measured_us: r.ratio_milli.max as f64,
+            limit_us: 1000.0,
+            limit_is: "bound",
+            target: Some(STOP_TARGET),
+        });
+        notes.push(format!(
+            "7. {}: {} stops over {STOP_ROUNDS} rounds, latency mean {:.0} us, p50 {} us, p99 {} us, max {} us; at most {} stops went out ahead of one; worst sample {:.3} of its bound",
+            face.id(),
+            r.latency.n,
+            r.latency.mean,
+            r.latency.p50,
+            r.latency.p99,
+            r.latency.max,
+            r.max_ahead,
+            r.ratio_milli.max as f64 / 1000.0,
+        ));
+        stops.push(r);
+    }
+    let stop_json: Vec<Value> = stops
+        .iter()
+        .map(|r| {
+            json!({
+                "face": r.face.id(),
+                "latency": r.latency.json(),
+                "ratio_to_bound_milli": r.ratio_milli.json(),
+                "max_stops_ahead": r.max_ahead,
+            })
+        })
+        .collect();
+
     let cycle_ratio = alive.mean / cycle_limit;
     let mut figures = vec![
         ("cycle_ratio", cycle_ratio, CYCLE_TARGET),
@@ -381,6 +443,14 @@ pub(crate) fn run(args: &Args) -> Result<Report, String> {
         "point_idle_status_age_p99_measured_ratio",
         worst(|r| r.idle_age.p99 as f64 / (f64::from(AXES) * r.transaction)),
         IDLE_AGE_TARGET,
+    ));
+    figures.push((
+        "stop_latency_max_ratio_to_bound",
+        stops
+            .iter()
+            .map(|r| r.ratio_milli.max as f64 / 1000.0)
+            .fold(0.0, f64::max),
+        STOP_TARGET,
     ));
     let mut bench = serde_json::Map::new();
     let mut targets = serde_json::Map::new();
@@ -478,6 +548,7 @@ pub(crate) fn run(args: &Args) -> Result<Report, String> {
                     "live_max_gap_us": with_dead.live_max,
                 },
             },
+            "stop_latency": stop_json,
             "position_age": {
                 "axis": MOVER,
                 "moves": age.moves,
@@ -493,4 +564,9 @@ pub(crate) fn run(args: &Args) -> Result<Report, String> {
         json,
         bench,
     })
+}
+
+/// A row id made at run time (the table's ids are `&'static str`; a bench run makes a few).
+fn leak(id: String) -> &'static str {
+    Box::leak(id.into_boxed_str())
 }
