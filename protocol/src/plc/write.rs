@@ -173,18 +173,6 @@ impl<'a> AxisWrite<'a> {
         })
     }
 
-    /// Whether it stops the axis: DRG1 with STP or EMG, or the STOP or STP coil ON.
-    pub fn stops(&self) -> bool {
-        match *self {
-            AxisWrite::Drg1(drg1) => drg1.paused(),
-            AxisWrite::Coils(address, values) => values
-                .iter()
-                .enumerate()
-                .any(|(i, on)| on && matches!(nth(address, i), Some(COIL_STOP | COIL_STP))),
-            _ => false,
-        }
-    }
-
     /// The write of coils from `address` (FC05/FC0F): 02 unless every one is an axis unit's.
     pub fn coils(address: u16, values: Bits<'a>) -> Result<AxisWrite<'a>, Refused> {
         coils_exist(address, values.len())?;
