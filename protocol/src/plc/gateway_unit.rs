@@ -292,7 +292,8 @@ impl Gateway {
         let start_sync = at(G_SYNC_START) == Some(1);
         if start_sync {
             let mask = at(G_SYNC_MASK).map_or(self.sync.mask(), AxisSet);
-            self.sync.check(mask, self.blocked(), &self.engine)?;
+            let blocked = self.blocked();
+            self.sync.check(mask, blocked, &mut self.engine)?;
         }
         let request = self.channel.after_write(address, values);
         let start = match request {
