@@ -151,7 +151,8 @@ pub enum JobError {
     Alarm(AlarmCode),
     /// A response did not confirm the step (wrong echoed address, wrong kind).
     Unexpected,
-    /// A stop cancelled it.
+    /// A stop cancelled it, or its axis left the bus
+    /// ([`Engine::reconfigure`](super::Engine::reconfigure)).
     Cancelled,
     /// The read-back differs from what was written.
     VerifyFailed,

@@ -185,6 +185,13 @@ impl Schedule {
         self.position_due = self.position_due.with(axis);
     }
 
+    /// The axis left the bus: no position read of it is due and no arrival of it expected
+    /// (probes and status polls go only to the axes on the bus).
+    pub(super) fn forget(&mut self, axis: Axis) {
+        self.position_due = self.position_due.without(axis);
+        self.approach[axis].clear();
+    }
+
     /// The axis stopped answering: probe it [`FIRST_PROBE`] from now.
     pub(super) fn went_offline(&mut self, now: Instant, axis: Axis) {
         self.probes[axis] = Probe {

@@ -1,6 +1,7 @@
 //! The bus-master engine against a scripted bus, in virtual time: the §5 and §6-1 rules that
 //! need no simulator. (End-to-end behaviour against the simulator lives in the host crate.)
 
+mod off_bus;
 mod regressions;
 mod rules;
 
