@@ -277,7 +277,7 @@ impl Gateway {
     /// A RES pulse on the discrete inputs (PIOAXIS set, its axis online and showing no alarm):
     /// the fail-safe's acknowledgement by wire, refused (nothing changes) while the stop input
     /// is active; it acknowledges a watchdog latch during the master's silence too, and
-    /// disarms the watchdog until a master speaks again ([`failsafe`](super::failsafe)).
+    /// disarms the watchdog until a master speaks again (`protocol/src/plc/failsafe.rs`).
     pub fn acknowledge_by_wire(&mut self) {
         self.failsafe.acknowledge(false);
     }
