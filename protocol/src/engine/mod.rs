@@ -430,6 +430,8 @@ impl Engine {
         changed
     }
 
+    // Not inlined into its callers: 132 bytes less on the F103 (scripts/size-report.sh).
+    #[inline(never)]
     fn complete(&mut self, now: Instant, flight: InFlight, reply: Reply) {
         let axis = flight.request.axis;
         let state = &mut self.axes[axis];
@@ -444,7 +446,7 @@ impl Engine {
             state.counters.rejections = state.counters.rejections.wrapping_add(1);
             state.last_error = Some(LinkError::Rejected(code));
         }
-        if flight.request.command == Command::CancelMotion {
+        if matches!(flight.request.command, Command::CancelMotion) {
             // Any answer to a `d` pays an owed stop: the axis has heard it (its status says
             // the rest, and a controller that refuses `d` must not lose its polls for ever).
             self.owed = self.owed.without(axis);
@@ -484,7 +486,7 @@ impl Engine {
             let (point_at, started) = match self.active[axis].as_ref().map(|a| a.job.kind) {
                 Some(JobKind::MoveToPoint(_, target)) => (target, AxisSet::EMPTY),
                 Some(JobKind::StartBuffered(axes))
-                    if flight.request.command == Command::ExecuteBuffered =>
+                    if matches!(flight.request.command, Command::ExecuteBuffered) =>
                 {
                     (None, axes.with(axis))
                 }

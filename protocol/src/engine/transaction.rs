@@ -75,7 +75,7 @@ impl Engine {
     ) -> Output {
         // An axis owed a stop hears nothing else first.
         let stands_in =
-            self.owed.contains(request.axis) && request.command != Command::CancelMotion;
+            self.owed.contains(request.axis) && !matches!(request.command, Command::CancelMotion);
         let request = if stands_in {
             Request::new(request.axis, Command::CancelMotion)
         } else {
