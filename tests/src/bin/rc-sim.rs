@@ -13,6 +13,14 @@
 //! ends (SIGINT/SIGTERM, `--duration`, or the TCP client leaving). Exit status 0 after a clean
 //! end, 1 on an I/O error, 2 on bad command-line input.
 //!
+//! `--control` takes faults on standard input while it runs, one a line, each answered `OK` or
+//! `ERR why`: `silent 2 on|off` (axis 2 executes commands but never answers), `cut 2 on|off`
+//! (the wire to axis 2 cut: it hears nothing and answers nothing, a move it makes goes on;
+//! what the master sends it meanwhile is lost), `alarm 2 E0`, `power 2 500`, `where 2` (see
+//! `rc_host::sim::realtime::Control`). The log (`--log`) notes each as it is applied, e.g.
+//! `-- control: Cut(Axis(2), false)`: the frames logged after that note are the ones the axis
+//! hears.
+//!
 //! See `rc_host::sim::realtime` for the clock mapping and the line-rate and break decisions,
 //! summarised in `--help`.
 
@@ -120,9 +128,11 @@ struct Cli {
     /// Noise bytes per burst, at most.
     #[arg(long, value_name = "N", default_value_t = 3)]
     noise_max: u8,
-    /// Read faults to inject from standard input, one per line: `silent AXIS on|off`,
-    /// `alarm AXIS CODE` (hex, 80-FF), `power AXIS MS`, `where AXIS` (the log notes the axis'
-    /// position); each is answered `OK` or `ERR why` on standard output.
+    /// Read faults to inject from standard input, one per line: `silent AXIS on|off` (it
+    /// executes commands but never answers), `cut AXIS on|off` (its wire cut: it hears nothing,
+    /// answers nothing, and a move in progress goes on), `alarm AXIS CODE` (hex, 80-FF),
+    /// `power AXIS MS`, `where AXIS` (the log notes the axis' position); each is answered `OK`
+    /// or `ERR why` on standard output.
     #[arg(long)]
     control: bool,
     /// Exit after this many seconds.

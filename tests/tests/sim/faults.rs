@@ -3,6 +3,7 @@
 use protocol::line::Baud;
 use protocol::memory::{self, common};
 use protocol::{Command, Pulses, Request, Transfer};
+use rc_host::sim::realtime::Control;
 use rc_host::sim::wire::{ms, transmit_time};
 use rc_host::sim::{BusConfig, ControllerConfig, Faults, ScriptedHost};
 
@@ -146,6 +147,44 @@ fn a_silent_axis_executes_but_never_answers() {
     assert!(host.status(axis(0)).is_some());
     host.bus_mut().set_silent(axis(1), false);
     assert!(host.status(axis(1)).is_some());
+}
+
+#[test]
+fn a_cut_axis_hears_nothing_answers_nothing_and_keeps_moving() {
+    // Through rc-sim's control (`cut AXIS on|off`), as the emulator tests cut a wire.
+    let mut host = fast_host(&[0, 1]);
+    home(&mut host, 1);
+    move_to(&mut host, 1, -3_000);
+    let profile = controller(&host, 1).profile().expect("moving").clone();
+    assert!(
+        profile.end() - host.now() > ms(100),
+        "a move long enough to cut"
+    );
+    Control::parse("cut 1 on")
+        .unwrap()
+        .apply(host.bus_mut())
+        .unwrap();
+    let before = controller(&host, 1).position();
+    assert!(host
+        .transact(&Request::new(axis(1), Command::CancelMotion))
+        .is_none());
+    host.wait(ms(20));
+    assert!(controller(&host, 1).moving(), "the stop was never heard");
+    assert_ne!(controller(&host, 1).position(), before, "still moving");
+    assert_eq!(
+        host.bus().stats().replies_silenced,
+        0,
+        "not heard, so not silenced"
+    );
+    assert!(host.status(axis(0)).is_some(), "the other wire is whole");
+    Control::parse("cut 1 off")
+        .unwrap()
+        .apply(host.bus_mut())
+        .unwrap();
+    accept(&mut host, 1, Command::CancelMotion);
+    host.wait(ms(200));
+    assert!(!controller(&host, 1).moving(), "stopped once heard");
+    assert!(host.now() < profile.end(), "by the stop, not by arriving");
 }
 
 #[test]

@@ -4,8 +4,13 @@
 //! `rc-sim --control` reads them as lines on standard input ([`Control::parse`]):
 //!
 //! ```text
-//! silent 2 on        axis 2 stops answering (it still executes commands), as with a cut wire
+//! silent 2 on        axis 2 stops answering (it still hears and executes commands)
 //! silent 2 off       it answers again
+//! cut 2 on           the wire to axis 2 is cut: it hears nothing and answers nothing, and a
+//!                    move it is making goes on (what a master cannot tell from `silent`, but
+//!                    what it sends meanwhile is lost: the first frame after the mend is the
+//!                    first the axis hears)
+//! cut 2 off          the wire is mended
 //! alarm 2 E0         axis 2 raises error E0 (80-FF only: 01-7F are warnings, not alarms)
 //! power 2 500        axis 2 loses power now, for 500 ms
 //! where 2            the log (`--log`) notes axis 2's position, target and motion: the truth a
@@ -22,6 +27,9 @@ use super::super::bus::Bus;
 pub enum Control {
     /// The axis stops answering (`true`) or answers again.
     Silent(Axis, bool),
+    /// The wire to the axis is cut (`true`: it hears nothing, answers nothing and goes on with
+    /// what it was doing) or mended.
+    Cut(Axis, bool),
     /// The axis raises an error-level alarm.
     Alarm(Axis, AlarmCode),
     /// The axis loses power now for this many milliseconds.
@@ -39,15 +47,14 @@ impl Control {
                 .and_then(Axis::new)
                 .ok_or_else(|| format!("{line:?}: the second word is an axis, 0-15"))
         };
+        let on_off = |word: &str| match words.get(2).copied() {
+            Some("on") if words.len() == 3 => Ok(true),
+            Some("off") if words.len() == 3 => Ok(false),
+            _ => Err(format!("{line:?}: {word} AXIS on|off")),
+        };
         match words.first().copied() {
-            Some("silent") => {
-                let silent = match words.get(2).copied() {
-                    Some("on") => true,
-                    Some("off") => false,
-                    _ => return Err(format!("{line:?}: silent AXIS on|off")),
-                };
-                Ok(Control::Silent(axis(words.get(1))?, silent))
-            }
+            Some("silent") => Ok(Control::Silent(axis(words.get(1))?, on_off("silent")?)),
+            Some("cut") => Ok(Control::Cut(axis(words.get(1))?, on_off("cut")?)),
             Some("alarm") => {
                 let code = words
                     .get(2)
@@ -69,8 +76,8 @@ impl Control {
             }
             Some("where") if words.len() == 2 => Ok(Control::Where(axis(words.get(1))?)),
             _ => Err(format!(
-                "{line:?}: expected `silent AXIS on|off`, `alarm AXIS CODE`, `power AXIS MS` or \
-                 `where AXIS`"
+                "{line:?}: expected `silent AXIS on|off`, `cut AXIS on|off`, `alarm AXIS CODE`, \
+                 `power AXIS MS` or `where AXIS`"
             )),
         }
     }
@@ -79,6 +86,7 @@ impl Control {
     pub fn axis(self) -> Axis {
         match self {
             Control::Silent(axis, _)
+            | Control::Cut(axis, _)
             | Control::Alarm(axis, _)
             | Control::PowerCycle(axis, _)
             | Control::Where(axis) => axis,
@@ -93,6 +101,7 @@ impl Control {
         }
         match self {
             Control::Silent(axis, silent) => bus.set_silent(axis, silent),
+            Control::Cut(axis, cut) => bus.set_cut(axis, cut),
             Control::Alarm(axis, code) => bus
                 .inject_alarm(axis, code)
                 .map_err(|code| format!("{code:?} refused"))?,
@@ -148,10 +157,18 @@ mod tests {
             Ok(Control::PowerCycle(a2, 500))
         );
         assert_eq!(Control::parse("where 2"), Ok(Control::Where(a2)));
+        assert_eq!(Control::parse("cut 2 on"), Ok(Control::Cut(a2, true)));
+        assert_eq!(Control::parse(" cut  2 off"), Ok(Control::Cut(a2, false)));
         for bad in [
             "",
             "silent 16 on",
             "silent 2",
+            "silent 2 on now",
+            "cut 2",
+            "cut 16 on",
+            "cut 2 yes",
+            "cut on",
+            "cut 2 off 3",
             "alarm 2 41",
             "alarm 2 zz",
             "power 2 0",
