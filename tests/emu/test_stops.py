@@ -12,11 +12,11 @@
   runs by its wires alone. (Before issue 33 the RES pulse was refused while the silence lasted:
   such a machine stayed latched until a power cycle.)
 
-Two expected failures (`xfail`, strict: they fail the run once fixed) record what the PIO's
-*STP does wrong with a cut wire: its stop, repeated every 100 ms while the axis last reported
-moving, supersedes the unanswered one before its resends run out, so the axis is never found
-offline nor owed (LINK 1, the LINK output ON) and, a fresh first stop always waiting, the other
-axes get no frame at all while *STP stays OFF.
+The PIO's *STP with a cut wire: its stop, repeated every 100 ms while the axis last reported
+moving, used to supersede the unanswered one before its resends ran out, so the axis was never
+found offline nor owed and, a fresh first stop always waiting, the other axes got no frame at all
+while *STP stayed OFF (found by these tests). A repeated stop now takes over the tries of the one
+it supersedes (`Engine::submit`): both cases below pass.
 
 The controllers' view is rc-sim's log: its `where` control notes the simulated axis' own
 position and motion, its control notes (`-- control: Cut(Axis(0), false)`) mark when the wire
@@ -197,24 +197,10 @@ FACES = {
 }
 
 
-# The PIO repeats its *STP stop every 100 ms while the axis last reported moving (pio::STOP_REPEAT),
-# and each repeat replaces the stop under way with a fresh one, its resends counted from 0 again:
-# a stop whose wire is cut never runs out of resends, so the axis is never found offline nor owed
-# the stop (LINK stays 1, the LINK output ON), though `d` keeps going out and is still the first
-# frame after the mend. Once the axis is offline (no status, no repeat) *STP's stop is owed as
-# every other face's.
-PIO_STP_REPEAT_BUG = pytest.mark.xfail(
-    strict=True,
-    reason="*STP's 100 ms repeat supersedes the unanswered stop: the cut axis never goes offline, "
-    "LINK stays 1 and no stop is owed",
-)
-
-
 def cases():
     for face in FACES:
         for when in ("at_once", "once_offline"):
-            marks = [PIO_STP_REPEAT_BUG] if (face, when) == ("pio_stp", "at_once") else []
-            yield pytest.param(face, when, id=f"{face}-{when}", marks=marks)
+            yield pytest.param(face, when, id=f"{face}-{when}")
 
 
 @pytest.mark.parametrize("face, when", cases())
@@ -269,11 +255,6 @@ def test_a_stop_the_cut_wire_swallows_is_owed_and_is_the_first_frame_after_the_m
 
 
 @pytest.mark.axes("0-1")
-@pytest.mark.xfail(
-    strict=True,
-    reason="*STP's 100 ms repeat keeps a fresh first stop to the cut PIO axis waiting, and first "
-    "stops go before everything: the other axes get no frame at all while *STP stays OFF",
-)
 def test_a_cut_pio_axis_held_by_stp_leaves_the_bus_to_the_other_axes(emu):
     """The same cut under *STP (the PIO axis' wire cut mid-move, *STP OFF and held OFF): the
     other axis must keep its share of the bus (polls, and a command over Modbus runs), as with

@@ -393,7 +393,13 @@ impl Engine {
         if job.kind == JobKind::Stop {
             self.next_id = self.next_id.wrapping_add(1);
             self.cancel_jobs(job.axis, JobError::Cancelled);
-            if let Some((old, _)) = self.stops[job.axis].replace((id, 0)) {
+            // A stop for an axis whose stop is still unanswered (the PIO repeats its stop while
+            // *STP is off) takes over the tries that one has used (here, or in `requeue_stop`
+            // when the one on the wire fails), so the axis still goes offline, owing it, after
+            // 1 + retries time-outs: a fresh round at every repeat kept a cut axis online for
+            // ever and its first stop ahead of every other frame on the bus.
+            let tries = self.stops[job.axis].map_or(0, |(_, tries)| tries);
+            if let Some((old, _)) = self.stops[job.axis].replace((id, tries)) {
                 // Two stops in a row: the first is superseded by the second.
                 self.job_failed(old, job.axis, JobError::Cancelled);
             }

@@ -82,11 +82,15 @@ impl Engine {
         }
     }
 
-    /// Put a stop back in its slot, unless a newer stop for the axis supersedes it.
+    /// Put a stop back in its slot, unless a newer stop for the axis supersedes it: the newer
+    /// one then takes over the tries this one used (see [`Engine::submit`]).
     pub(super) fn requeue_stop(&mut self, axis: Axis, id: JobId, attempt: u8) {
         match &mut self.stops[axis] {
             slot @ None => *slot = Some((id, attempt)),
-            Some(_) => self.job_failed(id, axis, JobError::Cancelled),
+            Some((_, tries)) => {
+                *tries = (*tries).max(attempt);
+                self.job_failed(id, axis, JobError::Cancelled);
+            }
         }
     }
 

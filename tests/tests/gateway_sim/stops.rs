@@ -413,3 +413,44 @@ fn one_res_pulse_clears_the_watchdog_latch_a_commissioning_pc_left_behind() {
         "armed again"
     );
 }
+
+/// The PIO repeats its *STP stop every 100 ms while its axis last reported moving. With the wire
+/// cut, each repeat used to start the unanswered stop's tries over: the axis never went offline
+/// nor owed its stop, and a fresh first stop always waiting kept every other axis off the bus
+/// (found by tests/emu/test_stops.py). A repeat now takes over the tries it supersedes.
+#[test]
+fn a_repeated_pio_stop_to_a_cut_axis_leaves_the_bus_to_the_others() {
+    let mut h = homed(2);
+    // Controllers that answer late (RTIM 150 ms): one try of a stop outlasts the PIO's repeat.
+    write(&mut h, 63, G_BUS_RTIM, &[150]).unwrap();
+    write(&mut h, 63, G_APPLY, &[1]).unwrap();
+    h.run_for(3 * S);
+    assert_eq!(h.node.gateway().engine().config().rtim.get(), 150);
+    write(&mut h, 63, G_PIO_AXIS, &[0]).unwrap();
+    h.inputs = Some(PioInputs::from_bits(
+        PioInputs::STP_N.bits() | PioInputs::SON.bits(),
+    ));
+    h.run_for(200 * MS);
+    write(&mut h, unit(0), DIRECT, &SLOW_MOVE).unwrap();
+    h.run_for(500 * MS);
+    assert!(moving(&h, 0));
+    h.bus.set_cut(axis(0), true);
+    h.inputs = Some(PioInputs::from_bits(PioInputs::SON.bits()));
+    h.run_for(2 * S);
+    assert_eq!(
+        read(&mut h, unit(0), LINK, 1).unwrap(),
+        [3],
+        "owed, not online"
+    );
+    let at = h.now;
+    h.run_for(S);
+    let polls = h
+        .sent
+        .iter()
+        .filter(|(t, r)| *t >= at && r.axis == axis(1))
+        .count();
+    assert!(
+        polls >= 3,
+        "axis 1 keeps its share of the bus: {polls} frames in 1 s"
+    );
+}
