@@ -208,6 +208,11 @@ extern "C" fn hard_fault(sp: u32) -> ! {
     halt()
 }
 
+/// NMI (exception 2) as cortex-m-rt numbers it for [`DefaultHandler`] (the exception's number
+/// less 16, so that interrupts count from 0).
+#[cfg(all(feature = "hw", feature = "board-l475"))]
+const NMI: i16 = 2 - 16;
+
 /// Every exception and interrupt without a handler of its own, which cortex-m-rt's vector table
 /// points here (its own default spins, the outputs as they were, until the watchdog fires): NMI
 /// (the clock security system on the F103 and F429, a flash ECC double error or an SRAM parity
@@ -216,8 +221,15 @@ extern "C" fn hard_fault(sp: u32) -> ! {
 /// escalate to HardFault). The same as a HardFault: outputs OFF and both drivers released first,
 /// then a reset; in the emulator too (after the harness has read the pins), which halts only
 /// after a HardFault or a panic.
+///
+/// One exception returns, on the L475: an ECC double error in a settings page (a record torn by
+/// a power cut during a save), which fails the read that hit it instead (`l475::DcacheOff`).
 #[cortex_m_rt::exception]
 unsafe fn DefaultHandler(irqn: i16) {
+    #[cfg(all(feature = "hw", feature = "board-l475"))]
+    if irqn == NMI && crate::board::l475::settings_ecc_error() {
+        return;
+    }
     fail_safe(|| error!("exception {} has no handler: reset", irqn + 16));
     reset()
 }
