@@ -38,6 +38,7 @@
 //! pull-downs keep every output OFF and both drivers off meanwhile.
 
 use core::future::Future;
+use core::sync::atomic::{AtomicBool, Ordering};
 use core::task::Context;
 
 use embassy_stm32::eth::{self, PacketQueue, Phy, Sma, StationManagement};
@@ -166,6 +167,13 @@ pub struct Ethernet {
 /// The clock tree of [`SYSCLK_HZ`]: the 8 MHz the ST-LINK feeds to PH0 (its MCO, HSE bypass)
 /// / 4 × 168 = 336 MHz VCO; / 2 = 168 MHz system clock, / 7 = 48 MHz for the RNG. The Ethernet
 /// needs HCLK of 25 MHz at least; here it is 168 MHz.
+///
+/// **Without the ST-LINK's clock** (the board powered from VIN or E5V with the ST-LINK not
+/// running, or its MCO cut off by the solder bridges) the same tree from HSI, 16 MHz / 8:
+/// embassy-stm32 0.6.0 waits for HSERDY without bound, so the HSE is tried here first, for
+/// [`HSE_WAIT_MS`] at most ([`hse_runs`]). Every rate is the same; their accuracy is HSI's,
+/// ±1 % at 25 °C but -4 to +4 % from -10 to 85 °C (datasheet), past what a UART tolerates (about
+/// 2 %) at the ends of that range. The start logs it ([`board`]).
 pub fn clock_config() -> embassy_stm32::Config {
     use embassy_stm32::rcc::{
         AHBPrescaler, APBPrescaler, Hse, HseMode, Pll, PllMul, PllPDiv, PllPreDiv, PllQDiv,
@@ -175,13 +183,25 @@ pub fn clock_config() -> embassy_stm32::Config {
     const HSE_HZ: u32 = 8_000_000;
     const _: () = assert!(HSE_HZ / 4 * 168 / 2 == SYSCLK_HZ);
     const _: () = assert!(HSE_HZ / 4 * 168 / 7 == 48_000_000);
-    config.rcc.hse = Some(Hse {
-        freq: embassy_stm32::time::Hertz(HSE_HZ),
-        mode: HseMode::Bypass,
-    });
-    config.rcc.pll_src = PllSource::HSE;
+    const _: () = assert!(HSI_HZ / 8 * 168 / 2 == SYSCLK_HZ);
+    const _: () = assert!(HSI_HZ / 8 * 168 / 7 == 48_000_000);
+    let on_hse = hse_runs();
+    ON_HSE.store(on_hse, Ordering::Relaxed);
+    // The PLL's input at 2 MHz either way (the reference manual's advice against jitter).
+    let prediv = if on_hse {
+        config.rcc.hse = Some(Hse {
+            freq: embassy_stm32::time::Hertz(HSE_HZ),
+            mode: HseMode::Bypass,
+        });
+        config.rcc.pll_src = PllSource::HSE;
+        PllPreDiv::DIV4
+    } else {
+        config.rcc.hsi = true;
+        config.rcc.pll_src = PllSource::HSI;
+        PllPreDiv::DIV8
+    };
     config.rcc.pll = Some(Pll {
-        prediv: PllPreDiv::DIV4,
+        prediv,
         mul: PllMul::MUL168,
         divp: Some(PllPDiv::DIV2),
         divq: Some(PllQDiv::DIV7),
@@ -192,6 +212,34 @@ pub fn clock_config() -> embassy_stm32::Config {
     config.rcc.apb1_pre = APBPrescaler::DIV4;
     config.rcc.apb2_pre = APBPrescaler::DIV2;
     config
+}
+
+/// HSI, the clock the chip runs from out of reset, until `embassy_stm32::init`.
+const HSI_HZ: u32 = 16_000_000;
+/// How long the start waits for the ST-LINK's clock: the time-out ST's own HAL gives the HSE
+/// (`HSE_STARTUP_TIMEOUT`). An external clock is ready within a few of its cycles once it runs.
+const HSE_WAIT_MS: u32 = 100;
+/// Whether the start found the HSE ([`clock_config`]); read by [`board`].
+static ON_HSE: AtomicBool = AtomicBool::new(false);
+
+/// Turns the HSE on (bypass: a clock on PH0, not a crystal) and waits for it at most
+/// [`HSE_WAIT_MS`] (counted in HSI cycles, before `init` changes the clock); off again if it
+/// did not come. Runs with the watchdog already started (`super::start_watchdog`).
+fn hse_runs() -> bool {
+    use embassy_stm32::pac::RCC;
+    // HSEBYP may be written only while the HSE is off (RM0090, RCC_CR), as it is after reset.
+    RCC.cr().modify(|w| w.set_hseon(false));
+    RCC.cr().modify(|w| w.set_hsebyp(true));
+    RCC.cr().modify(|w| w.set_hseon(true));
+    for _ in 0..HSE_WAIT_MS {
+        if RCC.cr().read().hserdy() {
+            return true;
+        }
+        cortex_m::asm::delay(HSI_HZ / 1000);
+    }
+    RCC.cr().modify(|w| w.set_hseon(false));
+    RCC.cr().modify(|w| w.set_hsebyp(false));
+    false
 }
 
 /// This chip's part of a UART's settings: nothing (DE is a GPIO).
@@ -355,6 +403,54 @@ impl<S: StationManagement> Phy for Lan8742a<S> {
     }
 }
 
+/// How long the MAC's DMA may take to leave its software reset once the PHY's reference clock
+/// runs (a few of its cycles; [`mac_clock_runs`]).
+const REF_CLK_WAIT_MS: u32 = 10;
+
+/// Whether the PHY's 50 MHz reference clock (RMII REF_CLK, PA1) reaches the MAC. The MAC's DMA
+/// leaves its software reset (ETH_DMABMR.SR) only once every clock of its interface runs, and
+/// embassy-stm32 0.6.0 waits for that without bound in `Ethernet::new_with_phy`: a PHY that
+/// answers on the management interface (clocked by the MCU) but sends no reference clock (its
+/// crystal or its REF_CLK strap faulty) would hang the start there. So the same reset first,
+/// bounded ([`REF_CLK_WAIT_MS`]); embassy's then passes at once. Also done in the order the
+/// reference manual asks (RM0090, SYSCFG_PMC.MII_RMII_SEL: set while the MAC is held in reset,
+/// before its clocks), which embassy's is not. Without the clock: the MAC's clocks off again,
+/// `false`.
+fn mac_clock_runs() -> bool {
+    use embassy_stm32::pac::gpio::vals::Moder;
+    use embassy_stm32::pac::{ETH, GPIOA, RCC, SYSCFG};
+    const REF_CLK_PIN: usize = 1;
+    const AF_ETH: u8 = 11;
+    critical_section::with(|_| {
+        RCC.ahb1rstr().modify(|w| w.set_ethrst(true));
+        SYSCFG.pmc().modify(|w| w.set_mii_rmii_sel(true));
+        RCC.ahb1rstr().modify(|w| w.set_ethrst(false));
+        RCC.ahb1enr().modify(|w| {
+            w.set_ethen(true);
+            w.set_ethtxen(true);
+            w.set_ethrxen(true);
+        });
+        GPIOA.afr(0).modify(|w| w.set_afr(REF_CLK_PIN, AF_ETH));
+        GPIOA
+            .moder()
+            .modify(|w| w.set_moder(REF_CLK_PIN, Moder::ALTERNATE));
+    });
+    let dma = ETH.ethernet_dma();
+    dma.dmabmr().modify(|w| w.set_sr(true));
+    for _ in 0..REF_CLK_WAIT_MS {
+        if !dma.dmabmr().read().sr() {
+            return true;
+        }
+        embassy_time::block_for(embassy_time::Duration::from_millis(1));
+    }
+    RCC.ahb1enr().modify(|w| {
+        w.set_ethen(false);
+        w.set_ethtxen(false);
+        w.set_ethrxen(false);
+    });
+    false
+}
+
 /// Takes the peripherals this board uses. Fails only if a UART rejects its configuration.
 pub fn board(
     p: Peripherals,
@@ -427,15 +523,34 @@ pub fn board(
         line_config(plc_line.baud, plc_line.parity),
     )?;
 
+    if ON_HSE.load(Ordering::Relaxed) {
+        // The clock security system: should the ST-LINK's clock stop (the ST-LINK reset or
+        // unpowered), the chip falls back to HSI and raises an NMI, whose handler forces the
+        // outputs safe and resets (`rt::DefaultHandler`); the next start runs on HSI. Without
+        // it, the system clock would stop with the outputs as they were until the watchdog.
+        embassy_stm32::pac::RCC.cr().modify(|w| w.set_csson(true));
+    } else {
+        warn!(
+            "clock: no 8 MHz from the ST-LINK (HSE): on HSI, UART rates within 1 % only near 25 C"
+        );
+    }
+
     // The seed before the MAC: the RNG runs from the PLL's 48 MHz (`clock_config`).
     let seed = Rng::new(p.RNG, Irqs).next_u64();
-    // The MAC's DMA cannot leave its reset without the PHY's 50 MHz reference clock, and
-    // embassy-stm32 0.6.0 waits for it without bound: a board whose PHY does not answer on the
-    // management interface (clocked from HCLK, not by the PHY) gets no Ethernet, and keeps its
-    // RS485 side, instead of hanging here before the watchdog runs.
+    // A board whose PHY does not answer on the management interface (clocked from HCLK, not by
+    // the PHY), or sends no reference clock, gets no Ethernet and keeps its RS485 side, instead
+    // of hanging here (embassy-stm32 0.6.0 waits for the MAC's reset without bound).
     let mut sma = Sma::new(p.ETH_SMA, p.PA2, p.PC1);
-    let ethernet = if phy_answers(&mut sma) {
-        // The PHY's reset is waited for here (at most `PHY_RESET_WAIT_MS`), before the watchdog.
+    let phy = phy_answers(&mut sma);
+    if !phy {
+        error!("net: no LAN8742A answers at SMI address 0: no Ethernet");
+    }
+    let clocked = phy && mac_clock_runs();
+    if phy && !clocked {
+        error!("net: no 50 MHz reference clock from the PHY: no Ethernet");
+    }
+    let ethernet = if clocked {
+        // The PHY's reset is waited for here (at most `PHY_RESET_WAIT_MS`).
         let device = eth::Ethernet::new_with_phy(
             PACKET_QUEUE.take(),
             p.ETH,
@@ -452,7 +567,6 @@ pub fn board(
         );
         Some(Ethernet { device, seed })
     } else {
-        error!("net: no LAN8742A answers at SMI address 0: no Ethernet");
         None
     };
 
