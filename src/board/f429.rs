@@ -58,55 +58,97 @@ use crate::io::Pins;
 use crate::pins::{LineBreak, PinId};
 use crate::serial::Rs485;
 
-/// The settings' flash, erased 32 bits at a time. embassy-stm32 0.6.0 never sets FLASH_CR.PSIZE
-/// for an erase, and its writes leave it at 0 (x8, the reset value), where a 16 KiB sector takes
-/// about 0.4 s (0.8 s at most) instead of 0.25 s (0.5 s) at x32 (STM32F429 datasheet, flash
-/// characteristics; 2.7-3.6 V allows x32), all of it with the interrupts masked: too close to the
-/// 0.68 s the IWDG may really be ([`super::Watchdog`]).
-pub struct Psize32<F>(pub F);
+/// The settings' flash: bank 2's first four 16 KiB sectors (sectors 12-15, 0x0810_0000 to
+/// 0x0811_0000), as offsets from 0x0810_0000, through the whole chip's blocking flash driver.
+///
+/// - **Interrupts run during an erase.** embassy-stm32 0.6.0's per-region flash objects (such as
+///   `Bank2Region1`) erase each sector and write each word inside a critical section
+///   (`erase_sector_with_critical_section`): a 16 KiB sector masked every interrupt for 0.25-0.5 s
+///   (UART bytes and Ethernet frames lost, the stop input's interrupt and embassy-time held). The
+///   whole chip's object does neither (`erase_sector_unlocked`, `write_chunk_unlocked`), which is
+///   safe here: the program, its vectors and every handler run from bank 1 while bank 2 is
+///   erased or written (read-while-write between the banks), and no handler touches the flash
+///   interface. The task that asked still waits for the erase (the driver polls FLASH_SR.BSY):
+///   the executor's other tasks, and the stop on the bus, wait for it too (README, "SAVE").
+/// - **x32.** embassy-stm32 0.6.0 never sets FLASH_CR.PSIZE for an erase, and its writes leave
+///   it at 0 (x8, the reset value), where a 16 KiB sector takes about 0.4 s (0.8 s at most)
+///   instead of 0.25 s (0.5 s) at x32 (STM32F429 datasheet, flash characteristics; 2.7-3.6 V
+///   allows x32). PSIZE is set in the unlocked FLASH_CR before each sector (embassy's own unlock
+///   then finds it unlocked, and its lock after the sector keeps the field).
+/// - **The watchdog is fed before each sector**: the longest stretch without a pet is one
+///   sector's erase, 0.5 s, against the IWDG's shortest 0.68 s (`super::WATCHDOG_TIMEOUT_US`),
+///   however many sectors an erase spans.
+/// - **Bounds**: the whole chip's driver takes any offset, the program's too; every offset here
+///   is checked against these four sectors first.
+pub struct SettingsSectors(
+    pub embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>,
+);
 
-impl<F: embedded_storage::nor_flash::ErrorType> embedded_storage::nor_flash::ErrorType
-    for Psize32<F>
-{
-    type Error = F::Error;
+/// Bank 2's first sector (0x0810_0000) as an offset from the start of flash.
+const BANK_2: u32 = 0x10_0000;
+/// A sector of bank 2's first region.
+const SECTOR: u32 = 16 * 1024;
+/// The four sectors of bank 2's first region.
+const SECTORS_LEN: u32 = 4 * SECTOR;
+
+impl SettingsSectors {
+    /// `BANK_2 + offset`, if `offset..offset + len` lies inside the four sectors.
+    fn address(offset: u32, len: usize) -> Result<u32, embassy_stm32::flash::Error> {
+        let len = u32::try_from(len).map_err(|_| embassy_stm32::flash::Error::Size)?;
+        match offset.checked_add(len) {
+            Some(end) if end <= SECTORS_LEN => Ok(BANK_2 + offset),
+            _ => Err(embassy_stm32::flash::Error::Size),
+        }
+    }
 }
 
-impl<F: embedded_storage::nor_flash::ReadNorFlash> embedded_storage::nor_flash::ReadNorFlash
-    for Psize32<F>
-{
-    const READ_SIZE: usize = F::READ_SIZE;
+impl embedded_storage::nor_flash::ErrorType for SettingsSectors {
+    type Error = embassy_stm32::flash::Error;
+}
+
+impl embedded_storage::nor_flash::ReadNorFlash for SettingsSectors {
+    const READ_SIZE: usize = 1;
 
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-        self.0.read(offset, bytes)
+        let at = Self::address(offset, bytes.len())?;
+        self.0.blocking_read(at, bytes)
     }
 
     fn capacity(&self) -> usize {
-        self.0.capacity()
+        SECTORS_LEN as usize
     }
 }
 
-impl<F: embedded_storage::nor_flash::NorFlash> embedded_storage::nor_flash::NorFlash
-    for Psize32<F>
-{
-    const WRITE_SIZE: usize = F::WRITE_SIZE;
-    const ERASE_SIZE: usize = F::ERASE_SIZE;
+impl embedded_storage::nor_flash::NorFlash for SettingsSectors {
+    const WRITE_SIZE: usize = embassy_stm32::flash::WRITE_SIZE;
+    const ERASE_SIZE: usize = SECTOR as usize;
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-        self.0.write(offset, bytes)
+        let at = Self::address(offset, bytes.len())?;
+        self.0.blocking_write(at, bytes)
     }
 
-    /// PSIZE is set in the unlocked FLASH_CR (embassy's own unlock then finds it unlocked, and
-    /// its lock after each sector keeps the field), and the register locked again after.
     fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        use embassy_stm32::flash::Error;
         use embassy_stm32::pac::{flash::vals::Psize, FLASH};
-        if FLASH.cr().read().lock() {
-            FLASH.keyr().write_value(0x4567_0123);
-            FLASH.keyr().write_value(0xCDEF_89AB);
+        if !from.is_multiple_of(SECTOR) || !to.is_multiple_of(SECTOR) || from > to {
+            return Err(Error::Unaligned);
         }
-        FLASH.cr().modify(|w| w.set_psize(Psize::PSIZE32));
-        let result = self.0.erase(from, to);
-        FLASH.cr().modify(|w| w.set_lock(true));
-        result
+        Self::address(from, (to - from) as usize)?;
+        let mut sector = BANK_2 + from;
+        while sector < BANK_2 + to {
+            super::pet_watchdog();
+            if FLASH.cr().read().lock() {
+                FLASH.keyr().write_value(0x4567_0123);
+                FLASH.keyr().write_value(0xCDEF_89AB);
+            }
+            FLASH.cr().modify(|w| w.set_psize(Psize::PSIZE32));
+            let result = self.0.blocking_erase(sector, sector + SECTOR);
+            FLASH.cr().modify(|w| w.set_lock(true));
+            result?;
+            sector += SECTOR;
+        }
+        Ok(())
     }
 }
 

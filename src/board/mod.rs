@@ -111,11 +111,10 @@ pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<l475::Dcac
 pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<Flash>;
 /// On the F429, bank 2's first region (its four 16 KiB sectors; offsets from 0x0810_0000): its
 /// erase page is a 16 KiB sector, where the whole flash's is the largest sector, 128 KiB
-/// (`memory/f429zi.x` says why the small sectors).
+/// (`memory/f429zi.x` says why the small sectors), erased with the interrupts running
+/// ([`f429::SettingsSectors`]).
 #[cfg(all(feature = "hw", feature = "board-f429"))]
-pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<
-    f429::Psize32<embassy_stm32::flash::Bank2Region1<'static, embassy_stm32::flash::Blocking>>,
->;
+pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<f429::SettingsSectors>;
 /// No flash interface in QEMU.
 #[cfg(feature = "emulator")]
 pub type SettingsFlash = core::convert::Infallible;
@@ -258,7 +257,7 @@ pub(crate) fn settings_flash(
     #[cfg(feature = "board-l475")]
     let flash = l475::DcacheOff(flash);
     #[cfg(feature = "board-f429")]
-    let flash = f429::Psize32(flash.into_blocking_regions().bank2_region1);
+    let flash = f429::SettingsSectors(flash);
     Some(embassy_embedded_hal::adapter::BlockingAsync::new(flash))
 }
 
