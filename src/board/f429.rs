@@ -360,17 +360,27 @@ fn phy_answers(sma: &mut impl StationManagement) -> bool {
     false
 }
 
-/// The LAN8742A through its SMI: reset, auto-negotiation advertising 100BASE-TX full duplex
-/// only, and the link reported up only at that speed and duplex.
+/// The LAN8742A through its SMI: reset, auto-negotiation advertising 10 and 100 Mbit/s, half and
+/// full duplex, and the MAC set to the speed and duplex the link came up at.
 ///
 /// Why not embassy's `GenericPhy`: its automatic address search panics when no PHY answers
 /// (a damaged PHY would then stop the RS485 gateway, which needs no network), and waits for a
 /// reset without bound at a fixed address. And embassy-stm32 0.6.0's MAC (eth v1) is set to
-/// 100 Mbit/s full duplex once and never follows the link: a link negotiated at 10 Mbit/s or
-/// half duplex would be up and pass nothing, so this PHY does not offer those.
+/// 100 Mbit/s full duplex once and never follows the link: a link at 10 Mbit/s or half duplex
+/// would be up and pass nothing (or collide), so [`Phy::poll_link`] here sets the MAC's speed
+/// (MACCR.FES) and duplex (MACCR.DM) to what the PHY resolved, whenever that changes.
+///
+/// **A partner that does not negotiate** (a switch port with its speed and duplex fixed): the PHY
+/// finds the speed by parallel detection, which can only report half duplex (IEEE 802.3 clause
+/// 28); the port itself is then almost always fixed at full duplex, so the MAC runs full duplex:
+/// a port forced to 100 Mbit/s full duplex works (it never linked before: only 100 Mbit/s full
+/// duplex was advertised and accepted). A port forced to *half* duplex would run mismatched
+/// (late collisions, lost frames): README says to let such a port negotiate.
 pub struct Lan8742a<S> {
     sma: S,
     address: u8,
+    /// The speed (100 Mbit/s?) and duplex (full?) the MAC was last set to while the link was up.
+    mode: Option<(bool, bool)>,
 }
 
 /// IEEE 802.3 clause 22 registers and the LAN8742A's own.
@@ -384,19 +394,28 @@ mod reg {
     pub const BSR: u8 = 1;
     pub const BSR_LINK: u16 = 1 << 2;
     pub const BSR_AUTONEG_DONE: u16 = 1 << 5;
-    /// Auto-negotiation advertisement: selector 802.3, 100BASE-TX full duplex.
+    /// Auto-negotiation advertisement: selector 802.3, 10BASE-T and 100BASE-TX, half and full
+    /// duplex.
     pub const ANAR: u8 = 4;
-    pub const ANAR_100_FULL: u16 = 1 << 8 | 0x0001;
-    /// LAN8742A PHY Special Control/Status: bits 4:2 the speed and duplex resolved.
+    pub const ANAR_ALL: u16 = 1 << 8 | 1 << 7 | 1 << 6 | 1 << 5 | 0x0001;
+    /// Auto-negotiation expansion: bit 0, the link partner negotiates.
+    pub const ANER: u8 = 6;
+    pub const ANER_PARTNER_NEGOTIATES: u16 = 1 << 0;
+    /// LAN8742A PHY Special Control/Status: bits 4:2 the speed and duplex resolved (001 10 Mbit/s
+    /// half, 101 10 full, 010 100 half, 110 100 full).
     pub const PSCSR: u8 = 31;
-    pub const PSCSR_SPEED_MASK: u16 = 0b111 << 2;
-    pub const PSCSR_100_FULL: u16 = 0b110 << 2;
+    pub const PSCSR_100: u16 = 1 << 3;
+    pub const PSCSR_FULL: u16 = 1 << 4;
 }
 
 impl<S: StationManagement> Lan8742a<S> {
     /// The PHY at `address` on `sma`.
     pub fn new(sma: S, address: u8) -> Lan8742a<S> {
-        Lan8742a { sma, address }
+        Lan8742a {
+            sma,
+            address,
+            mode: None,
+        }
     }
 
     fn read(&mut self, register: u8) -> u16 {
@@ -406,6 +425,20 @@ impl<S: StationManagement> Lan8742a<S> {
     fn write(&mut self, register: u8, value: u16) {
         self.sma.smi_write(self.address, register, value)
     }
+}
+
+/// Sets the MAC's speed and duplex (MACCR.FES, MACCR.DM), which embassy-stm32 0.6.0 sets to
+/// 100 Mbit/s full duplex once. Called as the link comes up, before frames flow.
+fn set_mac_mode(fast: bool, full: bool) {
+    use embassy_stm32::pac::eth::vals::{Dm, Fes};
+    embassy_stm32::pac::ETH.ethernet_mac().maccr().modify(|w| {
+        w.set_fes(if fast { Fes::FES100 } else { Fes::FES10 });
+        w.set_dm(if full {
+            Dm::FULL_DUPLEX
+        } else {
+            Dm::HALF_DUPLEX
+        });
+    });
 }
 
 /// How long the PHY may take to leave its reset (the LAN8742A takes well under a millisecond;
@@ -428,7 +461,7 @@ impl<S: StationManagement> Phy for Lan8742a<S> {
     }
 
     fn phy_init(&mut self) {
-        self.write(reg::ANAR, reg::ANAR_100_FULL);
+        self.write(reg::ANAR, reg::ANAR_ALL);
         self.write(reg::BCR, reg::BCR_AUTONEG | reg::BCR_RESTART_AUTONEG);
     }
 
@@ -439,9 +472,24 @@ impl<S: StationManagement> Phy for Lan8742a<S> {
         // All ones: no PHY answers (MDIO idles high).
         let up = reg::BSR_LINK | reg::BSR_AUTONEG_DONE;
         if bsr == u16::MAX || bsr & up != up {
+            self.mode = None;
             return false;
         }
-        self.read(reg::PSCSR) & reg::PSCSR_SPEED_MASK == reg::PSCSR_100_FULL
+        let resolved = self.read(reg::PSCSR);
+        let fast = resolved & reg::PSCSR_100 != 0;
+        // Parallel detection (a partner that does not negotiate) says half duplex: see above.
+        let full = resolved & reg::PSCSR_FULL != 0
+            || self.read(reg::ANER) & reg::ANER_PARTNER_NEGOTIATES == 0;
+        if self.mode != Some((fast, full)) {
+            set_mac_mode(fast, full);
+            self.mode = Some((fast, full));
+            info!(
+                "net: link up, {} Mbit/s, {} duplex",
+                if fast { 100 } else { 10 },
+                if full { "full" } else { "half" }
+            );
+        }
+        true
     }
 }
 
