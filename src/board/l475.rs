@@ -129,8 +129,12 @@ pub struct DcacheOff<F>(pub F);
 /// the settings pages since the last read began, [`NO_ECC_ERROR`] if none.
 #[cfg(feature = "hw")]
 static SETTINGS_ECC_ERROR: AtomicU32 = AtomicU32::new(NO_ECC_ERROR);
+/// No error: offset 0 is the program's first word, never a settings page (and 0 keeps the static
+/// in `.bss`, not in flash and RAM both).
 #[cfg(feature = "hw")]
-const NO_ECC_ERROR: u32 = u32::MAX;
+const NO_ECC_ERROR: u32 = 0;
+#[cfg(feature = "hw")]
+const _: () = assert!(SETTINGS_RANGE.start > NO_ECC_ERROR);
 /// Bank 2's offset from the start of flash (the STM32L475VG's two 512 KiB banks, not swapped):
 /// FLASH_ECCR gives the address within the bank (BK_ECC, ADDR_ECC).
 #[cfg(feature = "hw")]
