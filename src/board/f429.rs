@@ -229,6 +229,8 @@ pub fn clock_config() -> embassy_stm32::Config {
     const _: () = assert!(HSI_HZ / 8 * 168 / 7 == 48_000_000);
     let on_hse = hse_runs();
     ON_HSE.store(on_hse, Ordering::Relaxed);
+    // The wait counts against the watchdog's start-up stretch no more.
+    super::pet_watchdog();
     // The PLL's input at 2 MHz either way (the reference manual's advice against jitter).
     let prediv = if on_hse {
         config.rcc.hse = Some(Hse {
@@ -265,8 +267,9 @@ const HSE_WAIT_MS: u32 = 100;
 static ON_HSE: AtomicBool = AtomicBool::new(false);
 
 /// Turns the HSE on (bypass: a clock on PH0, not a crystal) and waits for it at most
-/// [`HSE_WAIT_MS`] (counted in HSI cycles, before `init` changes the clock); off again if it
-/// did not come. Runs with the watchdog already started (`super::start_watchdog`).
+/// [`HSE_WAIT_MS`] (counted in HSI cycles, before `init` changes the clock: cortex-m's
+/// `asm::delay` loop takes three cycles a count on the Cortex-M4); off again if it did not come.
+/// Runs with the watchdog already started (`super::start_watchdog`).
 fn hse_runs() -> bool {
     use embassy_stm32::pac::RCC;
     // HSEBYP may be written only while the HSE is off (RM0090, RCC_CR), as it is after reset.
@@ -277,7 +280,7 @@ fn hse_runs() -> bool {
         if RCC.cr().read().hserdy() {
             return true;
         }
-        cortex_m::asm::delay(HSI_HZ / 1000);
+        cortex_m::asm::delay(HSI_HZ / 1000 / 3);
     }
     RCC.cr().modify(|w| w.set_hseon(false));
     RCC.cr().modify(|w| w.set_hsebyp(false));
