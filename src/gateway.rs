@@ -19,6 +19,8 @@
 //! input, the bus and the watchdog are served while a long reply is on the wire.
 
 use core::pin::pin;
+#[cfg(feature = "net")]
+use core::{future::Future, pin::Pin};
 
 #[cfg(feature = "net")]
 use embassy_futures::select::{select, Either};
@@ -73,6 +75,35 @@ async fn bus_read(bus: &mut Rs485, buf: &mut [u8], hold: Option<Instant>) -> usi
 async fn plc_read(plc: &mut Rs485, buf: &mut [u8]) -> usize {
     plc.settle().await;
     plc.read(buf).await
+}
+
+/// How often [`fed`] feeds the watchdog, and for how long at most: the longest PLC reply on the
+/// wire, 256 bytes of 11 bits at 1.2 kbit/s (2.35 s), rounded up.
+#[cfg(feature = "net")]
+const FEEDS: u32 = 25;
+#[cfg(feature = "net")]
+const _: () = assert!(
+    FEEDS as u64 * HEARTBEAT.0 >= 256 * 11 * 1_000_000 / 1200
+        && FEEDS as u64 * HEARTBEAT.0 < 3_000_000
+);
+
+/// Waits for `work` (the PLC line to finish the reply on the wire) feeding the watchdog every
+/// [`HEARTBEAT`] meanwhile, for as long as the longest reply lasts at most ([`FEEDS`]; a UART
+/// stuck past it still ends in a reset). With Modbus TCP a SAVE, FACTORY, RESTART or line change
+/// can come over the network while an RTU reply of any length is on the wire (2.3 s at
+/// 1.2 kbit/s, against the watchdog's shortest 0.67 s): without the feeding the board reset, and
+/// the save was lost. Over RTU the reply is the one to the write that asked, 8 bytes (73 ms at
+/// 1.2 kbit/s), so the other boards wait without it.
+#[cfg(feature = "net")]
+async fn fed(watchdog: &mut crate::board::Watchdog, work: Pin<&mut dyn Future<Output = ()>>) {
+    let feed = async {
+        for _ in 0..FEEDS {
+            Timer::after(embassy_time::Duration::from_micros(HEARTBEAT.0)).await;
+            watchdog.pet();
+        }
+        core::future::pending::<()>().await
+    };
+    select(work, feed).await;
 }
 
 /// The emulator build only: the harness writes `true` here (QEMU's qtest, found by its symbol)
@@ -201,15 +232,24 @@ pub async fn run(
                     }
                     Action::Line(LineAction::BreakEnd) => bus.break_end(),
                     // After the reply to the write that asked for it has left.
+                    #[cfg(not(feature = "net"))]
                     Action::PlcLine(line) => plc.set_line(line.baud, line.parity).await,
+                    // Asked over TCP, the reply on the PLC line may be any, up to 2.3 s long.
+                    #[cfg(feature = "net")]
+                    Action::PlcLine(line) => {
+                        fed(watchdog, pin!(plc.set_line(line.baud, line.parity))).await
+                    }
                     Action::Store(store) => {
                         // The reply to the write that asked for it leaves first: on the F103 an
                         // erase stops the CPU, and with it the interrupt that feeds the UART, for
-                        // 20-40 ms.
+                        // 20-40 ms; a restart would cut it.
+                        #[cfg(not(feature = "net"))]
                         plc.settle().await;
-                        // A whole watchdog period for the erase (on the F429 a 16 KiB sector
-                        // takes 0.25-0.5 s with the interrupts masked), not what the wait for the
-                        // reply left of it.
+                        #[cfg(feature = "net")]
+                        fed(watchdog, pin!(plc.settle())).await;
+                        // A whole watchdog period for the erase, not what the wait for the reply
+                        // left of it (the F429 feeds it again before each 16 KiB sector, 0.5 s
+                        // at most: `board::f429::SettingsSectors`).
                         watchdog.pet();
                         match store {
                             Store::Save => {

@@ -108,6 +108,7 @@ fn start() -> Started {
     let mut config = node::default_config();
     let mut parts = bring_up(config.plc);
     if let Some(Parts {
+        board,
         settings,
         boot,
         pins,
@@ -120,6 +121,9 @@ fn start() -> Started {
             outputs: pins.outputs.ports(),
         };
         settings.load(boot.inputs, &mut config);
+        // A load that erased (a factory reset, a torn page) had its last pet before its last
+        // erase: the gateway task's first heartbeat counts from here, not from there.
+        board.watchdog.pet();
     }
     #[cfg(feature = "net")]
     if let Some(parts) = parts.as_deref_mut() {
@@ -136,6 +140,9 @@ fn start() -> Started {
 /// at start-up: the settings store's, on the boards).
 #[inline(never)]
 fn bring_up(plc: protocol::plc::PlcLine) -> Option<&'static mut Parts> {
+    // The IWDG first: nothing below (clocks, PHY) may hang the chip before it runs.
+    #[cfg(feature = "hw")]
+    board::start_watchdog();
     let p = embassy_stm32::init(board::clock_config());
     #[cfg(feature = "emulator")]
     if let Some(core) = cortex_m::Peripherals::take() {

@@ -1,5 +1,6 @@
-//! The runtime glue that needs `unsafe`, all of it here: the executor loop, the panic handler
-//! and the HardFault handler.
+//! The runtime glue that needs `unsafe`, all of it here: the executor loop, the panic handler,
+//! the HardFault handler and the handler of every other exception and interrupt
+//! (`DefaultHandler`: NMI, and any interrupt no driver binds).
 //!
 //! The stack: flip-link (`.cargo/config.toml`) links the firmware with the stack at the bottom of
 //! RAM, from `_stack_start` (right below `.data`) down to the start of RAM, and the statics above
@@ -56,7 +57,7 @@ pub fn run<T: 'static>(make: impl FnOnce() -> T, init: impl FnOnce(Spawner, &'st
         // 'static and every task was spawned on it through its own spawner.
         unsafe { executor.poll() };
         #[cfg(feature = "emulator")]
-        overflow::on_request();
+        requests::on_request();
         // Sleep unless something was woken meanwhile. Interrupts are masked for the check, so a
         // wake between the check and WFI leaves the interrupt pending, and WFI returns at once.
         cortex_m::interrupt::free(|_| {
@@ -184,34 +185,91 @@ unsafe extern "C" {
 /// reset (board) or halt (emulator). Runs on the stack `HardFault` gave it; `sp`: the stack pointer
 /// of the code that faulted, where the core stacked the exception frame if it could.
 extern "C" fn hard_fault(sp: u32) -> ! {
-    pins::force_safe();
-    let bottom = core::ptr::addr_of!(_stack_end) as u32;
-    let top = core::ptr::addr_of!(_stack_start) as u32;
-    // The frame (r0-r3, r12, lr, pc, xpsr) is there only if it lies inside the stack; after an
-    // overflow it does not (the stack pointer is below RAM), and reading it would fault again.
-    // (This handler's own few dozen bytes at the top of the stack could overwrite a frame only
-    // from a fault before `main`: past it, the run loop's frame holds the 11 KB node.)
-    if sp >= bottom && sp <= top.saturating_sub(32) {
-        // SAFETY: eight words inside the stack region, 4-aligned (the core keeps SP so).
-        let pc = unsafe { core::ptr::read_volatile((sp as *const u32).add(6)) };
-        error!("HardFault at pc {:#x}, sp {:#x}", pc, sp);
-    } else {
-        error!("HardFault, sp {:#x} outside the stack: stack overflow", sp);
-    }
-    // The board: start again (outputs stay OFF through the reset). The emulator: halt, as after a
-    // panic, so that the harness can read the pins (tests/emu/test_firmware.py).
+    fail_safe(|| {
+        let bottom = core::ptr::addr_of!(_stack_end) as u32;
+        let top = core::ptr::addr_of!(_stack_start) as u32;
+        // The frame (r0-r3, r12, lr, pc, xpsr) is there only if it lies inside the stack; after
+        // an overflow it does not (the stack pointer is below RAM), and reading it would fault
+        // again. (This handler's own few dozen bytes at the top of the stack could overwrite a
+        // frame only from a fault before `main`: past it, the run loop's frame holds the node.)
+        if sp >= bottom && sp <= top.saturating_sub(32) {
+            // SAFETY: eight words inside the stack region, 4-aligned (the core keeps SP so).
+            let pc = unsafe { core::ptr::read_volatile((sp as *const u32).add(6)) };
+            error!("HardFault at pc {:#x}, sp {:#x}", pc, sp);
+        } else {
+            error!("HardFault, sp {:#x} outside the stack: stack overflow", sp);
+        }
+    });
+    // The board: start again. The emulator: halt, as after a panic, so that the harness can read
+    // the pins (tests/emu/test_firmware.py).
     #[cfg(feature = "hw")]
-    cortex_m::peripheral::SCB::sys_reset();
+    reset();
     #[cfg(feature = "emulator")]
     halt()
 }
 
-/// The emulator build only: a stack overflow on request, to prove the guard on the real ELF
-/// (`test_stack_overflow_faults_and_leaves_outputs_safe` in tests/emu/test_firmware.py).
+/// NMI (exception 2) as cortex-m-rt numbers it for [`DefaultHandler`] (the exception's number
+/// less 16, so that interrupts count from 0).
+#[cfg(all(feature = "hw", feature = "board-l475"))]
+const NMI: i16 = 2 - 16;
+
+/// Every exception and interrupt without a handler of its own, which cortex-m-rt's vector table
+/// points here (its own default spins, the outputs as they were, until the watchdog fires): NMI
+/// (the clock security system on the F103 and F429, a flash ECC double error or an SRAM parity
+/// error on the L475), any interrupt enabled with no driver bound to it, SVCall, PendSV, SysTick
+/// on the boards (their time driver is a TIM), and the configurable faults (not enabled: they
+/// escalate to HardFault). The same as a HardFault: outputs OFF and both drivers released first,
+/// then a reset; in the emulator too (after the harness has read the pins), which halts only
+/// after a HardFault or a panic.
+///
+/// One exception returns, on the L475: an ECC double error in a settings page (a record torn by
+/// a power cut during a save), which fails the read that hit it instead (`l475::DcacheOff`).
+#[cortex_m_rt::exception]
+unsafe fn DefaultHandler(irqn: i16) {
+    #[cfg(all(feature = "hw", feature = "board-l475"))]
+    if irqn == NMI && crate::board::l475::settings_ecc_error() {
+        return;
+    }
+    fail_safe(|| error!("exception {} has no handler: reset", irqn + 16));
+    reset()
+}
+
+/// What every fault does first: every output OFF, the alarm LED on, both RS485 drivers released
+/// (`pins::force_safe`), then `report`. On the board not when the fault interrupted a critical
+/// section (PRIMASK set: only an NMI or a HardFault can), which may have been defmt's, midway
+/// through a log frame: a second frame would panic there ("taken reentrantly"), and a panic in
+/// an NMI locks the core up until the watchdog. `#[inline(always)]`: one copy per handler, no
+/// closure call.
+#[inline(always)]
+fn fail_safe(report: impl FnOnce()) {
+    pins::force_safe();
+    #[cfg(feature = "hw")]
+    if cortex_m::register::primask::read().is_active() {
+        return;
+    }
+    report();
+}
+
+/// After a fault: a system reset. The outputs stay OFF through it: every pin is an input from
+/// reset until start-up drives it OFF, and the carrier's pull-downs hold the output stages and
+/// the drivers' DE low meanwhile. The emulator waits first until the harness has read the pins
+/// (bounded: `requests::hold`).
+fn reset() -> ! {
+    #[cfg(feature = "emulator")]
+    requests::hold();
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// The emulator build only: faults on request, to prove the handlers on the real ELF (tests/emu):
+/// a stack overflow (`test_stack_overflow_faults_and_leaves_outputs_safe` in
+/// tests/emu/test_firmware.py), an NMI and an interrupt without a handler (tests/emu/test_faults.py).
 #[cfg(feature = "emulator")]
-mod overflow {
+mod requests {
     use core::hint::black_box;
-    use core::sync::atomic::{AtomicBool, Ordering};
+    use core::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+
+    use cortex_m::peripheral::{SCB, SYST};
+    use embassy_stm32::interrupt::{self, InterruptExt};
 
     /// Set by the harness through qtest, by its symbol (`request_stack_overflow` in
     /// tests/pyshared/emu.py). `#[used]` and an atomic, like `EMU_PANIC` in src/gateway.rs: nothing
@@ -219,10 +277,47 @@ mod overflow {
     #[used]
     static EMU_OVERFLOW: AtomicBool = AtomicBool::new(false);
 
+    /// Set by the harness (`request_fault`): [`NMI`] or [`UNBOUND_IRQ`].
+    #[used]
+    static EMU_FAULT_REQUEST: AtomicU8 = AtomicU8::new(0);
+    const NMI: u8 = 1;
+    const UNBOUND_IRQ: u8 = 2;
+    /// Set by the harness once it has read the pins after a fault that resets (`release_fault`).
+    #[used]
+    static EMU_FAULT_SEEN: AtomicBool = AtomicBool::new(false);
+
     /// Checked after every poll of the executor (every wake).
     pub(super) fn on_request() {
         if EMU_OVERFLOW.load(Ordering::Relaxed) {
             black_box(recurse(0));
+        }
+        match EMU_FAULT_REQUEST.swap(0, Ordering::Relaxed) {
+            // SCB ICSR NMIPENDSET: the NMI, taken at once.
+            // SAFETY: a write to a system control register, whose only effect is the NMI.
+            NMI => unsafe { (*SCB::PTR).icsr.write(1 << 31) },
+            // SWPMI1: no peripheral this firmware uses, so no handler is bound to it (its vector
+            // is cortex-m-rt's `DefaultHandler`). Enabled, then pended in the NVIC.
+            UNBOUND_IRQ => {
+                // SAFETY: unmasking an interrupt only runs its handler, which is the point.
+                unsafe { interrupt::SWPMI1.enable() };
+                interrupt::SWPMI1.pend();
+            }
+            _ => {}
+        }
+    }
+
+    /// Holds a fault that resets until the harness has read the pins ([`EMU_FAULT_SEEN`]), at
+    /// most 10 s: counted in SysTick wraps (1 ms each, `systick`), which go on with its interrupt
+    /// held off by this handler.
+    pub(super) fn hold() {
+        // SAFETY: a read of SysTick's control register (it clears COUNTFLAG, which the time
+        // driver does not use; the reset follows anyway).
+        let wrapped = || unsafe { (*SYST::PTR).csr.read() } & 1 << 16 != 0;
+        let mut ms = 0u32;
+        while !EMU_FAULT_SEEN.load(Ordering::Relaxed) && ms < 10_000 {
+            if wrapped() {
+                ms += 1;
+            }
         }
     }
 

@@ -38,6 +38,7 @@
 //! pull-downs keep every output OFF and both drivers off meanwhile.
 
 use core::future::Future;
+use core::sync::atomic::{AtomicBool, Ordering};
 use core::task::Context;
 
 use embassy_stm32::eth::{self, PacketQueue, Phy, Sma, StationManagement};
@@ -57,55 +58,97 @@ use crate::io::Pins;
 use crate::pins::{LineBreak, PinId};
 use crate::serial::Rs485;
 
-/// The settings' flash, erased 32 bits at a time. embassy-stm32 0.6.0 never sets FLASH_CR.PSIZE
-/// for an erase, and its writes leave it at 0 (x8, the reset value), where a 16 KiB sector takes
-/// about 0.4 s (0.8 s at most) instead of 0.25 s (0.5 s) at x32 (STM32F429 datasheet, flash
-/// characteristics; 2.7-3.6 V allows x32), all of it with the interrupts masked: too close to the
-/// 0.68 s the IWDG may really be ([`super::Watchdog`]).
-pub struct Psize32<F>(pub F);
+/// The settings' flash: bank 2's first four 16 KiB sectors (sectors 12-15, 0x0810_0000 to
+/// 0x0811_0000), as offsets from 0x0810_0000, through the whole chip's blocking flash driver.
+///
+/// - **Interrupts run during an erase.** embassy-stm32 0.6.0's per-region flash objects (such as
+///   `Bank2Region1`) erase each sector and write each word inside a critical section
+///   (`erase_sector_with_critical_section`): a 16 KiB sector masked every interrupt for 0.25-0.5 s
+///   (UART bytes and Ethernet frames lost, the stop input's interrupt and embassy-time held). The
+///   whole chip's object does neither (`erase_sector_unlocked`, `write_chunk_unlocked`), which is
+///   safe here: the program, its vectors and every handler run from bank 1 while bank 2 is
+///   erased or written (read-while-write between the banks), and no handler touches the flash
+///   interface. The task that asked still waits for the erase (the driver polls FLASH_SR.BSY):
+///   the executor's other tasks, and the stop on the bus, wait for it too (README, "SAVE").
+/// - **x32.** embassy-stm32 0.6.0 never sets FLASH_CR.PSIZE for an erase, and its writes leave
+///   it at 0 (x8, the reset value), where a 16 KiB sector takes about 0.4 s (0.8 s at most)
+///   instead of 0.25 s (0.5 s) at x32 (STM32F429 datasheet, flash characteristics; 2.7-3.6 V
+///   allows x32). PSIZE is set in the unlocked FLASH_CR before each sector (embassy's own unlock
+///   then finds it unlocked, and its lock after the sector keeps the field).
+/// - **The watchdog is fed before each sector**: the longest stretch without a pet is one
+///   sector's erase, 0.5 s, against the IWDG's shortest 0.68 s (`super::WATCHDOG_TIMEOUT_US`),
+///   however many sectors an erase spans.
+/// - **Bounds**: the whole chip's driver takes any offset, the program's too; every offset here
+///   is checked against these four sectors first.
+pub struct SettingsSectors(
+    pub embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>,
+);
 
-impl<F: embedded_storage::nor_flash::ErrorType> embedded_storage::nor_flash::ErrorType
-    for Psize32<F>
-{
-    type Error = F::Error;
+/// Bank 2's first sector (0x0810_0000) as an offset from the start of flash.
+const BANK_2: u32 = 0x10_0000;
+/// A sector of bank 2's first region.
+const SECTOR: u32 = 16 * 1024;
+/// The four sectors of bank 2's first region.
+const SECTORS_LEN: u32 = 4 * SECTOR;
+
+impl SettingsSectors {
+    /// `BANK_2 + offset`, if `offset..offset + len` lies inside the four sectors.
+    fn address(offset: u32, len: usize) -> Result<u32, embassy_stm32::flash::Error> {
+        let len = u32::try_from(len).map_err(|_| embassy_stm32::flash::Error::Size)?;
+        match offset.checked_add(len) {
+            Some(end) if end <= SECTORS_LEN => Ok(BANK_2 + offset),
+            _ => Err(embassy_stm32::flash::Error::Size),
+        }
+    }
 }
 
-impl<F: embedded_storage::nor_flash::ReadNorFlash> embedded_storage::nor_flash::ReadNorFlash
-    for Psize32<F>
-{
-    const READ_SIZE: usize = F::READ_SIZE;
+impl embedded_storage::nor_flash::ErrorType for SettingsSectors {
+    type Error = embassy_stm32::flash::Error;
+}
+
+impl embedded_storage::nor_flash::ReadNorFlash for SettingsSectors {
+    const READ_SIZE: usize = 1;
 
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-        self.0.read(offset, bytes)
+        let at = Self::address(offset, bytes.len())?;
+        self.0.blocking_read(at, bytes)
     }
 
     fn capacity(&self) -> usize {
-        self.0.capacity()
+        SECTORS_LEN as usize
     }
 }
 
-impl<F: embedded_storage::nor_flash::NorFlash> embedded_storage::nor_flash::NorFlash
-    for Psize32<F>
-{
-    const WRITE_SIZE: usize = F::WRITE_SIZE;
-    const ERASE_SIZE: usize = F::ERASE_SIZE;
+impl embedded_storage::nor_flash::NorFlash for SettingsSectors {
+    const WRITE_SIZE: usize = embassy_stm32::flash::WRITE_SIZE;
+    const ERASE_SIZE: usize = SECTOR as usize;
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-        self.0.write(offset, bytes)
+        let at = Self::address(offset, bytes.len())?;
+        self.0.blocking_write(at, bytes)
     }
 
-    /// PSIZE is set in the unlocked FLASH_CR (embassy's own unlock then finds it unlocked, and
-    /// its lock after each sector keeps the field), and the register locked again after.
     fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        use embassy_stm32::flash::Error;
         use embassy_stm32::pac::{flash::vals::Psize, FLASH};
-        if FLASH.cr().read().lock() {
-            FLASH.keyr().write_value(0x4567_0123);
-            FLASH.keyr().write_value(0xCDEF_89AB);
+        if !from.is_multiple_of(SECTOR) || !to.is_multiple_of(SECTOR) || from > to {
+            return Err(Error::Unaligned);
         }
-        FLASH.cr().modify(|w| w.set_psize(Psize::PSIZE32));
-        let result = self.0.erase(from, to);
-        FLASH.cr().modify(|w| w.set_lock(true));
-        result
+        Self::address(from, (to - from) as usize)?;
+        let mut sector = BANK_2 + from;
+        while sector < BANK_2 + to {
+            super::pet_watchdog();
+            if FLASH.cr().read().lock() {
+                FLASH.keyr().write_value(0x4567_0123);
+                FLASH.keyr().write_value(0xCDEF_89AB);
+            }
+            FLASH.cr().modify(|w| w.set_psize(Psize::PSIZE32));
+            let result = self.0.blocking_erase(sector, sector + SECTOR);
+            FLASH.cr().modify(|w| w.set_lock(true));
+            result?;
+            sector += SECTOR;
+        }
+        Ok(())
     }
 }
 
@@ -166,6 +209,13 @@ pub struct Ethernet {
 /// The clock tree of [`SYSCLK_HZ`]: the 8 MHz the ST-LINK feeds to PH0 (its MCO, HSE bypass)
 /// / 4 × 168 = 336 MHz VCO; / 2 = 168 MHz system clock, / 7 = 48 MHz for the RNG. The Ethernet
 /// needs HCLK of 25 MHz at least; here it is 168 MHz.
+///
+/// **Without the ST-LINK's clock** (the board powered from VIN or E5V with the ST-LINK not
+/// running, or its MCO cut off by the solder bridges) the same tree from HSI, 16 MHz / 8:
+/// embassy-stm32 0.6.0 waits for HSERDY without bound, so the HSE is tried here first, for
+/// [`HSE_WAIT_MS`] at most ([`hse_runs`]). Every rate is the same; their accuracy is HSI's,
+/// ±1 % at 25 °C but -4 to +4 % from -10 to 85 °C (datasheet), past what a UART tolerates (about
+/// 2 %) at the ends of that range. The start logs it ([`board`]).
 pub fn clock_config() -> embassy_stm32::Config {
     use embassy_stm32::rcc::{
         AHBPrescaler, APBPrescaler, Hse, HseMode, Pll, PllMul, PllPDiv, PllPreDiv, PllQDiv,
@@ -175,13 +225,27 @@ pub fn clock_config() -> embassy_stm32::Config {
     const HSE_HZ: u32 = 8_000_000;
     const _: () = assert!(HSE_HZ / 4 * 168 / 2 == SYSCLK_HZ);
     const _: () = assert!(HSE_HZ / 4 * 168 / 7 == 48_000_000);
-    config.rcc.hse = Some(Hse {
-        freq: embassy_stm32::time::Hertz(HSE_HZ),
-        mode: HseMode::Bypass,
-    });
-    config.rcc.pll_src = PllSource::HSE;
+    const _: () = assert!(HSI_HZ / 8 * 168 / 2 == SYSCLK_HZ);
+    const _: () = assert!(HSI_HZ / 8 * 168 / 7 == 48_000_000);
+    let on_hse = hse_runs();
+    ON_HSE.store(on_hse, Ordering::Relaxed);
+    // The wait counts against the watchdog's start-up stretch no more.
+    super::pet_watchdog();
+    // The PLL's input at 2 MHz either way (the reference manual's advice against jitter).
+    let prediv = if on_hse {
+        config.rcc.hse = Some(Hse {
+            freq: embassy_stm32::time::Hertz(HSE_HZ),
+            mode: HseMode::Bypass,
+        });
+        config.rcc.pll_src = PllSource::HSE;
+        PllPreDiv::DIV4
+    } else {
+        config.rcc.hsi = true;
+        config.rcc.pll_src = PllSource::HSI;
+        PllPreDiv::DIV8
+    };
     config.rcc.pll = Some(Pll {
-        prediv: PllPreDiv::DIV4,
+        prediv,
         mul: PllMul::MUL168,
         divp: Some(PllPDiv::DIV2),
         divq: Some(PllQDiv::DIV7),
@@ -192,6 +256,35 @@ pub fn clock_config() -> embassy_stm32::Config {
     config.rcc.apb1_pre = APBPrescaler::DIV4;
     config.rcc.apb2_pre = APBPrescaler::DIV2;
     config
+}
+
+/// HSI, the clock the chip runs from out of reset, until `embassy_stm32::init`.
+const HSI_HZ: u32 = 16_000_000;
+/// How long the start waits for the ST-LINK's clock: the time-out ST's own HAL gives the HSE
+/// (`HSE_STARTUP_TIMEOUT`). An external clock is ready within a few of its cycles once it runs.
+const HSE_WAIT_MS: u32 = 100;
+/// Whether the start found the HSE ([`clock_config`]); read by [`board`].
+static ON_HSE: AtomicBool = AtomicBool::new(false);
+
+/// Turns the HSE on (bypass: a clock on PH0, not a crystal) and waits for it at most
+/// [`HSE_WAIT_MS`] (counted in HSI cycles, before `init` changes the clock: cortex-m's
+/// `asm::delay` loop takes three cycles a count on the Cortex-M4); off again if it did not come.
+/// Runs with the watchdog already started (`super::start_watchdog`).
+fn hse_runs() -> bool {
+    use embassy_stm32::pac::RCC;
+    // HSEBYP may be written only while the HSE is off (RM0090, RCC_CR), as it is after reset.
+    RCC.cr().modify(|w| w.set_hseon(false));
+    RCC.cr().modify(|w| w.set_hsebyp(true));
+    RCC.cr().modify(|w| w.set_hseon(true));
+    for _ in 0..HSE_WAIT_MS {
+        if RCC.cr().read().hserdy() {
+            return true;
+        }
+        cortex_m::asm::delay(HSI_HZ / 1000 / 3);
+    }
+    RCC.cr().modify(|w| w.set_hseon(false));
+    RCC.cr().modify(|w| w.set_hsebyp(false));
+    false
 }
 
 /// This chip's part of a UART's settings: nothing (DE is a GPIO).
@@ -270,17 +363,27 @@ fn phy_answers(sma: &mut impl StationManagement) -> bool {
     false
 }
 
-/// The LAN8742A through its SMI: reset, auto-negotiation advertising 100BASE-TX full duplex
-/// only, and the link reported up only at that speed and duplex.
+/// The LAN8742A through its SMI: reset, auto-negotiation advertising 10 and 100 Mbit/s, half and
+/// full duplex, and the MAC set to the speed and duplex the link came up at.
 ///
 /// Why not embassy's `GenericPhy`: its automatic address search panics when no PHY answers
 /// (a damaged PHY would then stop the RS485 gateway, which needs no network), and waits for a
 /// reset without bound at a fixed address. And embassy-stm32 0.6.0's MAC (eth v1) is set to
-/// 100 Mbit/s full duplex once and never follows the link: a link negotiated at 10 Mbit/s or
-/// half duplex would be up and pass nothing, so this PHY does not offer those.
+/// 100 Mbit/s full duplex once and never follows the link: a link at 10 Mbit/s or half duplex
+/// would be up and pass nothing (or collide), so [`Phy::poll_link`] here sets the MAC's speed
+/// (MACCR.FES) and duplex (MACCR.DM) to what the PHY resolved, whenever that changes.
+///
+/// **A partner that does not negotiate** (a switch port with its speed and duplex fixed): the PHY
+/// finds the speed by parallel detection, which can only report half duplex (IEEE 802.3 clause
+/// 28); the port itself is then almost always fixed at full duplex, so the MAC runs full duplex:
+/// a port forced to 100 Mbit/s full duplex works (it never linked before: only 100 Mbit/s full
+/// duplex was advertised and accepted). A port forced to *half* duplex would run mismatched
+/// (late collisions, lost frames): README says to let such a port negotiate.
 pub struct Lan8742a<S> {
     sma: S,
     address: u8,
+    /// The speed (100 Mbit/s?) and duplex (full?) the MAC was last set to while the link was up.
+    mode: Option<(bool, bool)>,
 }
 
 /// IEEE 802.3 clause 22 registers and the LAN8742A's own.
@@ -294,19 +397,28 @@ mod reg {
     pub const BSR: u8 = 1;
     pub const BSR_LINK: u16 = 1 << 2;
     pub const BSR_AUTONEG_DONE: u16 = 1 << 5;
-    /// Auto-negotiation advertisement: selector 802.3, 100BASE-TX full duplex.
+    /// Auto-negotiation advertisement: selector 802.3, 10BASE-T and 100BASE-TX, half and full
+    /// duplex.
     pub const ANAR: u8 = 4;
-    pub const ANAR_100_FULL: u16 = 1 << 8 | 0x0001;
-    /// LAN8742A PHY Special Control/Status: bits 4:2 the speed and duplex resolved.
+    pub const ANAR_ALL: u16 = 1 << 8 | 1 << 7 | 1 << 6 | 1 << 5 | 0x0001;
+    /// Auto-negotiation expansion: bit 0, the link partner negotiates.
+    pub const ANER: u8 = 6;
+    pub const ANER_PARTNER_NEGOTIATES: u16 = 1 << 0;
+    /// LAN8742A PHY Special Control/Status: bits 4:2 the speed and duplex resolved (001 10 Mbit/s
+    /// half, 101 10 full, 010 100 half, 110 100 full).
     pub const PSCSR: u8 = 31;
-    pub const PSCSR_SPEED_MASK: u16 = 0b111 << 2;
-    pub const PSCSR_100_FULL: u16 = 0b110 << 2;
+    pub const PSCSR_100: u16 = 1 << 3;
+    pub const PSCSR_FULL: u16 = 1 << 4;
 }
 
 impl<S: StationManagement> Lan8742a<S> {
     /// The PHY at `address` on `sma`.
     pub fn new(sma: S, address: u8) -> Lan8742a<S> {
-        Lan8742a { sma, address }
+        Lan8742a {
+            sma,
+            address,
+            mode: None,
+        }
     }
 
     fn read(&mut self, register: u8) -> u16 {
@@ -316,6 +428,20 @@ impl<S: StationManagement> Lan8742a<S> {
     fn write(&mut self, register: u8, value: u16) {
         self.sma.smi_write(self.address, register, value)
     }
+}
+
+/// Sets the MAC's speed and duplex (MACCR.FES, MACCR.DM), which embassy-stm32 0.6.0 sets to
+/// 100 Mbit/s full duplex once. Called as the link comes up, before frames flow.
+fn set_mac_mode(fast: bool, full: bool) {
+    use embassy_stm32::pac::eth::vals::{Dm, Fes};
+    embassy_stm32::pac::ETH.ethernet_mac().maccr().modify(|w| {
+        w.set_fes(if fast { Fes::FES100 } else { Fes::FES10 });
+        w.set_dm(if full {
+            Dm::FULL_DUPLEX
+        } else {
+            Dm::HALF_DUPLEX
+        });
+    });
 }
 
 /// How long the PHY may take to leave its reset (the LAN8742A takes well under a millisecond;
@@ -338,7 +464,7 @@ impl<S: StationManagement> Phy for Lan8742a<S> {
     }
 
     fn phy_init(&mut self) {
-        self.write(reg::ANAR, reg::ANAR_100_FULL);
+        self.write(reg::ANAR, reg::ANAR_ALL);
         self.write(reg::BCR, reg::BCR_AUTONEG | reg::BCR_RESTART_AUTONEG);
     }
 
@@ -349,10 +475,73 @@ impl<S: StationManagement> Phy for Lan8742a<S> {
         // All ones: no PHY answers (MDIO idles high).
         let up = reg::BSR_LINK | reg::BSR_AUTONEG_DONE;
         if bsr == u16::MAX || bsr & up != up {
+            self.mode = None;
             return false;
         }
-        self.read(reg::PSCSR) & reg::PSCSR_SPEED_MASK == reg::PSCSR_100_FULL
+        let resolved = self.read(reg::PSCSR);
+        let fast = resolved & reg::PSCSR_100 != 0;
+        // Parallel detection (a partner that does not negotiate) says half duplex: see above.
+        let full = resolved & reg::PSCSR_FULL != 0
+            || self.read(reg::ANER) & reg::ANER_PARTNER_NEGOTIATES == 0;
+        if self.mode != Some((fast, full)) {
+            set_mac_mode(fast, full);
+            self.mode = Some((fast, full));
+            info!(
+                "net: link up, {} Mbit/s, {} duplex",
+                if fast { 100 } else { 10 },
+                if full { "full" } else { "half" }
+            );
+        }
+        true
     }
+}
+
+/// How long the MAC's DMA may take to leave its software reset once the PHY's reference clock
+/// runs (a few of its cycles; [`mac_clock_runs`]).
+const REF_CLK_WAIT_MS: u32 = 10;
+
+/// Whether the PHY's 50 MHz reference clock (RMII REF_CLK, PA1) reaches the MAC. The MAC's DMA
+/// leaves its software reset (ETH_DMABMR.SR) only once every clock of its interface runs, and
+/// embassy-stm32 0.6.0 waits for that without bound in `Ethernet::new_with_phy`: a PHY that
+/// answers on the management interface (clocked by the MCU) but sends no reference clock (its
+/// crystal or its REF_CLK strap faulty) would hang the start there. So the same reset first,
+/// bounded ([`REF_CLK_WAIT_MS`]); embassy's then passes at once. Also done in the order the
+/// reference manual asks (RM0090, SYSCFG_PMC.MII_RMII_SEL: set while the MAC is held in reset,
+/// before its clocks), which embassy's is not. Without the clock: the MAC's clocks off again,
+/// `false`.
+fn mac_clock_runs() -> bool {
+    use embassy_stm32::pac::gpio::vals::Moder;
+    use embassy_stm32::pac::{ETH, GPIOA, RCC, SYSCFG};
+    const REF_CLK_PIN: usize = 1;
+    const AF_ETH: u8 = 11;
+    critical_section::with(|_| {
+        RCC.ahb1rstr().modify(|w| w.set_ethrst(true));
+        SYSCFG.pmc().modify(|w| w.set_mii_rmii_sel(true));
+        RCC.ahb1rstr().modify(|w| w.set_ethrst(false));
+        RCC.ahb1enr().modify(|w| {
+            w.set_ethen(true);
+            w.set_ethtxen(true);
+            w.set_ethrxen(true);
+        });
+        GPIOA.afr(0).modify(|w| w.set_afr(REF_CLK_PIN, AF_ETH));
+        GPIOA
+            .moder()
+            .modify(|w| w.set_moder(REF_CLK_PIN, Moder::ALTERNATE));
+    });
+    let dma = ETH.ethernet_dma();
+    dma.dmabmr().modify(|w| w.set_sr(true));
+    for _ in 0..REF_CLK_WAIT_MS {
+        if !dma.dmabmr().read().sr() {
+            return true;
+        }
+        embassy_time::block_for(embassy_time::Duration::from_millis(1));
+    }
+    RCC.ahb1enr().modify(|w| {
+        w.set_ethen(false);
+        w.set_ethtxen(false);
+        w.set_ethrxen(false);
+    });
+    false
 }
 
 /// Takes the peripherals this board uses. Fails only if a UART rejects its configuration.
@@ -427,15 +616,34 @@ pub fn board(
         line_config(plc_line.baud, plc_line.parity),
     )?;
 
+    if ON_HSE.load(Ordering::Relaxed) {
+        // The clock security system: should the ST-LINK's clock stop (the ST-LINK reset or
+        // unpowered), the chip falls back to HSI and raises an NMI, whose handler forces the
+        // outputs safe and resets (`rt::DefaultHandler`); the next start runs on HSI. Without
+        // it, the system clock would stop with the outputs as they were until the watchdog.
+        embassy_stm32::pac::RCC.cr().modify(|w| w.set_csson(true));
+    } else {
+        warn!(
+            "clock: no 8 MHz from the ST-LINK (HSE): on HSI, UART rates within 1 % only near 25 C"
+        );
+    }
+
     // The seed before the MAC: the RNG runs from the PLL's 48 MHz (`clock_config`).
     let seed = Rng::new(p.RNG, Irqs).next_u64();
-    // The MAC's DMA cannot leave its reset without the PHY's 50 MHz reference clock, and
-    // embassy-stm32 0.6.0 waits for it without bound: a board whose PHY does not answer on the
-    // management interface (clocked from HCLK, not by the PHY) gets no Ethernet, and keeps its
-    // RS485 side, instead of hanging here before the watchdog runs.
+    // A board whose PHY does not answer on the management interface (clocked from HCLK, not by
+    // the PHY), or sends no reference clock, gets no Ethernet and keeps its RS485 side, instead
+    // of hanging here (embassy-stm32 0.6.0 waits for the MAC's reset without bound).
     let mut sma = Sma::new(p.ETH_SMA, p.PA2, p.PC1);
-    let ethernet = if phy_answers(&mut sma) {
-        // The PHY's reset is waited for here (at most `PHY_RESET_WAIT_MS`), before the watchdog.
+    let phy = phy_answers(&mut sma);
+    if !phy {
+        error!("net: no LAN8742A answers at SMI address 0: no Ethernet");
+    }
+    let clocked = phy && mac_clock_runs();
+    if phy && !clocked {
+        error!("net: no 50 MHz reference clock from the PHY: no Ethernet");
+    }
+    let ethernet = if clocked {
+        // The PHY's reset is waited for here (at most `PHY_RESET_WAIT_MS`).
         let device = eth::Ethernet::new_with_phy(
             PACKET_QUEUE.take(),
             p.ETH,
@@ -452,7 +660,6 @@ pub fn board(
         );
         Some(Ethernet { device, seed })
     } else {
-        error!("net: no LAN8742A answers at SMI address 0: no Ethernet");
         None
     };
 

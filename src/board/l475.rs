@@ -64,6 +64,9 @@
 //! board routes to no connector) so that the emulator suite runs those patterns on the real
 //! firmware; a board with those terminals adds them to its table the same way.
 
+#[cfg(feature = "hw")]
+use core::sync::atomic::{AtomicU32, Ordering};
+
 use embassy_stm32::exti::{self, ExtiInput};
 use embassy_stm32::peripherals::{UART4, USART2};
 use embassy_stm32::usart::{self, BufferedInterruptHandler, BufferedUart, ConfigError};
@@ -77,6 +80,10 @@ use crate::discrete::{Inputs, Leds, Outputs};
 use crate::io::Pins;
 use crate::pins::{self, LineBreak, PinId};
 use crate::serial::Rs485;
+#[cfg(feature = "hw")]
+use embedded_storage::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
 
 /// The board, as the gateway names it to the PLC (device identification).
 pub const MODEL_NAME: &str = "B-L475E-IOT01A (STM32L475VG)";
@@ -98,13 +105,79 @@ pub const LED_ON: embassy_stm32::gpio::Level = embassy_stm32::gpio::Level::High;
 #[cfg(feature = "hw")]
 pub const SETTINGS_RANGE: core::ops::Range<u32> = 0x000F_E000..0x0010_0000;
 
-/// The flash with the data cache off while it is written or erased: STM32L47x/L48x errata
-/// (ES0250), "Data cache might be corrupted during Flash memory read-while-write operation"
-/// (the settings pages are in bank 2, the program runs from bank 1). The workaround: the data
-/// cache off (ACR.DCEN) before each program or erase, reset (DCRST) and on again after.
-/// embassy-stm32 0.6.0 does not do it (later versions do).
+/// The flash with the data cache off while it is read, written or erased, and a read that hit an
+/// ECC double error failing.
+///
+/// The data cache: STM32L47x/L48x errata (ES0250), "Data cache might be corrupted during Flash
+/// memory read-while-write operation" (the settings pages are in bank 2, the program runs from
+/// bank 1). The workaround: the data cache off (ACR.DCEN) before each program or erase, reset
+/// (DCRST) and on again after. embassy-stm32 0.6.0 does not do it (later versions do). Reads
+/// too, so that every read reaches the flash and its ECC check (a cached line would not raise
+/// the error again).
+///
+/// ECC: a double word whose programming a power cut interrupted (a save torn midway) can hold
+/// two bad bits; reading it sets FLASH_ECCR.ECCD, which raises an NMI. The NMI handler
+/// (`rt::DefaultHandler`, through [`settings_ecc_error`]) records the address when it lies in the
+/// settings pages, clears the flag and returns; the read then fails here ([`FlashError::Ecc`]),
+/// which the settings store takes for a torn record. (Without the handler the NMI spun in
+/// cortex-m-rt's default handler until the watchdog reset the chip, whose next start read the
+/// same word: a boot loop.)
 #[cfg(feature = "hw")]
 pub struct DcacheOff<F>(pub F);
+
+/// The flash offset (from the start of flash) of the ECC double error the NMI handler took in
+/// the settings pages since the last read began, [`NO_ECC_ERROR`] if none.
+#[cfg(feature = "hw")]
+static SETTINGS_ECC_ERROR: AtomicU32 = AtomicU32::new(NO_ECC_ERROR);
+/// No error: offset 0 is the program's first word, never a settings page (and 0 keeps the static
+/// in `.bss`, not in flash and RAM both).
+#[cfg(feature = "hw")]
+const NO_ECC_ERROR: u32 = 0;
+#[cfg(feature = "hw")]
+const _: () = assert!(SETTINGS_RANGE.start > NO_ECC_ERROR);
+/// Bank 2's offset from the start of flash (the STM32L475VG's two 512 KiB banks, not swapped):
+/// FLASH_ECCR gives the address within the bank (BK_ECC, ADDR_ECC).
+#[cfg(feature = "hw")]
+const BANK_2: u32 = 0x8_0000;
+
+/// For the NMI handler: whether the NMI is an ECC double error (FLASH_ECCR.ECCD) in the settings
+/// pages, which this records and clears (the handler then returns, and the read that hit it
+/// fails). Anything else (an error in the program or the system flash, any other NMI) is left
+/// to the handler: outputs safe, then a reset.
+#[cfg(feature = "hw")]
+pub fn settings_ecc_error() -> bool {
+    let eccr = embassy_stm32::pac::FLASH.eccr();
+    let ecc = eccr.read();
+    if !ecc.eccd() || ecc.sysf_ecc() {
+        return false;
+    }
+    let offset = ecc.addr_ecc() + if ecc.bk_ecc() { BANK_2 } else { 0 };
+    if !SETTINGS_RANGE.contains(&offset) {
+        return false;
+    }
+    SETTINGS_ECC_ERROR.store(offset, Ordering::Relaxed);
+    // ECCD is cleared by writing 1 (ECCC too, if set: a corrected error, nothing to keep).
+    eccr.modify(|w| w.set_eccd(true));
+    true
+}
+
+/// A failed flash operation: the driver's error, or a read that took an ECC double error.
+#[cfg(feature = "hw")]
+#[derive(Debug)]
+pub enum FlashError<E> {
+    Driver(E),
+    Ecc,
+}
+
+#[cfg(feature = "hw")]
+impl<E: NorFlashError> NorFlashError for FlashError<E> {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            FlashError::Driver(e) => e.kind(),
+            FlashError::Ecc => NorFlashErrorKind::Other,
+        }
+    }
+}
 
 #[cfg(feature = "hw")]
 impl<F> DcacheOff<F> {
@@ -123,20 +196,28 @@ impl<F> DcacheOff<F> {
 }
 
 #[cfg(feature = "hw")]
-impl<F: embedded_storage::nor_flash::ErrorType> embedded_storage::nor_flash::ErrorType
-    for DcacheOff<F>
-{
-    type Error = F::Error;
+impl<F: ErrorType> ErrorType for DcacheOff<F> {
+    type Error = FlashError<F::Error>;
 }
 
 #[cfg(feature = "hw")]
-impl<F: embedded_storage::nor_flash::ReadNorFlash> embedded_storage::nor_flash::ReadNorFlash
-    for DcacheOff<F>
-{
+impl<F: ReadNorFlash> ReadNorFlash for DcacheOff<F> {
     const READ_SIZE: usize = F::READ_SIZE;
 
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-        self.0.read(offset, bytes)
+        SETTINGS_ECC_ERROR.store(NO_ECC_ERROR, Ordering::Relaxed);
+        self.without_dcache(|flash| flash.read(offset, bytes))
+            .map_err(FlashError::Driver)?;
+        // The NMI is taken right after the load that raised it; the barriers make sure that
+        // has happened (the load completed, the pipeline refetched) before the check.
+        cortex_m::asm::dsb();
+        cortex_m::asm::isb();
+        let at = SETTINGS_ECC_ERROR.swap(NO_ECC_ERROR, Ordering::Relaxed);
+        if at != NO_ECC_ERROR {
+            warn!("settings: flash ECC error at {:#x}: a torn record", at);
+            return Err(FlashError::Ecc);
+        }
+        Ok(())
     }
 
     fn capacity(&self) -> usize {
@@ -145,18 +226,18 @@ impl<F: embedded_storage::nor_flash::ReadNorFlash> embedded_storage::nor_flash::
 }
 
 #[cfg(feature = "hw")]
-impl<F: embedded_storage::nor_flash::NorFlash> embedded_storage::nor_flash::NorFlash
-    for DcacheOff<F>
-{
+impl<F: NorFlash> NorFlash for DcacheOff<F> {
     const WRITE_SIZE: usize = F::WRITE_SIZE;
     const ERASE_SIZE: usize = F::ERASE_SIZE;
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
         self.without_dcache(|flash| flash.write(offset, bytes))
+            .map_err(FlashError::Driver)
     }
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
         self.without_dcache(|flash| flash.erase(from, to))
+            .map_err(FlashError::Driver)
     }
 }
 

@@ -56,13 +56,16 @@ pub const INPUT_ON: Level = Level::High;
 pub const OUTPUT_ON: Level = Level::High;
 /// The gateway task must make progress at least this often, or the IWDG resets the chip: its
 /// loop passes every 100 ms at least, and no await in it lasts longer than a bus frame, a rate
-/// change or a flash write (a PLC reply is left to the UART: `gateway`).
+/// change or a flash write (a PLC reply is left to the UART: `gateway`). The longest stretch
+/// without a pet is one flash erase: an F429 16 KiB sector, 0.5 s at most (the erase feeds the
+/// watchdog before each sector: `f429::SettingsSectors`), against the shortest timeout below,
+/// 0.68 s on that chip: 0.18 s to spare (0.63 s on the F103, whose page erase takes 40 ms at
+/// most; 0.91 s on the L475, 25 ms).
 const WATCHDOG_TIMEOUT_US: u32 = 1_000_000;
 /// The shortest time [`WATCHDOG_TIMEOUT_US`] may really be: the IWDG counts the LSI, which the
-/// driver takes for its nominal 40 kHz (F103) or 32 kHz (L4, F4); it runs at 30-60 kHz on the F103
-/// (datasheet), so the timeout is 0.67-1.33 s there (29.5-34 kHz on the L4: 0.94-1.08 s; 17-47
-/// kHz on the F429: 0.68-1.88 s). The
-/// emulator's model of the watchdog expires after this.
+/// firmware takes for its nominal 40 kHz (F103) or 32 kHz (L4, F4); it runs at 30-60 kHz on the
+/// F103 (datasheet), so the timeout is 0.67-1.33 s there (29.5-34 kHz on the L4: 0.94-1.08 s;
+/// 17-47 kHz on the F429: 0.68-1.88 s). The emulator's model of the watchdog expires after this.
 #[cfg(feature = "emulator")]
 pub const WATCHDOG_SHORTEST_US: u32 = WATCHDOG_TIMEOUT_US / 60 * 40;
 
@@ -108,11 +111,10 @@ pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<l475::Dcac
 pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<Flash>;
 /// On the F429, bank 2's first region (its four 16 KiB sectors; offsets from 0x0810_0000): its
 /// erase page is a 16 KiB sector, where the whole flash's is the largest sector, 128 KiB
-/// (`memory/f429zi.x` says why the small sectors).
+/// (`memory/f429zi.x` says why the small sectors), erased with the interrupts running
+/// ([`f429::SettingsSectors`]).
 #[cfg(all(feature = "hw", feature = "board-f429"))]
-pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<
-    f429::Psize32<embassy_stm32::flash::Bank2Region1<'static, embassy_stm32::flash::Blocking>>,
->;
+pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<f429::SettingsSectors>;
 /// No flash interface in QEMU.
 #[cfg(feature = "emulator")]
 pub type SettingsFlash = core::convert::Infallible;
@@ -255,7 +257,7 @@ pub(crate) fn settings_flash(
     #[cfg(feature = "board-l475")]
     let flash = l475::DcacheOff(flash);
     #[cfg(feature = "board-f429")]
-    let flash = f429::Psize32(flash.into_blocking_regions().bank2_region1);
+    let flash = f429::SettingsSectors(flash);
     Some(embassy_embedded_hal::adapter::BlockingAsync::new(flash))
 }
 
@@ -268,33 +270,78 @@ pub(crate) fn settings_flash(
 
 /// The independent watchdog on the board; in the emulator (QEMU has no IWDG model) a model of
 /// it on the SysTick interrupt (`systick`), with the shortest timeout the board's may have.
+///
+/// On the board the IWDG runs from [`start_watchdog`], before the clocks and the PHY are brought
+/// up: every wait there that is not bounded by the firmware itself (embassy-stm32's, for a clock
+/// that never becomes ready) ends in a reset instead of a hang. This object only feeds it.
 pub struct Watchdog {
-    #[cfg(feature = "hw")]
-    iwdg: embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
+    _private: (),
 }
 
 impl Watchdog {
+    /// The watchdog, fed once: on the board it runs already ([`start_watchdog`]).
     #[cfg(feature = "hw")]
-    pub(crate) fn new(iwdg: Peri<'static, embassy_stm32::peripherals::IWDG>) -> Watchdog {
-        freeze_watchdog_while_halted();
-        let mut iwdg = embassy_stm32::wdg::IndependentWatchdog::new(iwdg, WATCHDOG_TIMEOUT_US);
-        iwdg.unleash();
-        Watchdog { iwdg }
+    pub(crate) fn new(_iwdg: Peri<'static, embassy_stm32::peripherals::IWDG>) -> Watchdog {
+        pet_watchdog();
+        Watchdog { _private: () }
     }
 
     #[cfg(feature = "emulator")]
     pub(crate) fn new(_iwdg: Peri<'static, embassy_stm32::peripherals::IWDG>) -> Watchdog {
         crate::systick::watchdog_start(WATCHDOG_SHORTEST_US);
-        Watchdog {}
+        Watchdog { _private: () }
     }
 
     /// The gateway task made progress.
     pub fn pet(&mut self) {
         #[cfg(feature = "hw")]
-        self.iwdg.pet();
+        pet_watchdog();
         #[cfg(feature = "emulator")]
         crate::systick::watchdog_pet();
     }
+}
+
+/// The IWDG's prescaler: the LSI divided by 16 (PR = 2), 0.5 ms a count at the nominal 32 kHz.
+#[cfg(feature = "hw")]
+const WATCHDOG_PRESCALER: u32 = 16;
+/// The IWDG's reload value for [`WATCHDOG_TIMEOUT_US`] at the LSI's nominal rate (embassy-stm32's
+/// `LSI_FREQ`: 40 kHz on the F103, 32 kHz on the L4 and F4): 2,499 and 1,999, inside the 12-bit
+/// counter.
+#[cfg(feature = "hw")]
+const WATCHDOG_RELOAD: u16 = {
+    let counts =
+        embassy_stm32::rcc::LSI_FREQ.0 / WATCHDOG_PRESCALER * (WATCHDOG_TIMEOUT_US / 1000) / 1000;
+    assert!(counts >= 1 && counts <= 0x1000);
+    (counts - 1) as u16
+};
+
+/// Starts the IWDG at [`WATCHDOG_TIMEOUT_US`], first thing at start-up (before
+/// `embassy_stm32::init`): from here on a clock, PHY or peripheral that never becomes ready
+/// resets the chip within the timeout instead of hanging it with the RS485 side dead. The
+/// registers directly (the HAL's driver needs the peripherals `init` returns); the IWDG needs no
+/// clock enable (it starts the LSI itself). Its prescaler and reload take effect within a few LSI
+/// periods; until then the reset values (LSI / 4, 4,096 counts: 0.27 s at the fastest LSI, the
+/// F103's) apply, far longer than that.
+#[cfg(feature = "hw")]
+pub fn start_watchdog() {
+    use embassy_stm32::pac::iwdg::vals::{Key, Pr};
+    freeze_watchdog_while_halted();
+    let iwdg = embassy_stm32::pac::IWDG;
+    iwdg.kr().write(|w| w.set_key(Key::START));
+    iwdg.kr().write(|w| w.set_key(Key::ENABLE));
+    const _: () = assert!(WATCHDOG_PRESCALER == 16);
+    iwdg.pr().write(|w| w.set_pr(Pr::from_bits(2)));
+    iwdg.rlr().write(|w| w.set_rl(WATCHDOG_RELOAD));
+    pet_watchdog();
+}
+
+/// Reloads the IWDG's counter (its key register: no state, so any code that waits long on
+/// purpose, such as the F429's sector erase, may feed it between steps).
+#[cfg(feature = "hw")]
+pub fn pet_watchdog() {
+    embassy_stm32::pac::IWDG
+        .kr()
+        .write(|w| w.set_key(embassy_stm32::pac::iwdg::vals::Key::RESET));
 }
 
 /// The IWDG stops counting while a debug probe halts the core (DBGMCU, DBG_IWDG_STOP), so that a

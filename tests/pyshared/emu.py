@@ -408,6 +408,19 @@ class Emulator:
         self.measure_stack = False
         self.qtest.cmd(f"writeb {self.symbols['EMU_OVERFLOW']:#x} 0x1")
 
+    NMI, UNBOUND_IRQ = 1, 2
+
+    def request_fault(self, fault):
+        """Raises `Emulator.NMI` (SCB ICSR NMIPENDSET) or `Emulator.UNBOUND_IRQ` (an interrupt
+        no handler is bound to, enabled and pended in the NVIC) on the firmware's next wake
+        (emulator build only: `EMU_FAULT_REQUEST` in src/rt.rs). The handler forces the outputs
+        safe and then holds until `release_fault()` (10 s at most) before it resets the machine."""
+        self.qtest.cmd(f"writeb {self.symbols['EMU_FAULT_REQUEST']:#x} {fault:#x}")
+
+    def release_fault(self):
+        """Lets a held fault handler reset the machine (`EMU_FAULT_SEEN` in src/rt.rs)."""
+        self.qtest.cmd(f"writeb {self.symbols['EMU_FAULT_SEEN']:#x} 0x1")
+
     # ------------------------------------------------------------------ the bus, as rc-sim saw it
 
     def sim_log(self):
@@ -527,7 +540,8 @@ def elf_symbols(path):
                 found[symbol.name] = symbol["st_value"]
             else:  # mangled: rc_gateway::gateway::EMU_PANIC, rc_gateway::rt::load::EMU_BUSY_US
                 for name in ("EMU_PANIC", "EMU_STALL", "EMU_OVERFLOW", "EMU_BUSY_US", "EMU_CLOCK_US",
-                             "EMU_STOP_WAKES", "EMU_CSTR_SPAN_US", "EMU_PULSE_MASK"):
+                             "EMU_STOP_WAKES", "EMU_CSTR_SPAN_US", "EMU_PULSE_MASK",
+                             "EMU_FAULT_REQUEST", "EMU_FAULT_SEEN"):
                     if name in symbol.name:
                         found[name] = symbol["st_value"]
         return found
