@@ -302,7 +302,7 @@ const REASONS: &[&str] = &[
 ];
 
 fn link_name(link: u16) -> &'static str {
-    ["unknown", "online", "offline"]
+    ["unknown", "online", "offline", "offline, owed a stop"]
         .get(usize::from(link))
         .copied()
         .unwrap_or("?")
@@ -1175,7 +1175,7 @@ fn diag(gw: &mut Gw, json: bool) -> Result<(), Fail> {
         "uptime_s": long(&g, 1),
         "failsafe_trips": g[usize::from(G_FAILSAFE_COUNT)],
         "axes": axes,
-        "bus": {"unsolicited": long(&bus, 0), "events_lost": long(&bus, 1), "queue_full": long(&bus, 2), "establishments": long(&bus, 3)},
+        "bus": {"unsolicited": long(&bus, 0), "events_lost": long(&bus, 1), "queue_full": long(&bus, 2), "establishments": long(&bus, 3), "stops_owed": long(&bus, 4), "broadcast_refusals": long(&bus, 5)},
         "plc_line": {"frames": long(&plc, 0), "crc_errors": long(&plc, 1), "exceptions": long(&plc, 2), "replies": long(&plc, 3),
                      "other_units": long(&plc, 4), "broadcasts": long(&plc, 5), "malformed": long(&plc, 6)},
         "fc08": fc08,

@@ -1018,15 +1018,34 @@ pub fn apply(gw: &mut Gw) -> Result<(), Fail> {
     let line = gw.read(unit, G_PLC_BAUD, 3)?;
     let (pending_unit, pending_base) = (line[2], gw.get(G_AXIS_BASE)?);
     let enabled = Settings::read_enabled(gw)?;
-    match gw.try_write(unit, G_APPLY, &[1])? {
-        Ok(()) => {}
-        Err(Exception::IllegalDataValue) => {
-            return Err(Fail::Device(format!(
-                "{}: APPLY refused (exception 03): something moves, runs or waits on the bus, or an establishment runs",
-                gw.at(unit, G_APPLY)
-            )))
+    // A refusal while nothing the PLC started moves or runs is the gateway's own work: the
+    // establishment after a start (its first stops go before it, and a dead axis' cost
+    // time-outs), a stop still on the bus. Asked again until it ends, 15 s at most.
+    let patience = Instant::now() + Duration::from_secs(15);
+    loop {
+        match gw.try_write(unit, G_APPLY, &[1])? {
+            Ok(()) => break,
+            Err(Exception::IllegalDataValue) => {
+                let why = busy(gw, &enabled)?;
+                if why.is_some() || Instant::now() >= patience {
+                    return Err(Fail::Device(format!(
+                        "{}: APPLY refused (exception 03): {}",
+                        gw.at(unit, G_APPLY),
+                        why.unwrap_or_else(|| {
+                            "something moves, runs or waits on the bus, or an establishment runs"
+                                .into()
+                        })
+                    )));
+                }
+                std::thread::sleep(Duration::from_millis(250));
+            }
+            Err(e) => {
+                return Err(Fail::Device(format!(
+                    "{}: {e} writing 1",
+                    gw.at(unit, G_APPLY)
+                )))
+            }
         }
-        Err(e) => return Err(Fail::Device(format!("{}: {e} writing 1", gw.at(unit, G_APPLY)))),
     }
     if gw.link.is_rtu() {
         let parity = match line[1] {
