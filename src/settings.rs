@@ -97,7 +97,10 @@ impl Settings {
             // The pace's clock, in units of 2^20 µs (1.05 s; a shift, where seconds would link
             // a 64-bit division): 142 years before u32 runs out.
             let now = (embassy_time::Instant::now().as_micros() >> 20) as u32;
-            return store.save(record, now).map_err(|_| ());
+            return store.save(record, now).map_err(|e| {
+                // TooSoon: the PLC saved more than the pace allows (SAVESTAT 3 tells it).
+                warn!("settings: SAVE not stored: {}", e);
+            });
         }
         let _ = record;
         Err(())

@@ -80,7 +80,9 @@
 //! sooner is refused, [`StoreError::TooSoon`]). A full record takes `size(ITEM_LEN)` = 232
 //! bytes: the F103's 4 pages of 1 KiB hold 4 a page, 16 in all, so with 10 000 erases a page
 //! its range takes 160 000 saves (the L475's 4 x 2 KiB 320 000, the F429's 2 x 16 KiB sectors
-//! 1 400 000); at the paced rate, saving nonstop, that is 1.8 years on the F103.
+//! 1 400 000); at the paced rate, saving nonstop, that is 1.8 years on the F103. The pace is
+//! kept in RAM: it starts afresh with every start of the board (a start writes nothing but, once,
+//! a record that counts unreadable settings).
 //!
 //! (This store replaced `sequential-storage`'s queue: the same guarantees in 4.6 KB less flash
 //! on both boards, measured by `scripts/size-report.sh`.)
