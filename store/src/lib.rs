@@ -54,8 +54,9 @@
 //! not begun. A page whose erase was cut has no header, or (cut very early) holds records that
 //! its erase has set bits of: a set bit in the padding, or the CRC-32, gives them away. The
 //! previous newest record stays in force: the old settings or the new ones, never a mix. A
-//! factory reset erases the newest record's page last: cut before, the settings stay; cut
-//! during that erase, the defaults run and the counts (SAVECOUNT, CFGERRORS) start again from 0.
+//! factory reset erases the other pages, writes the counts alone in a freshly erased page as
+//! the newest record, and only then erases the newest settings' page: cut before that record is
+//! whole, the settings stay; after, the defaults run, the counts kept.
 //!
 //! At start-up: an erased range (a new board) gives the defaults. Else the newest item of ours
 //! is loaded. If its settings record does not decode ([`Settings::decode`]), the newest older
@@ -572,26 +573,41 @@ impl<F: NorFlash> Store<F> {
         Ok(saves)
     }
 
-    /// Forget the settings: the next start uses the defaults. The whole range is erased, the
-    /// newest record's page last (cut short before that, the newest record stays in force);
-    /// then that page holds one record: the counts, which stay (unless the flash cannot read
-    /// them).
+    /// Forget the settings: the next start uses the defaults. Every page of the range is erased,
+    /// the newest record's last: first the others but the one after it, then that one, given
+    /// the counts in a record of their own (newer than any before), then the newest record's.
+    /// Cut before that record is whole, the settings stay; after, the defaults run. The counts
+    /// stay (unless the flash cannot read them).
     pub fn factory_reset(&mut self) -> Result<(), StoreError> {
-        let page = match self.newest(None) {
-            Ok((scan, _)) => scan.page,
+        let scan = match self.newest(None) {
+            Ok((scan, _)) => scan,
             Err(_) => {
                 self.set_counts(0, 0);
-                0
+                Scan::BLANK
             }
         };
-        for i in 1..self.pages {
-            self.erase((page + i) % self.pages)?;
-        }
-        let last = Scan {
-            page,
-            ..Scan::BLANK
+        let newest = scan.page;
+        // Where the counts go: the page after the newest record's (`newest` if there is none).
+        let to = match scan.newest {
+            Some(_) => (newest + 1) % self.pages,
+            None => newest,
         };
-        self.append(&last, COUNTS_LEN)
+        for i in 1..self.pages {
+            let page = (to + i) % self.pages;
+            if page != newest {
+                self.erase(page)?;
+            }
+        }
+        // No room in the newest record's page: the next one, erased.
+        let full = Scan {
+            free: F::ERASE_SIZE,
+            ..scan
+        };
+        self.append(&full, COUNTS_LEN)?;
+        if to != newest {
+            self.erase(newest)?;
+        }
+        Ok(())
     }
 }
 
