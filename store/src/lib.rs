@@ -579,7 +579,7 @@ impl<F: NorFlash> Store<F> {
     /// Cut before that record is whole, the settings stay; after, the defaults run. The counts
     /// stay (unless the flash cannot read them).
     pub fn factory_reset(&mut self) -> Result<(), StoreError> {
-        let scan = match self.newest(None) {
+        let mut scan = match self.newest(None) {
             Ok((scan, _)) => scan,
             Err(_) => {
                 self.set_counts(0, 0);
@@ -599,11 +599,8 @@ impl<F: NorFlash> Store<F> {
             }
         }
         // No room in the newest record's page: the next one, erased.
-        let full = Scan {
-            free: F::ERASE_SIZE,
-            ..scan
-        };
-        self.append(&full, COUNTS_LEN)?;
+        scan.free = F::ERASE_SIZE;
+        self.append(&scan, COUNTS_LEN)?;
         if to != newest {
             self.erase(newest)?;
         }
