@@ -14,8 +14,6 @@ use protocol::plc::settings::RECORD_LEN;
 use protocol::plc::GatewayConfig;
 
 use crate::board::SettingsFlash;
-#[cfg(feature = "hw")]
-use embassy_futures::block_on;
 
 /// The inputs that, held ON at power-up, ask for a factory reset.
 pub const FACTORY_RESET_INPUTS: PioInputs =
@@ -48,10 +46,9 @@ impl Settings {
     /// settings over them, or nothing (after a factory reset if `inputs` ask for one), and
     /// what the start found.
     ///
-    /// The store's operations are async (`embedded-storage-async`), but over this chip's blocking
-    /// flash they never wait: each is run to completion on the spot, in a function of its own,
-    /// so that the store's code is in the firmware once rather than inlined into the gateway
-    /// task's state machine at every call.
+    /// The store's operations block (the chip's flash is blocking): each is run to completion on
+    /// the spot, in a function of its own, so that the store's code is in the firmware once
+    /// rather than inlined into the gateway task's state machine at every call.
     #[inline(never)]
     pub fn load(&mut self, inputs: PioInputs, config: &mut GatewayConfig) {
         let factory = inputs.contains(FACTORY_RESET_INPUTS);
@@ -73,8 +70,8 @@ impl Settings {
     }
 
     /// What the store holds, into `config`. Not inlined, like each store operation here: each
-    /// one's future (the store's buffers and its nested calls) is then on the stack only while
-    /// it runs, not all of them at once under [`Settings::load`]; and the settings loaded are
+    /// one's frames (its nested calls, what it returns) are then on the stack only while it
+    /// runs, not all of them at once under [`Settings::load`]; and the settings loaded are
     /// applied here, not returned (the deepest stack at start-up is this one:
     /// `scripts/stack_depth.py`).
     #[cfg(feature = "hw")]
@@ -83,19 +80,27 @@ impl Settings {
         let Some(store) = self.store.as_mut() else {
             return;
         };
-        let loaded = block_on(store.load());
+        let loaded = store.load();
         if let Some(settings) = loaded.settings {
             settings.apply_to(config);
         }
         config.boot = loaded.boot;
     }
 
-    /// SAVE: store `record`; the saves so far, or `Err` if there is no store or it failed.
+    /// SAVE: store `record`; the saves so far, or `Err` (SAVESTAT 3) if there is no store, it
+    /// failed, or the save came too soon after others (`settings_store::SAVE_BURST`: the flash's
+    /// wear is paced).
     #[inline(never)]
     pub fn save(&mut self, record: &[u8; RECORD_LEN]) -> Result<u32, ()> {
         #[cfg(feature = "hw")]
         if let Some(store) = self.store.as_mut() {
-            return block_on(store.save(record)).map_err(|_| ());
+            // The pace's clock, in units of 2^20 µs (1.05 s; a shift, where seconds would link
+            // a 64-bit division): 142 years before u32 runs out.
+            let now = (embassy_time::Instant::now().as_micros() >> 20) as u32;
+            return store.save(record, now).map_err(|e| {
+                // TooSoon: the PLC saved more than the pace allows (SAVESTAT 3 tells it).
+                warn!("settings: SAVE not stored: {}", e);
+            });
         }
         let _ = record;
         Err(())
@@ -106,7 +111,7 @@ impl Settings {
     pub fn factory_reset(&mut self) {
         #[cfg(feature = "hw")]
         if let Some(store) = self.store.as_mut() {
-            if block_on(store.factory_reset()).is_err() {
+            if store.factory_reset().is_err() {
                 error!("settings: the factory reset could not be written");
             }
         }

@@ -103,18 +103,18 @@ pub struct Board {
 /// The chip's flash, blocking.
 #[cfg(feature = "hw")]
 type Flash = embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>;
-/// The flash the settings store writes, as `settings_store` wants it (async over blocking);
-/// on the L475 with its data cache off while it writes ([`l475::DcacheOff`]).
+/// The flash the settings store writes (blocking: `settings_store` runs each operation to its
+/// end); on the L475 with its data cache off while it writes ([`l475::DcacheOff`]).
 #[cfg(all(feature = "hw", feature = "board-l475"))]
-pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<l475::DcacheOff<Flash>>;
+pub type SettingsFlash = l475::DcacheOff<Flash>;
 #[cfg(all(feature = "hw", feature = "board-f103"))]
-pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<Flash>;
+pub type SettingsFlash = Flash;
 /// On the F429, bank 2's first region (its four 16 KiB sectors; offsets from 0x0810_0000): its
 /// erase page is a 16 KiB sector, where the whole flash's is the largest sector, 128 KiB
 /// (`memory/f429zi.x` says why the small sectors), erased with the interrupts running
 /// ([`f429::SettingsSectors`]).
 #[cfg(all(feature = "hw", feature = "board-f429"))]
-pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<f429::SettingsSectors>;
+pub type SettingsFlash = f429::SettingsSectors;
 /// No flash interface in QEMU.
 #[cfg(feature = "emulator")]
 pub type SettingsFlash = core::convert::Infallible;
@@ -258,7 +258,7 @@ pub(crate) fn settings_flash(
     let flash = l475::DcacheOff(flash);
     #[cfg(feature = "board-f429")]
     let flash = f429::SettingsSectors(flash);
-    Some(embassy_embedded_hal::adapter::BlockingAsync::new(flash))
+    Some(flash)
 }
 
 #[cfg(feature = "emulator")]
