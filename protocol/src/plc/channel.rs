@@ -33,6 +33,10 @@ use crate::memory::PointField;
 use crate::{Address, Axis, PositionNo};
 
 /// Registers of the request block: code, axis, point, field, value high, value low.
+/// Whether this build has the command channel (feature `channel`; the F103's has not): without
+/// it its registers do not exist (02) and nothing here runs.
+pub const CHANNEL: bool = cfg!(feature = "channel");
+
 pub(super) const REQ_LEN: usize = G_REQUEST_LEN as usize;
 /// Registers of the response block: code, error, value high, value low, V5 write count.
 pub(super) const RESP_LEN: usize = G_RESPONSE_LEN as usize;
@@ -91,6 +95,9 @@ impl Channel {
 
     /// REQ or RESP register `address`, if it is one.
     pub(super) fn read(&self, address: u16) -> Option<u16> {
+        if !CHANNEL {
+            return None;
+        }
         let at = |base: u16, block: &[u16]| {
             address
                 .checked_sub(base)
@@ -103,6 +110,9 @@ impl Channel {
     /// The request block as a write of `values` at `address` would leave it, if the write
     /// touches it.
     pub(super) fn after_write(&self, address: u16, values: &[u16]) -> Option<Request> {
+        if !CHANNEL {
+            return None;
+        }
         let mut request = self.request;
         let mut touched = false;
         for (i, &value) in values.iter().enumerate() {
@@ -266,5 +276,32 @@ impl Channel {
         };
         self.state = State::Answered;
         None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::map::{G_REQUEST, G_RESPONSE};
+    use super::super::{Gateway, GatewayConfig};
+    use super::CHANNEL;
+    use crate::modbus::{DataModel, Exception, RegisterTable, SlaveCounters};
+    use crate::time::Instant;
+    use crate::AxisSet;
+
+    /// With the channel, its blocks read and a request is taken; without it (the F103's build)
+    /// they do not exist: 02, nothing stored.
+    #[test]
+    fn the_channel_registers_exist_only_with_the_channel() {
+        let mut gateway = Gateway::new(GatewayConfig::new(AxisSet::first(1)));
+        let mut registers = gateway.registers(Instant::ZERO, SlaveCounters::default());
+        let mut out = [0u16; 1];
+        let read = registers.read_registers(63, RegisterTable::Holding, G_RESPONSE, &mut out);
+        let write = registers.write_registers(63, G_REQUEST, &[0]);
+        if CHANNEL {
+            assert_eq!((read, write), (Ok(()), Ok(())));
+        } else {
+            let missing = Err(Exception::IllegalDataAddress);
+            assert_eq!((read, write), (missing, missing));
+        }
     }
 }
