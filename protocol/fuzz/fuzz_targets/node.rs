@@ -14,7 +14,7 @@
 //! Checks, besides "nothing panics":
 //! - every frame for the bus is a valid frame (BCC) of a command to an axis on the bus;
 //! - once the stop input goes active, every axis on the bus gets its first stop (`d`) before
-//!   any other frame: nothing but `d`s go out until each has had one, and none of them a second
+//!   any other frame (one whose `d` is on the wire then has it): nothing but `d`s go out until each has had one, and none of them a second
 //!   (a resend) before the others' first, unless something may have stopped it again since
 //!   (bytes from the PLC or a TCP client, PIO inputs, an armed watchdog);
 //! - nothing, not even a stop, goes to an axis after it leaves the bus (a PLC may take one off;
@@ -101,6 +101,13 @@ fuzz_target!(|data: &[u8]| {
                 let active = op & 0x08 != 0;
                 if active && !stop_active {
                     owed = node.gateway().config().bus.axes;
+                    // A `d` on the wire as the input opens is that axis' stop: the one asked
+                    // for now takes over its tries and goes as its resend.
+                    if let Some(r) = node.gateway().engine().in_flight() {
+                        if r.command == Command::CancelMotion {
+                            owed = owed.without(r.axis);
+                        }
+                    }
                     // A request still being received, or an armed watchdog (it may trip and
                     // stop every axis again), may bring new stops too.
                     talked = asked

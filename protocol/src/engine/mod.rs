@@ -142,7 +142,9 @@ pub struct Engine {
     config: Config,
     axes: AxisMap<AxisState>,
     active: AxisMap<Option<Active>>,
-    stops: AxisMap<Option<(JobId, u8)>>,
+    /// Each axis' stop waiting to go: its job, the tries it has used, and when it was first
+    /// asked for (a job number: the first stops go in the order they were asked for).
+    stops: AxisMap<Option<(JobId, u8, u32)>>,
     /// Axes owed a stop: theirs got no answer ([`Engine::stop_owed`]).
     owed: AxisSet,
     queue: Deque<(JobId, Job), QUEUE_LEN>,
@@ -248,6 +250,11 @@ impl Engine {
         self.owed.contains(axis)
     }
 
+    /// The command on the wire, waiting for its answer (or its time-out), if any.
+    pub fn in_flight(&self) -> Option<Request> {
+        self.in_flight.map(|f| f.request)
+    }
+
     /// Bus-level counters.
     pub fn bus_counters(&self) -> BusCounters {
         self.bus
@@ -307,7 +314,7 @@ impl Engine {
     /// Whether job `id` is still running or waiting.
     pub fn pending(&self, id: JobId) -> bool {
         self.active.values().flatten().any(|a| a.id == id)
-            || self.stops.values().flatten().any(|(s, _)| *s == id)
+            || self.stops.values().flatten().any(|(s, ..)| *s == id)
             || self.queue.iter().any(|(j, _)| *j == id)
     }
 
@@ -341,7 +348,7 @@ impl Engine {
     #[inline(never)]
     fn leave(&mut self, axis: Axis) {
         self.cancel_jobs(axis, JobError::Cancelled);
-        if let Some((id, _)) = self.stops[axis].take() {
+        if let Some((id, ..)) = self.stops[axis].take() {
             self.job_failed(id, axis, JobError::Cancelled);
         }
         // Its stop may also be on the wire or parked for a baud change (not both: a stop starts
@@ -398,8 +405,10 @@ impl Engine {
             // when the one on the wire fails), so the axis still goes offline, owing it, after
             // 1 + retries time-outs: a fresh round at every repeat kept a cut axis online for
             // ever and its first stop ahead of every other frame on the bus.
-            let tries = self.stops[job.axis].map_or(0, |(_, tries)| tries);
-            if let Some((old, _)) = self.stops[job.axis].replace((id, tries)) {
+            // (And it keeps that one's place among the stops waiting: a stop asked for again
+            // by another part, a synchronized start given up, goes no later for it.)
+            let (tries, asked) = self.stops[job.axis].map_or((0, id.0), |(_, t, a)| (t, a));
+            if let Some((old, ..)) = self.stops[job.axis].replace((id, tries, asked)) {
                 // Two stops in a row: the first is superseded by the second.
                 self.job_failed(old, job.axis, JobError::Cancelled);
             }

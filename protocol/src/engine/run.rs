@@ -86,8 +86,8 @@ impl Engine {
     /// one then takes over the tries this one used (see [`Engine::submit`]).
     pub(super) fn requeue_stop(&mut self, axis: Axis, id: JobId, attempt: u8) {
         match &mut self.stops[axis] {
-            slot @ None => *slot = Some((id, attempt)),
-            Some((_, tries)) => {
+            slot @ None => *slot = Some((id, attempt, id.0)),
+            Some((_, tries, _)) => {
                 *tries = (*tries).max(attempt);
                 self.job_failed(id, axis, JobError::Cancelled);
             }
@@ -96,19 +96,23 @@ impl Engine {
 
     /// The next stop (`d`) waiting to go, if any: every axis' first before any resend, and of
     /// the first ones those of the axes that answer before the others (a dead axis' costs a
-    /// time-out), each group in axis order.
+    /// time-out), each group in the order the stops were asked for.
     pub(super) fn next_stop(&mut self) -> Option<Next> {
-        let rank = |engine: &Engine, axis: Axis| match engine.stops[axis] {
-            Some((_, 0)) if engine.online(axis) => Some(0),
-            Some((_, 0)) => Some(1),
-            Some(_) => Some(2),
-            None => None,
-        };
+        let next_id = self.next_id;
         let axis = Axis::all()
-            .filter_map(|axis| rank(self, axis).map(|r| (r, axis)))
-            .min_by_key(|&(r, axis)| (r, axis.get()))
+            .filter_map(|axis| {
+                let (_, tries, asked) = self.stops[axis]?;
+                let rank = match tries {
+                    0 if self.online(axis) => 0,
+                    0 => 1,
+                    _ => 2,
+                };
+                // Older first: job numbers wrap, so counted back from the next one.
+                Some(((rank, asked.wrapping_sub(next_id)), axis))
+            })
+            .min_by_key(|&(key, _)| key)
             .map(|(_, axis)| axis)?;
-        let (id, attempt) = self.stops[axis].take()?;
+        let (id, attempt, _) = self.stops[axis].take()?;
         Some((
             Request::new(axis, Command::CancelMotion),
             Origin::Stop(id),
