@@ -127,6 +127,18 @@ struct InFlight {
     stands_in: bool,
 }
 
+/// A stop (`d`) waiting to go.
+#[derive(Clone, Copy, Debug)]
+struct WaitingStop {
+    id: JobId,
+    /// The tries used so far (of this stop, or of the ones it superseded).
+    tries: u8,
+    /// When it was first asked for (a job number): the first stops go in that order.
+    asked: u32,
+    /// The axis' first stop since it was asked for (none went since): it goes before resends.
+    first: bool,
+}
+
 /// Why an attempt failed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Failure {
@@ -142,9 +154,8 @@ pub struct Engine {
     config: Config,
     axes: AxisMap<AxisState>,
     active: AxisMap<Option<Active>>,
-    /// Each axis' stop waiting to go: its job, the tries it has used, and when it was first
-    /// asked for (a job number: the first stops go in the order they were asked for).
-    stops: AxisMap<Option<(JobId, u8, u32)>>,
+    /// Each axis' stop waiting to go.
+    stops: AxisMap<Option<WaitingStop>>,
     /// Axes owed a stop: theirs got no answer ([`Engine::stop_owed`]).
     owed: AxisSet,
     queue: Deque<(JobId, Job), QUEUE_LEN>,
@@ -314,7 +325,7 @@ impl Engine {
     /// Whether job `id` is still running or waiting.
     pub fn pending(&self, id: JobId) -> bool {
         self.active.values().flatten().any(|a| a.id == id)
-            || self.stops.values().flatten().any(|(s, ..)| *s == id)
+            || self.stops.values().flatten().any(|s| s.id == id)
             || self.queue.iter().any(|(j, _)| *j == id)
     }
 
@@ -348,7 +359,7 @@ impl Engine {
     #[inline(never)]
     fn leave(&mut self, axis: Axis) {
         self.cancel_jobs(axis, JobError::Cancelled);
-        if let Some((id, ..)) = self.stops[axis].take() {
+        if let Some(WaitingStop { id, .. }) = self.stops[axis].take() {
             self.job_failed(id, axis, JobError::Cancelled);
         }
         // Its stop may also be on the wire or parked for a baud change (not both: a stop starts
@@ -400,15 +411,30 @@ impl Engine {
         if job.kind == JobKind::Stop {
             self.next_id = self.next_id.wrapping_add(1);
             self.cancel_jobs(job.axis, JobError::Cancelled);
-            // A stop for an axis whose stop is still unanswered (the PIO repeats its stop while
-            // *STP is off) takes over the tries that one has used (here, or in `requeue_stop`
-            // when the one on the wire fails), so the axis still goes offline, owing it, after
-            // 1 + retries time-outs: a fresh round at every repeat kept a cut axis online for
-            // ever and its first stop ahead of every other frame on the bus.
-            // (And it keeps that one's place among the stops waiting: a stop asked for again
-            // by another part, a synchronized start given up, goes no later for it.)
-            let (tries, asked) = self.stops[job.axis].map_or((0, id.0), |(_, t, a)| (t, a));
-            if let Some((old, ..)) = self.stops[job.axis].replace((id, tries, asked)) {
+            // A stop for an axis whose stop is still unanswered takes over the tries that one
+            // has used (here, or in `requeue_stop` when the one on the wire fails), so the axis
+            // still goes offline, owing it, after 1 + retries time-outs; the PIO repeats its
+            // stop while *STP is off, and a fresh round at every repeat kept a cut axis online
+            // for ever. It keeps that one's place among the stops waiting, and it is the axis'
+            // first stop unless a `d` to the axis is on the wire (that one is).
+            let on_wire = matches!(self.in_flight,
+                Some(f) if f.request.axis == job.axis
+                    && matches!(f.request.command, Command::CancelMotion));
+            let waiting = WaitingStop {
+                id,
+                tries: 0,
+                asked: id.0,
+                first: !on_wire,
+            };
+            let waiting = match self.stops[job.axis] {
+                Some(old) => WaitingStop {
+                    tries: old.tries,
+                    asked: old.asked,
+                    ..waiting
+                },
+                None => waiting,
+            };
+            if let Some(WaitingStop { id: old, .. }) = self.stops[job.axis].replace(waiting) {
                 // Two stops in a row: the first is superseded by the second.
                 self.job_failed(old, job.axis, JobError::Cancelled);
             }
@@ -609,7 +635,12 @@ impl Engine {
         }
         // A stop goes before everything: before the establishment's next step, a frame parked
         // for a baud change and the broadcasts of a rejoin.
-        let next = match self.next_stop() {
+        // A stop parked for a baud change is one of the stops: it goes on first.
+        let parked = match self.pending {
+            Some((_, Origin::Stop(_), _)) => self.pending.take(),
+            _ => None,
+        };
+        let next = match parked.or_else(|| self.next_stop()) {
             Some(stop) => {
                 if let Some((request, origin, attempt)) = self.pending.take() {
                     // Job frames are rebuilt from their job's cursor, polls come round again.

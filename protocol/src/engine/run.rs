@@ -3,7 +3,7 @@
 //! are judged on status responses, and the end of the program (or a failure) reports once.
 
 use super::job::{self, program, readback_slot, reads_position, written, Op, STORE_COMPARED};
-use super::{Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Next, Origin};
+use super::{Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Next, Origin, WaitingStop};
 use crate::axes::AxisSet;
 use crate::jobs::{PointReadback, StepError};
 use crate::time::Instant;
@@ -86,9 +86,17 @@ impl Engine {
     /// one then takes over the tries this one used (see [`Engine::submit`]).
     pub(super) fn requeue_stop(&mut self, axis: Axis, id: JobId, attempt: u8) {
         match &mut self.stops[axis] {
-            slot @ None => *slot = Some((id, attempt, id.0)),
-            Some((_, tries, _)) => {
-                *tries = (*tries).max(attempt);
+            slot @ None => {
+                *slot = Some(WaitingStop {
+                    id,
+                    tries: attempt,
+                    asked: id.0,
+                    // (Never sent: parked for a baud change.)
+                    first: attempt == 0,
+                })
+            }
+            Some(newer) => {
+                newer.tries = newer.tries.max(attempt);
                 self.job_failed(id, axis, JobError::Cancelled);
             }
         }
@@ -101,22 +109,22 @@ impl Engine {
         let next_id = self.next_id;
         let axis = Axis::all()
             .filter_map(|axis| {
-                let (_, tries, asked) = self.stops[axis]?;
-                let rank = match tries {
-                    0 if self.online(axis) => 0,
-                    0 => 1,
-                    _ => 2,
+                let stop = self.stops[axis]?;
+                let rank = match stop.first {
+                    true if self.online(axis) => 0,
+                    true => 1,
+                    false => 2,
                 };
                 // Older first: job numbers wrap, so counted back from the next one.
-                Some(((rank, asked.wrapping_sub(next_id)), axis))
+                Some(((rank, stop.asked.wrapping_sub(next_id)), axis))
             })
             .min_by_key(|&(key, _)| key)
             .map(|(_, axis)| axis)?;
-        let (id, attempt, _) = self.stops[axis].take()?;
+        let stop = self.stops[axis].take()?;
         Some((
             Request::new(axis, Command::CancelMotion),
-            Origin::Stop(id),
-            attempt,
+            Origin::Stop(stop.id),
+            stop.tries,
         ))
     }
 

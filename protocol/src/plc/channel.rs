@@ -23,7 +23,7 @@
 
 use super::command::Reason;
 use super::config::{AxisConfig, GatewayConfig};
-use super::map::{G_REQUEST, G_REQUEST_LEN, G_RESPONSE, G_RESPONSE_LEN};
+use super::map::{CHANNEL, G_REQUEST, G_REQUEST_LEN, G_RESPONSE, G_RESPONSE_LEN};
 use super::refused::Refused;
 use super::registers::{join, split};
 use super::table;
@@ -33,10 +33,6 @@ use crate::memory::PointField;
 use crate::{Address, Axis, PositionNo};
 
 /// Registers of the request block: code, axis, point, field, value high, value low.
-/// Whether this build has the command channel (feature `channel`; the F103's has not): without
-/// it its registers do not exist (02) and nothing here runs.
-pub const CHANNEL: bool = cfg!(feature = "channel");
-
 pub(super) const REQ_LEN: usize = G_REQUEST_LEN as usize;
 /// Registers of the response block: code, error, value high, value low, V5 write count.
 pub(super) const RESP_LEN: usize = G_RESPONSE_LEN as usize;
@@ -281,9 +277,9 @@ impl Channel {
 
 #[cfg(test)]
 mod tests {
+    use super::super::map::CHANNEL;
     use super::super::map::{G_REQUEST, G_RESPONSE};
     use super::super::{Gateway, GatewayConfig};
-    use super::CHANNEL;
     use crate::modbus::{DataModel, Exception, RegisterTable, SlaveCounters};
     use crate::time::Instant;
     use crate::AxisSet;

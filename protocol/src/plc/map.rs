@@ -209,6 +209,9 @@ pub const G_REQUEST_LEN: u16 = 6;
 pub const G_RESPONSE: u16 = 0x0210;
 /// Registers of the command channel's response block.
 pub const G_RESPONSE_LEN: u16 = 5;
+/// Whether this build has the command channel (protocol feature `channel`; the F103's has
+/// not, for flash): without it the request and response blocks do not exist (02).
+pub const CHANNEL: bool = cfg!(feature = "channel");
 /// Per-axis diagnostics: 16 registers per axis from here.
 pub const G_DIAG: u16 = 0x0400;
 /// Registers per axis in the diagnostics block.

@@ -47,7 +47,6 @@ mod teach;
 pub mod write;
 
 pub use boot::{Boot, ConfigSource, ResetCause};
-pub use channel::CHANNEL;
 pub use command::{CommandState, Reason};
 pub use config::{
     AxisConfig, GatewayConfig, Parity, PlcLine, WatchdogAction, DEFAULT_GATEWAY_UNIT,

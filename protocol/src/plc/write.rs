@@ -370,7 +370,7 @@ impl GatewayWrite {
             G_PIO_INCH => pio_inch_ok(value).then_some(GatewayWrite::PioInch(value)),
             G_SYNC_MASK => Some(GatewayWrite::SyncMask(AxisSet(value))),
             a if a.checked_sub(G_REQUEST).is_some_and(|i| i < G_REQUEST_LEN) => {
-                if !super::channel::CHANNEL {
+                if !CHANNEL {
                     // A build without the command channel (the F103's): not there.
                     return Err(Refused::NoSuchAddress);
                 }
