@@ -69,7 +69,8 @@ pub struct BusCounters {
     pub queue_full: u32,
     /// Times the establishment procedure ran.
     pub establishments: u32,
-    /// Stops that got no answer, so their axis is owed one ([`Engine::stop_owed`](super::Engine::stop_owed)).
+    /// Times an axis came to owe a stop: its stop got no answer ([`Engine::stop_owed`](super::Engine::stop_owed));
+    /// more stops it does not answer while it owes one are not counted again.
     pub stops_owed: u32,
 }
 

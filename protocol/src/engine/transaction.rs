@@ -170,9 +170,11 @@ impl Engine {
             Origin::Stop(id) => {
                 self.job_failed(id, axis, JobError::Timeout);
                 self.set_link(now, axis, Link::Offline);
-                // Not given up: owed until the axis answers one.
+                // Not given up: owed until the axis answers one (counted once per debt).
+                if !self.owed.contains(axis) {
+                    self.bus.stops_owed = self.bus.stops_owed.wrapping_add(1);
+                }
                 self.owed = self.owed.with(axis);
-                self.bus.stops_owed = self.bus.stops_owed.wrapping_add(1);
             }
             Origin::Establish => {
                 self.set_link(now, axis, Link::Offline);
