@@ -113,6 +113,23 @@ fn a_stop_to_an_offline_axis_is_taken_and_owed() {
     );
 }
 
+/// PIOAXIS 0, its *STP and SON inputs ON.
+fn wire_drive_axis_0(h: &mut NodeHarness) {
+    write(h, 63, G_PIO_AXIS, &[0]).unwrap();
+    h.inputs = Some(PioInputs::from_bits(
+        PioInputs::STP_N.bits() | PioInputs::SON.bits(),
+    ));
+    h.run_for(200 * MS);
+}
+
+/// Axis 0 on [`SLOW_MOVE`], then its wire cut mid-move.
+fn move_slowly_then_cut(h: &mut NodeHarness) {
+    write(h, unit(0), DIRECT, &SLOW_MOVE).unwrap();
+    h.run_for(500 * MS);
+    assert!(moving(h, 0), "the move runs");
+    h.bus.set_cut(axis(0), true);
+}
+
 /// The owed stop: a move running (a held jog, as the bus sees it), the wire cut, the stop
 /// applied by `stop` and unanswered; the wire mended with the controller still moving. The
 /// first frame the axis gets after that is `d`, it ends at rest, and LINK reads 3 meanwhile.
@@ -122,16 +139,9 @@ fn owed_stop_is_the_first_frame_after_the_wire_is_mended(
 ) {
     let mut h = homed(2);
     if pio {
-        write(&mut h, 63, G_PIO_AXIS, &[0]).unwrap();
-        h.inputs = Some(PioInputs::from_bits(
-            PioInputs::STP_N.bits() | PioInputs::SON.bits(),
-        ));
-        h.run_for(200 * MS);
+        wire_drive_axis_0(&mut h);
     }
-    write(&mut h, unit(0), DIRECT, &SLOW_MOVE).unwrap();
-    h.run_for(500 * MS);
-    assert!(moving(&h, 0), "the move runs");
-    h.bus.set_cut(axis(0), true);
+    move_slowly_then_cut(&mut h);
     stop(&mut h);
     h.run_for(2 * S);
     assert_eq!(read(&mut h, unit(0), LINK, 1).unwrap(), [3], "owed a stop");
@@ -426,15 +436,8 @@ fn a_repeated_pio_stop_to_a_cut_axis_leaves_the_bus_to_the_others() {
     write(&mut h, 63, G_APPLY, &[1]).unwrap();
     h.run_for(3 * S);
     assert_eq!(h.node.gateway().engine().config().rtim.get(), 150);
-    write(&mut h, 63, G_PIO_AXIS, &[0]).unwrap();
-    h.inputs = Some(PioInputs::from_bits(
-        PioInputs::STP_N.bits() | PioInputs::SON.bits(),
-    ));
-    h.run_for(200 * MS);
-    write(&mut h, unit(0), DIRECT, &SLOW_MOVE).unwrap();
-    h.run_for(500 * MS);
-    assert!(moving(&h, 0));
-    h.bus.set_cut(axis(0), true);
+    wire_drive_axis_0(&mut h);
+    move_slowly_then_cut(&mut h);
     h.inputs = Some(PioInputs::from_bits(PioInputs::SON.bits()));
     h.run_for(2 * S);
     assert_eq!(
