@@ -141,6 +141,15 @@ struct Cli {
     /// Print every frame, decoded, with its time (s since the start) on standard error.
     #[arg(long)]
     log: bool,
+    /// Write the event log to FILE: every command, reply and move start with its time in µs of
+    /// CLOCK_MONOTONIC (`rc_host::sim::realtime` events), for benchmarks.
+    #[arg(long, value_name = "FILE")]
+    events: Option<std::path::PathBuf>,
+    /// Bytes take no time on the wire: a frame reaches the controllers (and a reply the master)
+    /// whole, the moment it is sent, as through a pseudo-terminal or a USB adapter; the
+    /// controllers still answer RTIM after a command.
+    #[arg(long)]
+    no_wire_time: bool,
 }
 
 #[derive(Clone, Debug)]
@@ -288,6 +297,7 @@ fn run(cli: &Cli) -> std::io::Result<()> {
         faults,
         host_echo: cli.echo,
         host_baud: baud,
+        wire_time: !cli.no_wire_time,
     };
     let options = Options {
         follow_baud: !cli.fixed_baud,
@@ -332,6 +342,9 @@ fn run(cli: &Cli) -> std::io::Result<()> {
         std::thread::Builder::new()
             .name("control".into())
             .spawn(move || read_controls(&axes, &sender))?;
+    }
+    if let Some(path) = &cli.events {
+        realtime.set_events(Box::new(std::fs::File::create(path)?));
     }
     let ended = realtime.run(&mut transport, &STOP)?;
     let why = match ended {

@@ -104,6 +104,7 @@ impl Soak {
             faults,
             host_echo: false,
             host_baud: BAUD,
+            wire_time: true,
         });
         for n in 0..16 {
             let start = 1_000 + u32::try_from(rng.below(8_000)).unwrap();

@@ -7,7 +7,6 @@ use protocol::line::Baud;
 use protocol::Axis;
 
 use super::{Bus, Source};
-use crate::sim::wire::byte_offset;
 
 /// How long a finished transmission is kept for collision checks: two bytes at the slowest rate.
 const KEEP_US: u64 = 2_100;
@@ -131,7 +130,7 @@ impl Bus {
         let k = tx.next;
         tx.next += 1;
         let (id, source, baud, timing) = (tx.id, tx.source, tx.baud, tx.timing);
-        let byte_start = tx.start + byte_offset(k, timing);
+        let byte_start = tx.start + tx.offset(k);
         let mut value = tx.bytes.get(k).copied().unwrap_or(0);
         let last = tx.next == tx.bytes.len();
 

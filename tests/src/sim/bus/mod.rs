@@ -60,6 +60,11 @@ pub struct BusConfig {
     pub host_echo: bool,
     /// The host's line rate at the start.
     pub host_baud: Baud,
+    /// Whether bytes take their time on the wire (10 bit times each). Off, every transmission
+    /// arrives whole the moment it starts: a pseudo-terminal or a USB adapter in front of a
+    /// master hides the wire's time from it, and a benchmark that must hold on such a line
+    /// runs the simulator this way (`rc-sim --no-wire-time`). RTIM still applies.
+    pub wire_time: bool,
 }
 
 impl Default for BusConfig {
@@ -69,6 +74,7 @@ impl Default for BusConfig {
             faults: Faults::default(),
             host_echo: false,
             host_baud: Baud::B9600,
+            wire_time: true,
         }
     }
 }
@@ -96,6 +102,8 @@ struct Transmission {
     baud: Option<Baud>,
     /// The rate that times its bytes.
     timing: Baud,
+    /// Bytes take their wire time ([`BusConfig::wire_time`]).
+    paced: bool,
     bytes: Vec<u8>,
     next: usize,
     /// A break has been applied to the controllers.
@@ -104,7 +112,16 @@ struct Transmission {
 
 impl Transmission {
     fn next_arrival(&self) -> Option<u64> {
-        (self.next < self.bytes.len()).then(|| self.start + byte_offset(self.next + 1, self.timing))
+        (self.next < self.bytes.len()).then(|| self.start + self.offset(self.next + 1))
+    }
+
+    /// Start of byte `k`, relative to the start of the transmission.
+    fn offset(&self, k: usize) -> u64 {
+        if self.paced {
+            byte_offset(k, self.timing)
+        } else {
+            0
+        }
     }
 
     fn pending_event(&self) -> Option<u64> {
@@ -325,6 +342,7 @@ impl Bus {
             end,
             baud: None,
             timing: self.host_baud,
+            paced: true,
             bytes: Vec::new(),
             next: 0,
             applied: false,
@@ -342,7 +360,13 @@ impl Bus {
         timing: Baud,
         bytes: Vec<u8>,
     ) -> u64 {
-        let end = start + transmit_time(bytes.len(), timing);
+        let paced = self.config.wire_time;
+        let end = start
+            + if paced {
+                transmit_time(bytes.len(), timing)
+            } else {
+                0
+            };
         let id = self.next_id;
         self.next_id += 1;
         self.transmissions.push(Transmission {
@@ -352,6 +376,7 @@ impl Bus {
             end,
             baud,
             timing,
+            paced,
             bytes,
             next: 0,
             applied: false,

@@ -98,6 +98,7 @@
 //! Either way the bus runs from the start of [`RealTime::run`], client or not.
 
 mod control;
+mod events;
 mod log;
 mod transport;
 
@@ -118,6 +119,8 @@ use protocol::{Axis, Rtim};
 use super::bus::{Bus, BusConfig};
 use super::controller::ControllerConfig;
 use super::stats::BusStats;
+pub use events::monotonic_us;
+use events::EventLog;
 use log::{stamp, FrameLog};
 use transport::Input;
 
@@ -232,6 +235,8 @@ pub struct RealTime {
     queue: VecDeque<u8>,
     log: FrameLog,
     control: Option<Receiver<Control>>,
+    /// The event log, if one was asked for ([`RealTime::set_events`]).
+    events: Option<EventLog>,
     /// When the master switched to 9.6 kbit/s, while it has been silent since
     /// ([`Options::slow_baud_is_break`]).
     pending_break: Option<u64>,
@@ -247,6 +252,7 @@ impl RealTime {
             queue: VecDeque::new(),
             log: FrameLog::default(),
             control: None,
+            events: None,
             pending_break: None,
         }
     }
@@ -255,6 +261,12 @@ impl RealTime {
     /// the loop (within [`Options::max_sleep`]) and noted in the log.
     pub fn set_control(&mut self, receiver: Receiver<Control>) {
         self.control = Some(receiver);
+    }
+
+    /// Write the event log ([`events`](self::events): commands, replies and moves, in
+    /// `CLOCK_MONOTONIC` µs) to `out` while running.
+    pub fn set_events(&mut self, out: Box<dyn io::Write + Send>) {
+        self.events = Some(EventLog::new(out));
     }
 
     /// The bus.
@@ -291,8 +303,12 @@ impl RealTime {
     /// `stop` is raised (checked at least every [`Options::max_sleep`]), the duration elapses or
     /// the TCP client leaves. Fails on an I/O error of the transport.
     pub fn run(&mut self, transport: &mut Transport, stop: &AtomicBool) -> io::Result<Ended> {
+        let monotonic = monotonic_us();
         let started = Instant::now();
         let origin = self.bus.now();
+        if let Some(events) = &mut self.events {
+            events.sync(origin, monotonic);
+        }
         let clock = |at: Instant| {
             let elapsed = at.saturating_duration_since(started).as_micros();
             origin.saturating_add(u64::try_from(elapsed).unwrap_or(u64::MAX))
@@ -309,10 +325,12 @@ impl RealTime {
             last_pass = now;
             if stop.load(Ordering::Relaxed) {
                 self.deliver(now, transport)?;
+                self.flush_events()?;
                 return Ok(Ended::Stopped);
             }
             if deadline.is_some_and(|d| wall >= d) {
                 self.deliver(now, transport)?;
+                self.flush_events()?;
                 return Ok(Ended::Duration);
             }
 
@@ -335,6 +353,9 @@ impl RealTime {
                         if self.options.log {
                             self.log.host(now, bytes);
                         }
+                        if let Some(events) = &mut self.events {
+                            events.host(now, bytes)?;
+                        }
                         self.bus.host_send(now, bytes);
                     }
                     Input::Connected(peer) => {
@@ -347,6 +368,7 @@ impl RealTime {
                         self.note(now, "client disconnected");
                         if !self.options.reconnect {
                             self.bus.advance(now);
+                            self.flush_events()?;
                             return Ok(Ended::Disconnected);
                         }
                     }
@@ -448,12 +470,20 @@ impl RealTime {
         if self.options.log {
             self.log.master(&received);
         }
+        if let Some(events) = &mut self.events {
+            events.master(&received)?;
+            events.moves(&self.bus)?;
+        }
         let excess = self.queue.len().saturating_sub(self.options.queue_limit);
         if excess > 0 {
             self.queue.drain(..excess);
             self.stats.overrun_bytes += excess as u64;
         }
         self.flush(transport)
+    }
+
+    fn flush_events(&mut self) -> io::Result<()> {
+        self.events.as_mut().map_or(Ok(()), EventLog::flush)
     }
 
     fn flush(&mut self, transport: &mut Transport) -> io::Result<()> {
