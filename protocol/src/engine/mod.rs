@@ -507,13 +507,9 @@ impl Engine {
             let previous = state.position.zip(state.position_at);
             state.position = Some(position);
             state.position_at = Some(now);
-            let approach = self.schedule.approach(axis);
-            approach.position_read(now, position, previous);
-            // The first estimate comes from where the move started (late: it includes the
-            // acceleration); one more read during the move measures its speed.
-            if approach.needs_read() && self.hot(axis) {
-                self.schedule.position_due(axis);
-            }
+            self.schedule
+                .approach(axis)
+                .position_read(now, position, previous);
         }
         if flight.stands_in {
             // Its origin's frame did not go: the job, establishment step or rejoin step sends

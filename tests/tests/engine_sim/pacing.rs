@@ -162,3 +162,44 @@ fn a_move_to_a_point_whose_position_the_job_carries_is_seen_within_three_transac
     let unknown = p99(seen);
     assert!(unknown > known, "unknown {unknown:.2}, known {known:.2}");
 }
+
+/// The estimate's second position read comes once the mover is under way, not in the
+/// transaction after the first: two reads in the first milliseconds of the acceleration give
+/// a speed far below the one it reaches, so its arrival was estimated late (tens of ms on
+/// `rt-bench`'s 40 mm moves) and it was polled as an idle axis past its arrival; and the read
+/// cost every move one transaction.
+#[test]
+fn a_movers_second_position_read_waits_until_it_is_under_way() {
+    let (mut h, positions) = fast_bus();
+    let mover = axis(MOVERS[0]);
+    let from = h.now;
+    let [_, far] = positions[0];
+    run_job(
+        &mut h,
+        Job {
+            axis: mover,
+            kind: JobKind::MoveAbsolute(Pulses(far)),
+        },
+        5 * S,
+    )
+    .expect("the move");
+    let reads: Vec<u64> = h
+        .sent
+        .iter()
+        .filter(|(t, r)| {
+            *t >= from
+                && r.axis == mover
+                && matches!(r.command, Command::ReadMemory { address } if address == memory::PNOW)
+        })
+        .map(|(t, _)| *t)
+        .collect();
+    let [first, second, ..] = reads[..] else {
+        panic!("fewer than two position reads during the move: {reads:?}");
+    };
+    // Three transactions of this bus (about 6.8 ms each): the acceleration's first part.
+    assert!(
+        second - first >= 20 * MS,
+        "the second read {} µs after the first",
+        second - first
+    );
+}

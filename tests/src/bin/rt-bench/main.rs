@@ -18,7 +18,7 @@
 //! time from the PLC's stop write to the `d` reaching the controller, in ms.
 //!
 //! ```text
-//! rt-bench [--seconds 20] [--json]
+//! rt-bench [--seconds 20] [--only direct_rtim3] [--json]
 //! ```
 //! Exit status 0 when every run was measured (whether the targets are met is in the output:
 //! `BENCH_RT {...}`), 1 when a run could not be made.
@@ -407,6 +407,7 @@ fn json_run(case: Case, f: &Figures) -> serde_json::Value {
 fn main() -> ExitCode {
     let mut seconds = 20u64;
     let mut json = false;
+    let mut only: Option<String> = None;
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         match arg.as_str() {
@@ -418,8 +419,9 @@ fn main() -> ExitCode {
                 }
             },
             "--json" => json = true,
+            "--only" => only = args.next(),
             _ => {
-                eprintln!("usage: rt-bench [--seconds N] [--json]");
+                eprintln!("usage: rt-bench [--seconds N] [--only RUN] [--json]");
                 return ExitCode::from(2);
             }
         }
@@ -434,6 +436,9 @@ fn main() -> ExitCode {
     let (mut worst_complete, mut worst_idle): (f64, f64) = (0.0, 0.0);
     let mut lost = 0;
     for case in CASES {
+        if only.as_ref().is_some_and(|o| *o != case.name()) {
+            continue;
+        }
         match run(case, Duration::from_secs(seconds), &dir) {
             Ok(f) => {
                 if !json {
