@@ -19,6 +19,17 @@ if [[ ${BENCH_CPU:-1} != 0 ]]; then
 fi
 cargo run --release --locked -p rc-host --bin bench -- ${cpu[@]+"${cpu[@]}"} "$@"
 
+# The same targets in real time (issue 34): rc-gateway-host against rc-sim over pseudo-terminals
+# with no wire time (a frame arrives whole when written, as through a USB adapter), 16 axes, four
+# moving in rounds whose ends come together, a Modbus RTU master polling PEND; direct moves and
+# moves to points, the controllers answering at RTIM 3 ms and 7 ms; measured from rc-sim's event
+# log against the run's own mean transaction time (`tests/src/bin/rt-bench`). About 2 minutes
+# (RT_BENCH_SECONDS per run, 20 by default); BENCH_RT=0 skips it. One line `BENCH_RT {...}`.
+if [[ ${BENCH_RT:-1} != 0 ]]; then
+    cargo build --release --locked --quiet -p rc-host --bin rt-bench --bin rc-sim --bin rc-gateway-host
+    "${CARGO_TARGET_DIR:-target}/release/rt-bench" --seconds "${RT_BENCH_SECONDS:-20}"
+fi
+
 # Modbus TCP, in real time (not virtual): request -> reply latency over loopback with 4 clients,
 # p50/p99 and requests per second, against rc-gateway-host (target: p99 <= 1 ms for cached
 # reads); then the same against the network firmware in QEMU's mps2-an386 when QEMU is there
