@@ -98,7 +98,7 @@
 //! Either way the bus runs from the start of [`RealTime::run`], client or not.
 
 mod control;
-mod events;
+pub mod events;
 mod log;
 mod transport;
 
@@ -263,7 +263,7 @@ impl RealTime {
         self.control = Some(receiver);
     }
 
-    /// Write the event log ([`events`](self::events): commands, replies and moves, in
+    /// Write the event log ([`events`]: commands, replies and moves, in
     /// `CLOCK_MONOTONIC` µs) to `out` while running.
     pub fn set_events(&mut self, out: Box<dyn io::Write + Send>) {
         self.events = Some(EventLog::new(out));
