@@ -206,21 +206,20 @@ fn lo(v: u32) -> u16 {
     v as u16
 }
 
+/// The first six words of a direct move and of a position-table row alike: position, band and
+/// speed to `to`, each 32 bits, high word first.
+fn motion(to: u32) -> [u16; 6] {
+    [hi(to), lo(to), hi(BAND), lo(BAND), hi(SPEED), lo(SPEED)]
+}
+
 /// Start axis `a`'s move to `far` or near.
 fn start(gw: &mut Gw, moves: Moves, a: u8, far: bool) -> Result<(), String> {
     let unit = gw.axis_unit(a);
     match moves {
         Moves::Direct => {
             let to = if far { FAR } else { NEAR };
-            let regs = [
-                hi(to),
-                lo(to),
-                hi(BAND),
-                lo(BAND),
-                hi(SPEED),
-                lo(SPEED),
-                ACCEL,
-            ];
+            let [p0, p1, b0, b1, s0, s1] = motion(to);
+            let regs = [p0, p1, b0, b1, s0, s1, ACCEL];
             gw.write(unit, map::DIRECT, &regs).map_err(fail)
         }
         Moves::Points => {
@@ -326,14 +325,7 @@ fn run(case: Case, window: Duration, dir: &Path) -> Result<Figures, String> {
             let unit = gw.axis_unit(a);
             for (point, to) in [(1u16, NEAR), (2, FAR)] {
                 let mut row = [0u16; 16];
-                row[..6].copy_from_slice(&[
-                    hi(to),
-                    lo(to),
-                    hi(BAND),
-                    lo(BAND),
-                    hi(SPEED),
-                    lo(SPEED),
-                ]);
+                row[..6].copy_from_slice(&motion(to));
                 row[10] = ACCEL;
                 row[11] = ACCEL;
                 let address = protocol::plc::table::BASE + protocol::plc::table::ROW_LEN * point;
