@@ -168,6 +168,13 @@ impl Approach {
         self.unseen = true;
     }
 
+    /// A command that can start a move went to the axis and its answer was lost: the axis may
+    /// move, so it counts as moving until a status says otherwise, as after
+    /// [`started`](Self::started), the estimate left alone.
+    pub(super) fn may_have_started(&mut self) {
+        self.unseen = true;
+    }
+
     /// A status report came in: from now on it says whether the axis moves.
     pub(super) fn status_seen(&mut self) {
         self.unseen = false;

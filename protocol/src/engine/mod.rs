@@ -555,6 +555,26 @@ impl Engine {
         }
     }
 
+    /// `request` may have set axes moving and its answer, which would have said so, was lost:
+    /// an `m` or a `t` (never resent, §5 (2), (3)), a move whose job a stop cancelled while it
+    /// was on the wire (not resent: the stop goes next). Such a move can end before any status shows it (a short one, over before
+    /// the axis' next poll), and the position read when its job failed was taken mid-move: the
+    /// axes count as moving until a status says otherwise, so that the first one that shows
+    /// them standing has their position read until it rests. A `t` may have started any axis
+    /// that has a move buffered.
+    fn may_have_moved(&mut self, request: &Request) {
+        if !request.command.moves() {
+            return;
+        }
+        let axes = match request.command {
+            Command::ExecuteBuffered => self.config.axes,
+            _ => AxisSet::EMPTY.with(request.axis),
+        };
+        for a in axes.iter() {
+            self.schedule.approach(a).may_have_started();
+        }
+    }
+
     fn set_link(&mut self, now: Instant, axis: Axis, link: Link) {
         let state = &mut self.axes[axis];
         if state.link == link {

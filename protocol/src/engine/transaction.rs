@@ -144,6 +144,9 @@ impl Engine {
             return;
         }
         self.axes[axis].last_error = Some(LinkError::Timeout);
+        if matches!(flight.origin, Origin::Job | Origin::Cancelled) {
+            self.may_have_moved(&flight.request);
+        }
         match flight.origin {
             Origin::Probe => self
                 .schedule

@@ -641,3 +641,147 @@ fn a_synchronized_start_reads_where_its_axes_came_to_rest() {
         "its position read after the move"
     );
 }
+
+/// An `m` whose answer is lost may have moved the axis (§5 (2)): the job fails with the outcome
+/// unknown after reading the position, and that read can come while the axis still moves. A
+/// short move then ends before the axis' next status poll (it is idle to the schedule, polled
+/// every cycle or so), so no status ever shows it moving, and the read mid-move stayed PNOW for
+/// good (the firmware soak in CI: an axis at rest 10.58 mm from its PNOW). The lost answer now
+/// counts as a move commanded: the next status that shows the axis standing has it read again
+/// until it rests.
+#[test]
+fn a_relative_move_whose_answer_is_lost_reads_where_the_axis_came_to_rest() {
+    let mut h = established(16);
+    let a = axis(0);
+    run_job(
+        &mut h,
+        Job {
+            axis: a,
+            kind: JobKind::Home(HomeDirection::MotorEnd),
+        },
+        10 * S,
+    )
+    .unwrap();
+    h.run_until(h.now + 300 * MS);
+    let from = h.bus.controller(a).unwrap().position();
+    let id = h
+        .engine
+        .submit(Job {
+            axis: a,
+            kind: JobKind::DirectMove {
+                target: Pulses(-250),
+                relative: true,
+                velocity: Velocity::new(10_000).unwrap(),
+                acceleration: Acceleration::new(100).unwrap(),
+            },
+        })
+        .unwrap();
+    let is_m = |r: &Request| matches!(r.command, Command::MoveRelative(_));
+    let until = h.now + S;
+    while h.now < until && !h.sent.iter().any(|(_, r)| is_m(r)) {
+        h.step(until);
+    }
+    // The `m`'s answer lost; the axis answers again from the next frame on (the job's read).
+    h.bus.set_silent(a, true);
+    let sent = h.sent.len();
+    while h.now < until && h.sent.len() == sent {
+        h.step(until);
+    }
+    h.bus.set_silent(a, false);
+    let result = h.run_until_event(
+        h.now + S,
+        |e| matches!(e, Event::JobDone { id: i, .. } if *i == id),
+    );
+    assert!(
+        matches!(
+            result,
+            Some((
+                _,
+                Event::JobDone {
+                    result: Err(JobError::OutcomeUnknown),
+                    ..
+                }
+            ))
+        ),
+        "{result:?}"
+    );
+    let read = h.engine.axis(a).position.expect("the job read it").0;
+    let c = h.bus.controller(a).unwrap();
+    assert!(
+        c.moving() && i64::from(read) != from,
+        "the case this test is about: the job's read came while the axis moved ({read}, from {from})"
+    );
+    // Its status polls lost until the move is over (a noisy bus), fewer of them than take it
+    // offline: the first status it answers shows it standing.
+    h.bus.set_silent(a, true);
+    while h.now < until && h.bus.controller(a).unwrap().moving() {
+        h.step(until);
+    }
+    h.bus.set_silent(a, false);
+    h.run_until(h.now + 2 * S);
+    assert!(
+        !h.events.iter().any(|(_, e)| *e == Event::Offline(a)),
+        "the case this test is about: the axis stayed online (going online reads the position)"
+    );
+    let rest = h.bus.controller(a).unwrap().position();
+    assert_eq!(rest, from - 250, "the axis moved");
+    assert_eq!(
+        h.engine.axis(a).position,
+        Some(Pulses(rest as i32)),
+        "read again once it rests"
+    );
+}
+
+/// A stop asked for while a move is on the wire cancels the move's job, and the move is not
+/// resent when its answer is lost (the stop goes next). The axis took it all the same: a short
+/// move is over when the stop's answer comes, which shows the axis standing. The lost answer
+/// counts as a move commanded, so that this status has the position read where the axis came
+/// to rest.
+#[test]
+fn a_move_whose_answer_is_lost_as_a_stop_cancels_it_reads_where_the_axis_came_to_rest() {
+    let mut h = homed(1);
+    let a = axis(0);
+    h.run_until(h.now + 300 * MS);
+    let from = h.bus.controller(a).unwrap().position();
+    let target = Pulses(from as i32 - 30);
+    h.engine
+        .submit(Job {
+            axis: a,
+            kind: JobKind::MoveAbsolute(target),
+        })
+        .unwrap();
+    let until = h.now + S;
+    while h.now < until
+        && !h
+            .sent
+            .iter()
+            .any(|(_, r)| matches!(r.command, Command::MoveAbsolute(_)))
+    {
+        h.step(until);
+    }
+    h.bus.set_silent(a, true);
+    h.engine
+        .submit(Job {
+            axis: a,
+            kind: JobKind::Stop,
+        })
+        .unwrap();
+    let sent = h.sent.len();
+    while h.now < until && h.sent.len() == sent {
+        h.step(until);
+    }
+    assert_eq!(h.sent.last().unwrap().1.command, Command::CancelMotion);
+    h.bus.set_silent(a, false);
+    assert!(
+        !h.bus.controller(a).unwrap().moving(),
+        "the case this test is about: the move is over when the stop goes"
+    );
+    h.run_until(h.now + 2 * S);
+    let rest = h.bus.controller(a).unwrap().position();
+    assert_eq!(rest, i64::from(target.0), "the axis moved");
+    assert_eq!(
+        h.engine.axis(a).position,
+        Some(Pulses(rest as i32)),
+        "read where it rests"
+    );
+}
