@@ -921,6 +921,16 @@ def main():
     if failure is not None:
         print("---- the last PLC requests (rc-sim's time, s; unit, address, value) ----")
         print("\n".join(soak.trace))
+        axis = re.search(r"axis (\d+)", str(failure))
+        bus = workdir / "rc-sim.log"
+        if axis and bus.exists():
+            # What the axis was told and answered, its status polls left out (a CI machine's
+            # logs are gone when its report is read).
+            tag = f"Axis({axis.group(1)})"
+            lines = [line for line in bus.read_text(errors="replace").splitlines()
+                     if tag in line and "command: Status }" not in line and "code: Status," not in line]
+            print(f"---- the bus for axis {axis.group(1)}, status polls left out (rc-sim's log) ----")
+            print("\n".join(lines[-50:]))
         print(f"SOAK FAILED (seed {args.seed}; rerun: scripts/soak.sh --minutes {args.minutes:g} --seed "
               f"{args.seed}): {failure}")
         print(f"logs: {workdir}/rc-sim.log (the bus), {workdir}/firmware.log")
