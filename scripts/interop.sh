@@ -337,7 +337,7 @@ settle() {
     ((values[0] == 2 && values[1] == 0)) || fail "unit $1: CMST ${values[0]} CMER ${values[1]}, want 2, 0"
 }
 
-# Axis registers and bits (README: register map).
+# Axis registers and bits (docs/plc.md: register map).
 PNOW=0x9000 DSS1=0x9005 CMCT=0x9F03 DRG1=0x0D00 POSR=0x0D03 DIRECT=0x9900
 COIL_SON=0x0403 COIL_STP=0x040A COIL_HOME=0x040B COIL_STOP=0x042C
 SON=$((1 << 12)) SV=$((1 << 12)) PWR=$((1 << 13)) STP=$((1 << 5)) HEND=$((1 << 4)) PEND=$((1 << 3))
@@ -503,7 +503,7 @@ mb_unknown_address() {
         mb_refused "$A" 1 4 $DIRECT 0 1000 0 10 &&
         mb_refused "$A" $GATEWAY 4 0x0050 &&
         mb_refused "$A" $GATEWAY 0 $COIL_SON &&
-        # FC02: no discrete inputs in the map, every address unknown (README's function list
+        # FC02: no discrete inputs in the map, every address unknown (docs/plc.md's function list
         # does not name FC02).
         mb_refused "$A" 1 1 $COIL_SON
 }

@@ -69,7 +69,7 @@ use crate::serial::Rs485;
 ///   safe here: the program, its vectors and every handler run from bank 1 while bank 2 is
 ///   erased or written (read-while-write between the banks), and no handler touches the flash
 ///   interface. The task that asked still waits for the erase (the driver polls FLASH_SR.BSY):
-///   the executor's other tasks, and the stop on the bus, wait for it too (README, "SAVE").
+///   the executor's other tasks, and the stop on the bus, wait for it too (docs/plc.md, "Settings, SAVE and factory reset").
 /// - **x32.** embassy-stm32 0.6.0 never sets FLASH_CR.PSIZE for an erase, and its writes leave
 ///   it at 0 (x8, the reset value), where a 16 KiB sector takes about 0.4 s (0.8 s at most)
 ///   instead of 0.25 s (0.5 s) at x32 (STM32F429 datasheet, flash characteristics; 2.7-3.6 V

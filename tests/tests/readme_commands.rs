@@ -1,4 +1,4 @@
-//! Every command and path that README.md and docs/*.md show exists: each `scripts/...` path (a
+//! Every command and path that README.md, CONTRIBUTING.md and docs/*.md show exists: each `scripts/...` path (a
 //! `.sh` one executable), each `cargo <alias>`, each `--bin NAME`, each relative link and its
 //! anchor, and each long flag shown for one of the host binaries (or a script) in a code block.
 //! Not a shell parser: it looks for these patterns in the text, which is all the documents use.
@@ -11,10 +11,10 @@ fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// README.md and every docs/*.md, with their paths relative to the repository.
+/// README.md, CONTRIBUTING.md and every docs/*.md, with their paths relative to the repository.
 fn documents() -> Vec<(PathBuf, String)> {
     let root = repo();
-    let mut docs = vec![PathBuf::from("README.md")];
+    let mut docs = vec![PathBuf::from("README.md"), PathBuf::from("CONTRIBUTING.md")];
     let mut extra: Vec<PathBuf> = fs::read_dir(root.join("docs"))
         .unwrap()
         .map(|e| e.unwrap().path())

@@ -20,8 +20,8 @@
 //! Modbus can start meanwhile: that needs a master's write, which re-arms it. (A Modbus write
 //! of 0 to FAILSAFE ends the silence by being a request.)
 //!
-//! These are functional stops of the gateway's own, not a safety function: see README's
-//! Fail-safe section.
+//! These are functional stops of the gateway's own, not a safety function: see the Fail-safe
+//! section of docs/plc.md.
 //!
 //! This type only decides; the gateway carries out the stops (before anything else on the bus).
 

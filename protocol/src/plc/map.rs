@@ -1,5 +1,5 @@
 //! The Modbus register map, as data: every address the gateway answers, with its unit, range,
-//! access and meaning. README's register table is generated from [`MAP`], so the document and
+//! access and meaning. The register table in docs/plc.md is generated from [`MAP`], so the document and
 //! the code cannot drift apart.
 //!
 //! Each axis is its own Modbus unit, id = axis + 1 (as IAI's SIO-through mode does), laid out
@@ -101,7 +101,7 @@ pub const DIRECT_MAX: u16 = 9;
 pub const COIL_SON: u16 = 0x0403;
 /// Coil ALRS: alarm reset (rising edge).
 pub const COIL_ALRS: u16 = 0x0407;
-/// Coil STP: pause (level; the RC cannot resume, see README).
+/// Coil STP: pause (level; the RC cannot resume, see docs/plc.md).
 pub const COIL_STP: u16 = 0x040A;
 /// Coil HOME: home (rising edge).
 pub const COIL_HOME: u16 = 0x040B;
@@ -231,7 +231,7 @@ use Support::{Full, Gateway, Partial};
 const AXES: u16 = crate::axes::AXES as u16;
 use Table::{Coil, Holding, Status};
 
-// One row of the table: positional like the README columns, so the table reads as a table.
+// One row of the table: positional like the document's columns, so the table reads as a table.
 #[allow(clippy::too_many_arguments)]
 const fn e(
     unit: Unit,

@@ -1,4 +1,4 @@
-//! Print README's Modbus register table from the code (`protocol::plc::map::MAP`).
+//! Print docs/plc.md's Modbus register table from the code (`protocol::plc::map::MAP`).
 fn main() {
     print!("{}", rc_host::regmap::markdown());
 }

@@ -1,4 +1,4 @@
-//! The axis units against `plc::map::MAP`, the table README's register map is generated from
+//! The axis units against `plc::map::MAP`, the table docs/plc.md's register map is generated from
 //! (issue 21: the map is kept as data and again as code; the gateway unit's code reads the data,
 //! the axis units' code has its own ranges, coil list and match arms). Every check is a Modbus
 //! request and its answer, so it holds whatever the code behind the map looks like:
