@@ -378,3 +378,99 @@ fn every_flag_shown_in_a_code_block_is_defined() {
     );
     assert!(problems.is_empty(), "{problems:#?}");
 }
+
+/// The paths of docs/development.md's Layout table, in order: a name with a `/` is from the
+/// repository's root (and sets the folder of the names after it: a file's folder, or itself), a
+/// bare name is in that folder ("`protocol/src/frame.rs`, `deframer.rs`", "`src/` (`main.rs`)").
+fn layout_paths(doc: &str) -> Vec<String> {
+    let start = doc.find("## Layout").expect("a Layout section");
+    let table = doc[start..]
+        .lines()
+        .skip_while(|l| !l.starts_with('|'))
+        .take_while(|l| l.starts_with('|'))
+        .skip(2);
+    let mut out = Vec::new();
+    for row in table {
+        let first = row.trim_matches('|').split('|').next().unwrap_or("");
+        let mut folder = String::new();
+        for (i, token) in first.split('`').enumerate() {
+            if i % 2 == 0 || token.is_empty() {
+                continue;
+            }
+            let path = if token.contains('/') {
+                folder = match token.rfind('/') {
+                    Some(at) if at + 1 == token.len() => token.to_string(),
+                    Some(at) => token[..=at].to_string(),
+                    None => String::new(),
+                };
+                token.to_string()
+            } else {
+                format!("{folder}{token}")
+            };
+            out.push(path);
+        }
+    }
+    out
+}
+
+/// docs/development.md's Layout table is the tree's: every path it names exists, and it names
+/// every crate of the workspace, every file and folder of `src/` and `protocol/src/`, every
+/// board module and every host program.
+#[test]
+fn the_layout_table_matches_the_tree() {
+    let root = repo();
+    let doc = fs::read_to_string(root.join("docs/development.md")).unwrap();
+    let paths = layout_paths(&doc);
+    assert!(
+        paths.len() > 20,
+        "found only {} paths: the scan is broken",
+        paths.len()
+    );
+    let mut problems: Vec<String> = paths
+        .iter()
+        .filter(|p| !root.join(p).exists())
+        .map(|p| format!("{p}: no such path"))
+        .collect();
+    let named = |p: &str| paths.iter().any(|q| q == p || q.starts_with(p));
+    let manifest = fs::read_to_string(root.join("Cargo.toml")).unwrap();
+    let members = manifest
+        .lines()
+        .find(|l| l.starts_with("members"))
+        .expect("workspace members");
+    for member in members.split('"').skip(1).step_by(2) {
+        if !named(&format!("{member}/")) {
+            problems.push(format!("workspace member {member}/ not in the table"));
+        }
+    }
+    let mut expected = Vec::new();
+    for entry in fs::read_dir(root.join("src/board")).unwrap() {
+        let name = entry.unwrap().file_name().into_string().unwrap();
+        expected.push(format!("src/board/{name}"));
+    }
+    for folder in ["protocol/src", "src"] {
+        for entry in fs::read_dir(root.join(folder)).unwrap() {
+            let entry = entry.unwrap();
+            let name = entry.file_name().into_string().unwrap();
+            if entry.path().is_dir() {
+                expected.push(format!("{folder}/{name}/"));
+            } else {
+                expected.push(format!("{folder}/{name}"));
+            }
+        }
+    }
+    for path in expected {
+        if !named(&path) {
+            problems.push(format!("{path} not in the table"));
+        }
+    }
+    // Every host program, by name.
+    let table = &doc[doc.find("## Layout").unwrap()..];
+    for entry in fs::read_dir(root.join("tests/src/bin")).unwrap() {
+        let name = entry.unwrap().file_name().into_string().unwrap();
+        let name = name.trim_end_matches(".rs");
+        if !table.contains(&format!("`{name}`")) {
+            problems.push(format!("tests/src/bin/{name} not in the table"));
+        }
+    }
+    assert!(problems.is_empty(), "{problems:#?}");
+}
