@@ -8,6 +8,13 @@
 #   scripts/fuzz.sh --runs 1000000           # every target, 1 M executions each (no time limit)
 #   scripts/fuzz.sh --long                   # the long run: 10 M executions of every target
 #   scripts/fuzz.sh --long --target node     # one target (repeat --target for several)
+#   scripts/fuzz.sh --long --target node --no-asan   # without AddressSanitizer: about 10x faster
+#
+# AddressSanitizer (cargo-fuzz's default) finds memory errors in unsafe code; the protocol crate
+# forbids unsafe code, so for it ASan watches only its dependencies (heapless, core) and costs a
+# factor of about ten on the `node` target (6,700 against 700 exec/s). `--no-asan` keeps what
+# the targets check (panics, debug assertions and overflow checks, the targets' own rules) and
+# drops ASan: for the long runs; the short runs in CI keep it.
 #
 # One libFuzzer process at a time (no -jobs/-workers). After each target it prints the
 # executions done, the time, exec/s, the corpus size and whether it found a crash; a summary of
@@ -21,10 +28,11 @@
 set -euo pipefail
 
 usage() {
-    sed -n '2,20s/^# \{0,1\}//p' "$0"
+    awk 'NR > 1 && !/^#/ { exit } NR > 1 { sub(/^# ?/, ""); print }' "$0"
 }
 
 seconds="${FUZZ_SECONDS:-60}"
+sanitizer=()
 seconds_given=""
 runs=""
 chosen=()
@@ -41,6 +49,10 @@ while [ $# -gt 0 ]; do
             ;;
         --long)
             runs=10000000
+            shift
+            ;;
+        --no-asan)
+            sanitizer=(-s none)
             shift
             ;;
         --target)
@@ -108,7 +120,7 @@ fi
 
 # Build every chosen target first, so that the times below are fuzzing only.
 for target in $targets; do
-    cargo +nightly fuzz build -a "$target"
+    cargo +nightly fuzz build -a "${sanitizer[@]}" "$target"
 done
 
 log_dir=$(mktemp -d)
@@ -127,7 +139,7 @@ for target in $targets; do
     log="$log_dir/$target.log"
     start=$(date +%s)
     status=0
-    cargo +nightly fuzz run -a "$target" "$corpus" "${seeds[@]}" -- "${limits[@]}" 2>&1 |
+    cargo +nightly fuzz run -a "${sanitizer[@]}" "$target" "$corpus" "${seeds[@]}" -- "${limits[@]}" 2>&1 |
         tee "$log" || status=$?
     elapsed=$(($(date +%s) - start))
     # libFuzzer's final statistics (-print_final_stats=1) and its last status line.
