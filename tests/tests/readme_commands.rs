@@ -474,3 +474,39 @@ fn the_layout_table_matches_the_tree() {
     }
     assert!(problems.is_empty(), "{problems:#?}");
 }
+
+/// docs/development.md's fuzzing section names every target of `protocol/fuzz` (in its text and
+/// in its table of long runs), and no target that is gone.
+#[test]
+fn the_fuzzing_section_names_every_target() {
+    let root = repo();
+    let manifest = fs::read_to_string(root.join("protocol/fuzz/Cargo.toml")).unwrap();
+    let targets: Vec<&str> = manifest
+        .split("[[bin]]")
+        .skip(1)
+        .filter_map(|bin| bin.lines().find(|l| l.trim_start().starts_with("name")))
+        .filter_map(|l| l.split('"').nth(1))
+        .collect();
+    assert!(
+        targets.len() >= 4,
+        "found only {targets:?}: the scan is broken"
+    );
+    let doc = fs::read_to_string(root.join("docs/development.md")).unwrap();
+    let section = &doc[doc.find("## Fuzzing").expect("a Fuzzing section")..];
+    let section = &section[..section[3..]
+        .find("\n## ")
+        .map_or(section.len(), |at| at + 3)];
+    let mut problems = Vec::new();
+    for target in &targets {
+        if !section.contains(&format!("| `{target}` |")) {
+            problems.push(format!("{target}: no row in the table of long runs"));
+        }
+    }
+    for row in section.lines().filter(|l| l.starts_with("| `")) {
+        let name = row.split('`').nth(1).unwrap_or("");
+        if !targets.contains(&name) {
+            problems.push(format!("the table names {name}, not a target"));
+        }
+    }
+    assert!(problems.is_empty(), "{problems:#?}");
+}
