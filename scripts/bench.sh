@@ -9,12 +9,21 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 rustup toolchain install >/dev/null
 cpu=()
+cpu_doc_stale=0
 if [[ ${BENCH_CPU:-1} != 0 ]]; then
-    if detail=$(scripts/cpu-load.sh --json 2>target/cpu-load.log); then
+    # --doc: docs/performance.md's instructions per transaction must be the measured ones (3 %):
+    # status 3 when they are not, with the line to paste.
+    status=0
+    detail=$(scripts/cpu-load.sh --json --doc docs/performance.md 2>target/cpu-load.log) || status=$?
+    if [[ $status == 0 || $status == 3 ]]; then
         percent=$(sed -n 's/.*"cpu_load_percent": \([0-9.]*\).*/\1/p' <<<"$detail")
         cpu=(--cpu-load-percent "$percent" --cpu-load-detail "$detail")
     else
         echo "bench: scripts/cpu-load.sh failed (target/cpu-load.log); cpu_load_percent is null" >&2
+    fi
+    if [[ $status == 3 ]]; then
+        grep "cpu-load:" target/cpu-load.log >&2
+        cpu_doc_stale=1
     fi
 fi
 cargo run --release --locked -p rc-host --bin bench -- ${cpu[@]+"${cpu[@]}"} "$@"
@@ -50,4 +59,9 @@ if [[ ${BENCH_NET_EMU:-1} != 0 ]] && command -v qemu-system-arm >/dev/null; then
         echo "bench: the network firmware in QEMU did not answer ($log)" >&2
     kill "$qemu" 2>/dev/null || true
     wait "$qemu" 2>/dev/null || true
+fi
+
+if [[ $cpu_doc_stale == 1 ]]; then
+    echo "bench: docs/performance.md's CPU figure is stale (above: the line to paste between its cpu markers)" >&2
+    exit 1
 fi

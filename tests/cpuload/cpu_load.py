@@ -18,6 +18,7 @@ another clock scales with 1/clock (the F103 at 72 MHz: about 1.1x).
 
 import argparse
 import json
+import re
 import sys
 import tempfile
 import time
@@ -50,6 +51,9 @@ def main():
                         help="-icount shift: 2^shift ns per instruction (default 4: the board)")
     parser.add_argument("--axes", type=int, default=16, choices=range(1, 17), metavar="N",
                         help="simulated axes 0..N-1 (default 16)")
+    parser.add_argument("--doc", metavar="MD",
+                        help="check the figure documented between MD's cpu markers: exit status 3 when "
+                             f"it is more than {DOC_SLACK_PERCENT} % off the one measured")
     args = parser.parse_args()
     axes = list(range(args.axes))
     with tempfile.TemporaryDirectory() as workdir:
@@ -91,6 +95,35 @@ def main():
               f"({result['transactions_per_second']} transactions/s, "
               f"{result['instructions_per_transaction']} instructions each, "
               f"{result['window_guest_s']} s of guest time; {result['assumes']})")
+    if args.doc and args.axes == 16 and args.shift == SHIFT:
+        problem = stale(args.doc, result)
+        if problem:
+            print(problem, file=sys.stderr)
+            sys.exit(3)
+
+
+DOC_SLACK_PERCENT = 3
+DOC_BEGIN, DOC_END = "<!-- cpu:begin", "<!-- cpu:end -->"
+
+
+def stale(path, result):
+    """Why the instructions per transaction documented in `path` (between its cpu markers) are
+    stale, if they are: more than DOC_SLACK_PERCENT off the measured figure. The instructions, not
+    the percentage, are checked: the percentage follows the emulated bus' rate, which the host moves
+    by a few percent from run to run; the instructions per transaction do not move."""
+    measured = result["instructions_per_transaction"]
+    line = (f"**{measured / 1000:.1f}k instructions per transaction** ({result['cpu_load_percent']} % at "
+            f"the emulator's {result['transactions_per_second']} transactions/s)")
+    try:
+        text = open(path).read()
+        block = text.split(DOC_BEGIN, 1)[1].split(DOC_END, 1)[0]
+        documented = float(re.search(r"([0-9.]+)k instructions per transaction", block).group(1)) * 1000
+    except (OSError, IndexError, AttributeError, ValueError):
+        return f"cpu-load: {path} has no figure between its cpu markers; measured: {line}"
+    if abs(documented - measured) > measured * DOC_SLACK_PERCENT / 100:
+        return (f"cpu-load: {path}'s CPU figure is stale: documented {documented / 1000:.1f}k instructions "
+                f"per transaction, measured {measured} (more than {DOC_SLACK_PERCENT} % off); paste: {line}")
+    return None
 
 
 if __name__ == "__main__":
