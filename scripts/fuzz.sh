@@ -32,7 +32,7 @@ usage() {
 }
 
 seconds="${FUZZ_SECONDS:-60}"
-sanitizer=()
+no_asan=""
 seconds_given=""
 runs=""
 chosen=()
@@ -52,7 +52,7 @@ while [ $# -gt 0 ]; do
             shift
             ;;
         --no-asan)
-            sanitizer=(-s none)
+            no_asan=1
             shift
             ;;
         --target)
@@ -77,6 +77,10 @@ for n in "$seconds" "$runs"; do
 done
 
 cd "$(dirname "$0")/.."
+sanitizer=()
+if [ -n "$no_asan" ]; then
+    sanitizer=(-s none)
+fi
 
 if ! rustup run nightly rustc --version >/dev/null 2>&1; then
     rustup toolchain install nightly --profile minimal
