@@ -516,6 +516,13 @@ impl Engine {
             // it next (the stop's answer moved nothing on but the status).
             return;
         }
+        // A move whose job a stop cancelled on the wire, taken: no job moves on to say it
+        // started. A `t` its own axis refuses still starts the others' buffered moves (§4-4-17).
+        let refused_t = matches!(flight.request.command, Command::ExecuteBuffered)
+            && reply.rejection().is_some();
+        if flight.origin == Origin::Cancelled || refused_t {
+            self.may_have_moved(&flight.request);
+        }
         if flight.origin == Origin::Job && reply.rejection().is_none() {
             let at = self.axes[axis].position;
             // A point's position is not in its Q3: the job may know it. A `t` starts the moves
@@ -555,9 +562,10 @@ impl Engine {
         }
     }
 
-    /// `request` may have set axes moving and its answer, which would have said so, was lost:
-    /// an `m` or a `t` (never resent, §5 (2), (3)), a move whose job a stop cancelled while it
-    /// was on the wire (not resent: the stop goes next). Such a move can end before any status shows it (a short one, over before
+    /// `request` may have set axes moving and no answer said so: an `m` or a `t` whose answer
+    /// was lost (never resent, §5 (2), (3)), any move whose attempt was lost (a stop may cancel
+    /// its job before the resend goes), a move whose job a stop cancelled while it was on the
+    /// wire, a `t` its own axis refused (the others still start). Such a move can end before any status shows it (a short one, over before
     /// the axis' next poll), and the position read when its job failed was taken mid-move: the
     /// axes count as moving until a status says otherwise, so that the first one that shows
     /// them standing has their position read until it rests. A `t` may have started any axis
@@ -570,7 +578,9 @@ impl Engine {
             Command::ExecuteBuffered => self.config.axes,
             _ => AxisSet::EMPTY.with(request.axis),
         };
-        for a in axes.iter() {
+        // Not an offline axis: no status would clear its mark (which held rejoin tries off for
+        // good), and going online reads its position anyway.
+        for a in axes.iter().filter(|&a| self.axes[a].link != Link::Offline) {
             self.schedule.approach(a).may_have_started();
         }
     }

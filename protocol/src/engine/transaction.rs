@@ -130,6 +130,11 @@ impl Engine {
             }
             Failure::Corrupted => self.free_at = now + timing::HOST_GAP,
         }
+        // A move whose answer is lost may have started, resent or not: a stop may cancel its
+        // job before the resend goes.
+        if matches!(flight.origin, Origin::Job | Origin::Cancelled) {
+            self.may_have_moved(&flight.request);
+        }
         // (A stand-in for an owed stop is not resent: the owed axis is offline, and its next
         // probe is the next try.)
         let may_retry = flight.attempt < self.config.retries
@@ -144,9 +149,6 @@ impl Engine {
             return;
         }
         self.axes[axis].last_error = Some(LinkError::Timeout);
-        if matches!(flight.origin, Origin::Job | Origin::Cancelled) {
-            self.may_have_moved(&flight.request);
-        }
         match flight.origin {
             Origin::Probe => self
                 .schedule

@@ -785,3 +785,226 @@ fn a_move_whose_answer_is_lost_as_a_stop_cancels_it_reads_where_the_axis_came_to
         "read where it rests"
     );
 }
+
+/// Two homed axes with a move buffered on each: axis 0 a long one, axis 1 a few pulses (over
+/// within a millisecond or two of the `t`, before any status poll of it can show it moving).
+fn two_axes_with_moves_buffered() -> rc_host::harness::Harness {
+    let mut h = homed(2);
+    for (a, target) in [(0, -8_000), (1, -20)] {
+        let buffered = Buffered::new(&Command::MoveAbsolute(Pulses(target))).unwrap();
+        let job = Job {
+            axis: axis(a),
+            kind: JobKind::Command(Command::Buffer(buffered)),
+        };
+        run_job(&mut h, job, S).unwrap();
+    }
+    h.run_until(h.now + 200 * MS);
+    assert_eq!(h.engine.axis(axis(1)).position, Some(Pulses(0)));
+    h
+}
+
+/// Step until a frame matching `is` has gone out (at most a second).
+fn until_sent(h: &mut rc_host::harness::Harness, is: impl Fn(&Request) -> bool) {
+    let until = h.now + S;
+    while h.now < until && !h.sent.iter().any(|(_, r)| is(r)) {
+        h.step(until);
+    }
+    assert!(h.sent.iter().any(|(_, r)| is(r)), "the frame went out");
+}
+
+/// The other axis of a synchronized start came to rest where the engine keeps its position.
+fn assert_axis_1_read_at_rest(h: &mut rc_host::harness::Harness) {
+    h.run_until(h.now + 2 * S);
+    assert_eq!(
+        h.bus.controller(axis(1)).unwrap().position(),
+        -20,
+        "axis 1 moved"
+    );
+    assert_eq!(
+        h.engine.axis(axis(1)).position,
+        Some(Pulses(-20)),
+        "axis 1's position read after its move"
+    );
+}
+
+/// A `t` whose answer is lost is not resent (§5 (3)) and its job fails; every axis it may have
+/// started counts as moving until a status says otherwise.
+#[test]
+fn a_synchronized_start_whose_answer_is_lost_reads_where_its_axes_came_to_rest() {
+    let mut h = two_axes_with_moves_buffered();
+    let set = AxisSet::default().with(axis(0)).with(axis(1));
+    let id = h
+        .engine
+        .submit(Job {
+            axis: axis(0),
+            kind: JobKind::StartBuffered(set),
+        })
+        .unwrap();
+    until_sent(&mut h, |r| r.command == Command::ExecuteBuffered);
+    h.bus.set_silent(axis(0), true);
+    let sent = h.sent.len();
+    let until = h.now + S;
+    while h.now < until && h.sent.len() == sent {
+        h.step(until);
+    }
+    h.bus.set_silent(axis(0), false);
+    assert!(h.events.iter().any(|(_, e)| matches!(e,
+        Event::JobDone { id: i, result: Err(JobError::Timeout), .. } if *i == id)));
+    assert_axis_1_read_at_rest(&mut h);
+}
+
+/// A stop of the `t`'s axis asked for while the `t` is on the wire cancels the start's job
+/// (`Origin::Cancelled`), and the `t`'s answer then moves no job on: the other axes it started
+/// are never marked as started (the answered `t` of a job that runs does that, `started`).
+#[test]
+fn a_synchronized_start_whose_job_a_stop_cancels_on_the_wire_reads_where_its_axes_came_to_rest() {
+    let mut h = two_axes_with_moves_buffered();
+    let set = AxisSet::default().with(axis(0)).with(axis(1));
+    h.engine
+        .submit(Job {
+            axis: axis(0),
+            kind: JobKind::StartBuffered(set),
+        })
+        .unwrap();
+    until_sent(&mut h, |r| r.command == Command::ExecuteBuffered);
+    h.engine
+        .submit(Job {
+            axis: axis(0),
+            kind: JobKind::Stop,
+        })
+        .unwrap();
+    // Axis 1's answers lost while its move runs (the `d` goes first anyway).
+    h.bus.set_silent(axis(1), true);
+    h.run_until(h.now + 30 * MS);
+    h.bus.set_silent(axis(1), false);
+    assert_axis_1_read_at_rest(&mut h);
+}
+
+/// A `t` its own axis rejects (its buffered move refused: RUN off, an alarm) still reaches the
+/// other axes, which run what they buffered (§4-4-17); the rejection moves no axis on to
+/// `started`.
+#[test]
+fn a_synchronized_start_its_axis_rejects_reads_where_the_other_axes_came_to_rest() {
+    let mut h = two_axes_with_moves_buffered();
+    run_job(
+        &mut h,
+        Job {
+            axis: axis(0),
+            kind: JobKind::Servo(false),
+        },
+        S,
+    )
+    .unwrap();
+    h.run_until(h.now + 200 * MS);
+    let set = AxisSet::default().with(axis(0)).with(axis(1));
+    let id = h
+        .engine
+        .submit(Job {
+            axis: axis(0),
+            kind: JobKind::StartBuffered(set),
+        })
+        .unwrap();
+    until_sent(&mut h, |r| r.command == Command::ExecuteBuffered);
+    // Axis 1's answers lost while its move runs (a noisy bus): the next status it answers
+    // shows it standing.
+    h.bus.set_silent(axis(1), true);
+    h.run_until(h.now + 30 * MS);
+    h.bus.set_silent(axis(1), false);
+    assert!(
+        h.events.iter().any(|(_, e)| matches!(e,
+            Event::JobDone { id: i, result: Err(JobError::Rejected(AlarmCode(0x70))), .. } if *i == id)),
+        "RUN off"
+    );
+    assert_axis_1_read_at_rest(&mut h);
+}
+
+/// A resendable move (`a`, `o`, Q3) whose first answer is lost is resent, and only a lost last
+/// attempt counts as a move commanded. A stop asked for after the first attempt timed out and
+/// before the resend went (the resend waits behind another axis' stop here; arrival polls of
+/// other movers also go before job frames) cancels the job: the resend never goes, the axis
+/// took the first attempt, and the stop's answer shows it standing.
+#[test]
+fn a_move_whose_answer_is_lost_and_a_stop_comes_before_its_resend_reads_where_the_axis_came_to_rest(
+) {
+    let mut h = homed(2);
+    let a = axis(0);
+    h.run_until(h.now + 300 * MS);
+    let from = h.bus.controller(a).unwrap().position();
+    let target = Pulses(from as i32 - 30);
+    h.engine
+        .submit(Job {
+            axis: a,
+            kind: JobKind::MoveAbsolute(target),
+        })
+        .unwrap();
+    until_sent(&mut h, |r| matches!(r.command, Command::MoveAbsolute(_)));
+    h.bus.set_silent(a, true);
+    // Another axis' stop, asked for while the `a` is on the wire: it goes when the `a` times
+    // out, before the resend.
+    h.engine
+        .submit(Job {
+            axis: axis(1),
+            kind: JobKind::Stop,
+        })
+        .unwrap();
+    let sent = h.sent.len();
+    let until = h.now + S;
+    while h.now < until && h.sent.len() == sent {
+        h.step(until);
+    }
+    let (_, last) = *h.sent.last().unwrap();
+    assert_eq!((last.axis, last.command), (axis(1), Command::CancelMotion));
+    h.bus.set_silent(a, false);
+    h.engine
+        .submit(Job {
+            axis: a,
+            kind: JobKind::Stop,
+        })
+        .unwrap();
+    h.run_until(h.now + 2 * S);
+    let moves = h
+        .sent
+        .iter()
+        .filter(|(_, r)| matches!(r.command, Command::MoveAbsolute(_)))
+        .count();
+    assert_eq!(moves, 1, "the case this test is about: never resent");
+    let rest = h.bus.controller(a).unwrap().position();
+    assert_eq!(rest, i64::from(target.0), "the axis moved");
+    assert_eq!(
+        h.engine.axis(a).position,
+        Some(Pulses(rest as i32)),
+        "read where it rests"
+    );
+}
+
+/// A `t` whose answer is lost marks every configured axis as maybe moving, an offline one
+/// too: that one answers no status that would clear the mark, so it counts as moving for good,
+/// and rejoin tries wait until no axis moves (`Config::rejoin_while_moving` off): a
+/// power-cycled axis never rejoins.
+#[test]
+fn a_synchronized_start_whose_answer_is_lost_does_not_keep_an_offline_axis_from_rejoining() {
+    let mut h = established(3);
+    let cycled = axis(2);
+    h.bus.schedule_power_cycle(cycled, h.now + 10 * MS, 2 * S);
+    h.run_until_event(2 * S, |e| *e == Event::Offline(cycled))
+        .expect("offline after its power went");
+    let id = h
+        .engine
+        .submit(Job {
+            axis: axis(0),
+            kind: JobKind::StartBuffered(AxisSet::default().with(axis(0))),
+        })
+        .unwrap();
+    until_sent(&mut h, |r| r.command == Command::ExecuteBuffered);
+    h.bus.set_silent(axis(0), true);
+    let sent = h.sent.len();
+    let until = h.now + S;
+    while h.now < until && h.sent.len() == sent {
+        h.step(until);
+    }
+    h.bus.set_silent(axis(0), false);
+    assert!(h.events.iter().any(|(_, e)| matches!(e,
+        Event::JobDone { id: i, result: Err(JobError::Timeout), .. } if *i == id)));
+    let back = h.run_until_event(15 * S, |e| *e == Event::Online(cycled));
+    assert!(back.is_some(), "rejoined once powered again");
+}
