@@ -154,7 +154,7 @@ fn signal_keys(cell: &str) -> Vec<String> {
     // IN/OUT numbers, with ranges "IN0-IN5" expanded.
     let mut keys = Vec::new();
     let words: Vec<&str> = cell
-        .split(|c: char| c == ' ' || c == ',')
+        .split([' ', ','])
         .filter(|w| !w.is_empty())
         .collect();
     for word in words {
