@@ -153,10 +153,7 @@ fn signal_keys(cell: &str) -> Vec<String> {
     }
     // IN/OUT numbers, with ranges "IN0-IN5" expanded.
     let mut keys = Vec::new();
-    let words: Vec<&str> = cell
-        .split([' ', ','])
-        .filter(|w| !w.is_empty())
-        .collect();
+    let words: Vec<&str> = cell.split([' ', ',']).filter(|w| !w.is_empty()).collect();
     for word in words {
         for prefix in ["OUT", "IN"] {
             let Some(rest) = word.strip_prefix(prefix) else {

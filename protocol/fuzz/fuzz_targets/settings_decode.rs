@@ -21,17 +21,29 @@ fn check(record: &[u8]) {
     };
     let encoded = settings.encode();
     if record.first() == Some(&FORMAT) {
-        assert_eq!(&encoded[..], record, "decode then encode is the same record");
+        assert_eq!(
+            &encoded[..],
+            record,
+            "decode then encode is the same record"
+        );
     } else {
-        let again = Settings::decode(&encoded).expect("an older record re-encodes to one that decodes");
-        assert_eq!(again, settings, "an older record keeps its settings in the current format");
+        let again =
+            Settings::decode(&encoded).expect("an older record re-encodes to one that decodes");
+        assert_eq!(
+            again, settings,
+            "an older record keeps its settings in the current format"
+        );
     }
 }
 
 fuzz_target!(|data: &[u8]| {
     check(data);
     // The same bytes as a whole record of each format, with a valid format byte and checksum.
-    for (format, len) in [(FORMAT, RECORD_LEN), (FORMAT_2, RECORD_LEN_2), (FORMAT_1, RECORD_LEN_1)] {
+    for (format, len) in [
+        (FORMAT, RECORD_LEN),
+        (FORMAT_2, RECORD_LEN_2),
+        (FORMAT_1, RECORD_LEN_1),
+    ] {
         let mut record = [0u8; RECORD_LEN];
         for (slot, byte) in record.iter_mut().zip(data) {
             *slot = *byte;
