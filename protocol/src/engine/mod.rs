@@ -565,8 +565,9 @@ impl Engine {
     /// `request` may have set axes moving and no answer said so: an `m` or a `t` whose answer
     /// was lost (never resent, §5 (2), (3)), any move whose attempt was lost (a stop may cancel
     /// its job before the resend goes), a move whose job a stop cancelled while it was on the
-    /// wire, a `t` its own axis refused (the others still start). Such a move can end before any status shows it (a short one, over before
-    /// the axis' next poll), and the position read when its job failed was taken mid-move: the
+    /// wire, a `t` its own axis refused (the others still start). Such a move can end before any
+    /// status shows it (a short one, over before the axis' next poll), and the position read when
+    /// its job failed was taken mid-move: the
     /// axes count as moving until a status says otherwise, so that the first one that shows
     /// them standing has their position read until it rests. A `t` may have started any axis
     /// that has a move buffered.

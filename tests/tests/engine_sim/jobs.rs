@@ -676,17 +676,10 @@ fn a_relative_move_whose_answer_is_lost_reads_where_the_axis_came_to_rest() {
             },
         })
         .unwrap();
-    let is_m = |r: &Request| matches!(r.command, Command::MoveRelative(_));
-    let until = h.now + S;
-    while h.now < until && !h.sent.iter().any(|(_, r)| is_m(r)) {
-        h.step(until);
-    }
+    until_sent(&mut h, |r| matches!(r.command, Command::MoveRelative(_)));
     // The `m`'s answer lost; the axis answers again from the next frame on (the job's read).
     h.bus.set_silent(a, true);
-    let sent = h.sent.len();
-    while h.now < until && h.sent.len() == sent {
-        h.step(until);
-    }
+    until_next_frame(&mut h);
     h.bus.set_silent(a, false);
     let result = h.run_until_event(
         h.now + S,
@@ -714,6 +707,7 @@ fn a_relative_move_whose_answer_is_lost_reads_where_the_axis_came_to_rest() {
     // Its status polls lost until the move is over (a noisy bus), fewer of them than take it
     // offline: the first status it answers shows it standing.
     h.bus.set_silent(a, true);
+    let until = h.now + S;
     while h.now < until && h.bus.controller(a).unwrap().moving() {
         h.step(until);
     }
@@ -750,15 +744,7 @@ fn a_move_whose_answer_is_lost_as_a_stop_cancels_it_reads_where_the_axis_came_to
             kind: JobKind::MoveAbsolute(target),
         })
         .unwrap();
-    let until = h.now + S;
-    while h.now < until
-        && !h
-            .sent
-            .iter()
-            .any(|(_, r)| matches!(r.command, Command::MoveAbsolute(_)))
-    {
-        h.step(until);
-    }
+    until_sent(&mut h, |r| matches!(r.command, Command::MoveAbsolute(_)));
     h.bus.set_silent(a, true);
     h.engine
         .submit(Job {
@@ -766,10 +752,7 @@ fn a_move_whose_answer_is_lost_as_a_stop_cancels_it_reads_where_the_axis_came_to
             kind: JobKind::Stop,
         })
         .unwrap();
-    let sent = h.sent.len();
-    while h.now < until && h.sent.len() == sent {
-        h.step(until);
-    }
+    until_next_frame(&mut h);
     assert_eq!(h.sent.last().unwrap().1.command, Command::CancelMotion);
     h.bus.set_silent(a, false);
     assert!(
@@ -812,6 +795,15 @@ fn until_sent(h: &mut rc_host::harness::Harness, is: impl Fn(&Request) -> bool) 
     assert!(h.sent.iter().any(|(_, r)| is(r)), "the frame went out");
 }
 
+/// Step until the engine has sent one more frame (at most a second).
+fn until_next_frame(h: &mut rc_host::harness::Harness) {
+    let (sent, until) = (h.sent.len(), h.now + S);
+    while h.now < until && h.sent.len() == sent {
+        h.step(until);
+    }
+    assert!(h.sent.len() > sent, "a frame went out");
+}
+
 /// The other axis of a synchronized start came to rest where the engine keeps its position.
 fn assert_axis_1_read_at_rest(h: &mut rc_host::harness::Harness) {
     h.run_until(h.now + 2 * S);
@@ -842,11 +834,7 @@ fn a_synchronized_start_whose_answer_is_lost_reads_where_its_axes_came_to_rest()
         .unwrap();
     until_sent(&mut h, |r| r.command == Command::ExecuteBuffered);
     h.bus.set_silent(axis(0), true);
-    let sent = h.sent.len();
-    let until = h.now + S;
-    while h.now < until && h.sent.len() == sent {
-        h.step(until);
-    }
+    until_next_frame(&mut h);
     h.bus.set_silent(axis(0), false);
     assert!(h.events.iter().any(|(_, e)| matches!(e,
         Event::JobDone { id: i, result: Err(JobError::Timeout), .. } if *i == id)));
@@ -947,11 +935,7 @@ fn a_move_whose_answer_is_lost_and_a_stop_comes_before_its_resend_reads_where_th
             kind: JobKind::Stop,
         })
         .unwrap();
-    let sent = h.sent.len();
-    let until = h.now + S;
-    while h.now < until && h.sent.len() == sent {
-        h.step(until);
-    }
+    until_next_frame(&mut h);
     let (_, last) = *h.sent.last().unwrap();
     assert_eq!((last.axis, last.command), (axis(1), Command::CancelMotion));
     h.bus.set_silent(a, false);
@@ -997,11 +981,7 @@ fn a_synchronized_start_whose_answer_is_lost_does_not_keep_an_offline_axis_from_
         .unwrap();
     until_sent(&mut h, |r| r.command == Command::ExecuteBuffered);
     h.bus.set_silent(axis(0), true);
-    let sent = h.sent.len();
-    let until = h.now + S;
-    while h.now < until && h.sent.len() == sent {
-        h.step(until);
-    }
+    until_next_frame(&mut h);
     h.bus.set_silent(axis(0), false);
     assert!(h.events.iter().any(|(_, e)| matches!(e,
         Event::JobDone { id: i, result: Err(JobError::Timeout), .. } if *i == id)));
