@@ -6,21 +6,33 @@
 //! mover all the time cannot do it with several movers (four movers polled in turn: each every
 //! four transactions at best, and idle axes starved); polling a mover when it is about to arrive
 //! can. The estimate comes from what the engine sees anyway: the target of the move command it
-//! sent (`a` absolute, `m` relative, complete edition §4-4-8/§4-4-11) and two successive
-//! position reads (R4 PNOW) during the move, their speed extrapolated to the target. Constant
-//! speed ignores the deceleration, so the estimate is early by about half the braking time:
-//! the safe side, since an axis due is polled until it is seen in position.
+//! sent (`a` absolute, `m` relative, complete edition §4-4-8/§4-4-11), where the axis rested
+//! at the command, and position reads (R4 PNOW) during the move, modelled as the controller
+//! moves: an even acceleration from a standstill, a cruise, and a braking as long as the
+//! acceleration (complete edition §7-2-1, MXAC 0):
 //!
-//! Until a second read, the first one and the position at the command give a provisional
-//! estimate, at twice their mean speed (an even acceleration from a standstill): also early.
+//! - **Accelerating** (a read's distance from the start over the square of its time does not
+//!   fall, or the read before came in the first quarter of the time): twice the mean speed
+//!   since the command is the speed it has. Provisional: it speeds up further, so the estimate
+//!   errs early, and the next read is asked for.
+//! - **Cruising**: the speed between the last two reads, extrapolated to the target, plus half
+//!   the time the acceleration lost against that speed (`lost`): a constant-speed
+//!   extrapolation alone is early by half the braking time (eight transactions early for
+//!   `rt-bench`'s 40 mm moves), and the axis was polled as arriving all that while. The half
+//!   left out keeps the estimate early by about a quarter of the braking time, which covers
+//!   the position band (PFIN comes when the axis enters it, before the target, complete
+//!   edition §4-3-1).
+//! - **Braking** (less left than the acceleration covered): the estimate from the cruise
+//!   stands; the speed between reads now overstates how long the rest takes.
+//!
 //! The reads an estimate needs are few (`ESTIMATE_READS` per move), so the schedule sends them
 //! first and outside the per-cycle share of position reads, each when the mover's position is
-//! due (right after the command, then a share period later): not one right after the other,
-//! since two reads in the first milliseconds of the acceleration measure a speed far below the
-//! one the axis reaches, and the estimate from them was late by tens of milliseconds
-//! (`rt-bench`, 40 mm moves over a pseudo-terminal). A mover whose command was accepted
-//! counts as moving until a status says otherwise (`unseen`): its last status, from before the
-//! command, says it stands.
+//! due (right after the command, then a share period later). Before this model the second read,
+//! still in the acceleration, set a speed far below the one the axis reached, and the estimate
+//! was late by tens of milliseconds (`rt-bench`: movers seen complete up to 9 transactions
+//! after they entered their band). A mover whose command was accepted counts as moving until
+//! a status says otherwise (`unseen`): its last status, from before the command, says it
+//! stands.
 //!
 //! A move ends in its position band, not at rest, so the estimate's last duty is the stop: the
 //! stopped axis is read again until two reads agree ([`SETTLE_READS`]), so that the position the
@@ -39,7 +51,8 @@ pub(super) struct Approach {
     target: Option<Pulses>,
     /// When its command was answered: position reads before it belong to an earlier move.
     since: Instant,
-    /// Where it was then (the last position read), the first point of its speed.
+    /// Where it was then (the last position read), if it rested there: the first point of its
+    /// speed.
     start: Option<Pulses>,
     /// When it is expected at its target, if `eta_known` (an `Option<Instant>` would take 8
     /// bytes more per axis, in a node the F103 budget holds to the byte).
@@ -105,10 +118,15 @@ impl Approach {
             Command::Home(_) => None,
             _ => return,
         };
+        // Where the axis rests, if it does: a position read while the last move was still
+        // ending (or settling in its band) is not where this one starts, and would make its
+        // acceleration look longer than it was (`lost`), the estimate late (`scripts/bench.sh`,
+        // scenario 6, moves given as soon as the last one is seen complete).
+        let rested = self.target.is_none() && !self.unseen && self.settle_reads == 0;
         *self = Approach {
             target,
             since: now,
-            start: at,
+            start: at.filter(|_| rested),
             eta: Instant::ZERO,
             eta_known: false,
             measured: false,
@@ -119,9 +137,7 @@ impl Approach {
     }
 
     /// A position read answered at `now` (`position`), after the one before (`previous`): the
-    /// speed between them (or since the move started, from where it started: slower than the
-    /// speed it reaches, so the first estimate is late, and the next read corrects it),
-    /// extrapolated to the target.
+    /// estimate of the phase the move is in (the module's doc).
     pub(super) fn position_read(
         &mut self,
         now: Instant,
@@ -138,20 +154,47 @@ impl Approach {
             return;
         };
         self.reads = self.reads.saturating_add(1);
-        let (from, measured) = match previous {
-            Some((before, at)) if at >= self.since => (Some((before, at)), true),
-            _ => (self.start.map(|start| (start, self.since)), false),
+        let previous = previous.filter(|&(_, at)| at >= self.since);
+        let (t, before) = (
+            self.elapsed(now),
+            previous.map(|(p, at)| (p, self.elapsed(at))),
+        );
+        let (from, elapsed, lost, measured) = match (before, self.start) {
+            // Cruising: at its speed between the two reads, plus half the time its
+            // acceleration lost (its braking loses as much: see `lost`).
+            (Some((before, early)), Some(start))
+                if !accelerating(start, before, early, position, t) =>
+            {
+                let elapsed = t.saturating_sub(early);
+                (
+                    before,
+                    elapsed,
+                    lost(start, t, before, position, elapsed),
+                    true,
+                )
+            }
+            // Without the position at the command: at the speed between the reads.
+            (Some((before, early)), None) => (before, t.saturating_sub(early), 0, true),
+            // Still accelerating (or the first read of the move): twice the mean speed since
+            // the command, the speed it has now if it accelerates evenly from a standstill.
+            (_, Some(start)) => (start, t / 2, 0, false),
+            (None, None) => return,
         };
-        if let Some((before, at)) = from {
-            let elapsed = now.0.saturating_sub(at.0);
-            // From a standstill at the command, accelerating evenly: twice the mean speed. Never
-            // more than the speed it has, so this estimate errs early, like the measured one.
-            let elapsed = if measured { elapsed } else { elapsed / 2 };
-            let eta = arrival(now, position, target, before, elapsed);
-            self.eta = eta.unwrap_or(Instant::ZERO);
-            self.eta_known = eta.is_some();
-            self.measured = measured && self.eta_known;
+        let left = time_left(position, target, from, elapsed);
+        // Less left than its acceleration covered: it brakes, slower than between the reads.
+        // The estimate from its cruise stands.
+        if self.measured && left.is_some_and(|left| left < u64::from(lost)) {
+            return;
         }
+        self.eta = now + Duration(left.unwrap_or(0).saturating_add(u64::from(lost / 2)));
+        self.eta_known = left.is_some();
+        self.measured = measured && self.eta_known;
+    }
+
+    /// µs from the command to `at`, in 32 bits (71 minutes, saturating: no move's estimate
+    /// needs more, and 32-bit products spare the F103 64-bit multiplications).
+    fn elapsed(&self, at: Instant) -> u32 {
+        u32::try_from(at.0.saturating_sub(self.since.0)).unwrap_or(u32::MAX)
     }
 
     /// Whether the axis' move has a target, so that position reads can estimate its arrival.
@@ -222,29 +265,53 @@ impl Approach {
     }
 }
 
-/// When an axis at `position` (now) reaches `target`, having come from `before` in `elapsed_us`
-/// µs at the same speed; `None` if it does not move toward the target.
-fn arrival(
-    now: Instant,
-    position: Pulses,
-    target: Pulses,
-    before: Pulses,
-    elapsed_us: u64,
-) -> Option<Instant> {
-    let moved = i64::from(position.0) - i64::from(before.0);
-    let remaining = i64::from(target.0) - i64::from(position.0);
+/// The µs an axis at `position` takes to reach `target`, having come from `before` in
+/// `elapsed_us` µs at the same speed; `None` if it does not move toward the target.
+fn time_left(position: Pulses, target: Pulses, before: Pulses, elapsed_us: u32) -> Option<u64> {
+    let remaining = target.0.abs_diff(position.0);
     if remaining == 0 {
-        return Some(now);
+        return Some(0);
     }
-    if moved == 0 || (moved > 0) != (remaining > 0) {
+    let moved = NonZeroU32::new(position.0.abs_diff(before.0))?;
+    if (position.0 > before.0) != (target.0 > position.0) {
         return None;
     }
-    // remaining / moved > 0; the product stays far from overflow (|remaining| < 2^33,
-    // elapsed < 2^31 µs in practice; saturating for the rest). `moved` is the difference of
-    // two i32, so its magnitude fits in 32 bits (crate::div: no 64-bit division routine).
-    let moved = NonZeroU32::new(u32::try_from(moved.unsigned_abs()).ok()?)?;
-    let us = div(remaining.unsigned_abs().saturating_mul(elapsed_us), moved);
-    Some(now + Duration(us))
+    // 32 x 32 bits: no overflow, and no 64-bit division routine (crate::div).
+    Some(div(u64::from(remaining) * u64::from(elapsed_us), moved))
+}
+
+/// Whether an axis that left `start` at the command still accelerated between a read `before`,
+/// `early` µs after the command, and one at `position`, `late` µs after it: an even
+/// acceleration from a standstill covers a distance in proportion to the square of its time,
+/// so the distance over the square of the time stays the same while it accelerates and falls
+/// once it cruises.
+///
+/// A read in the first quarter of the time tells nothing: the axis starts when its controller
+/// takes the command, up to a transaction before the engine's `since` (its answer), so a read
+/// 4 ms after the answer may find it 7 ms under way. Counted as accelerating, the safe side (the
+/// speed from the start errs early).
+fn accelerating(start: Pulses, before: Pulses, early: u32, position: Pulses, late: u32) -> bool {
+    // In ms, up to 65 s: each product fits its type.
+    let (early, late) = ((early >> 10).min(0xFFFF), (late >> 10).min(0xFFFF));
+    early * 4 < late
+        || u64::from(position.0.abs_diff(start.0)) * u64::from(early * early)
+            >= u64::from(before.0.abs_diff(start.0)) * u64::from(late * late)
+}
+
+/// The time (µs) an axis that left `start` at the command, `elapsed` µs ago, lost to its
+/// acceleration against its speed now (from `before` to `position` in `step_us` µs, its last
+/// two reads): the time it has been under way less the time its distance takes at that speed.
+/// It brakes as long as it accelerated (the deceleration follows the acceleration value unless
+/// MXAC says otherwise, complete edition §7-2-1; with MXAC the acceleration is the harder, and
+/// the estimate earlier), so a constant-speed extrapolation is early by half the braking time,
+/// which is this.
+fn lost(start: Pulses, elapsed: u32, before: Pulses, position: Pulses, step_us: u32) -> u32 {
+    let Some(step) = NonZeroU32::new(position.0.abs_diff(before.0)) else {
+        return 0;
+    };
+    let distance = u64::from(position.0.abs_diff(start.0));
+    let at_speed = div(distance * u64::from(step_us), step);
+    elapsed.saturating_sub(u32::try_from(at_speed).unwrap_or(u32::MAX))
 }
 
 #[cfg(test)]
@@ -282,6 +349,59 @@ mod tests {
             Some((Pulses(9_500), Instant(25 * MS))),
         );
         assert_eq!(a.eta(), Some(Instant(50 * MS + 200 * MS)));
+    }
+
+    /// Where a trapezoidal move from 0 to `distance` is at `t` ms: accelerating evenly for
+    /// `ramp` ms to `speed` pulses/ms, cruising, braking as long as it accelerated.
+    fn trapezoid(distance: f64, speed: f64, ramp: f64, t: f64) -> i32 {
+        let end = distance / speed + ramp;
+        let a = speed / ramp;
+        let p = if t <= ramp {
+            a * t * t / 2.0
+        } else if t <= end - ramp {
+            speed * (t - ramp / 2.0)
+        } else if t < end {
+            distance - a * (end - t) * (end - t) / 2.0
+        } else {
+            distance
+        };
+        p.round() as i32
+    }
+
+    #[test]
+    fn a_move_is_expected_early_but_near_its_end_after_its_acceleration() {
+        // rt-bench's moves: 40 mm at 200 mm/s, 68 ms of acceleration (0.3 G); 268 ms in all.
+        let (distance, speed, ramp) = (4_000.0, 20.0, 68.0);
+        let end = distance / speed + ramp;
+        let mut a = Approach::NONE;
+        a.command_accepted(
+            Instant(0),
+            &Command::MoveAbsolute(Pulses(4_000)),
+            Some(Pulses(0)),
+            None,
+        );
+        let mut previous = None;
+        let mut etas = [0.0; 5];
+        for (i, t) in [4.0, 65.0, 135.0, 205.0, 250.0].into_iter().enumerate() {
+            let now = Instant((t * 1_000.0) as u64);
+            let at = Pulses(trapezoid(distance, speed, ramp, t));
+            a.position_read(now, at, previous);
+            previous = Some((at, now));
+            etas[i] = a.eta().map_or(f64::NAN, |eta| eta.0 as f64 / 1_000.0);
+        }
+        // Never late (a late estimate leaves the axis unpolled past its end) once it has moved
+        // more than a pulse or two (4 ms after the command: provisional, not `estimated`).
+        for (i, eta) in etas.iter().enumerate().skip(1) {
+            assert!(*eta <= end, "read {i}: {eta} ms, the move ends at {end} ms");
+        }
+        // Accelerating (65 ms): at the speed it has, within its braking time.
+        assert!(etas[1] >= end - ramp, "{etas:?}");
+        // Cruising: within a quarter of the ramp (half the braking time, which the position band
+        // partly covers), not half the braking time early as a constant speed would be.
+        for eta in &etas[2..] {
+            assert!(*eta >= end - ramp / 4.0 - 1.0, "{etas:?}");
+        }
+        assert!(a.estimated());
     }
 
     #[test]
