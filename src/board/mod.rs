@@ -5,7 +5,7 @@
 //! |---|---|---|
 //! | `board-l475` (default) | [`l475`] | ST B-L475E-IOT01A (STM32L475VG, hardware driver enable); what QEMU emulates |
 //! | `board-f103` | [`f103`] | an STM32F103C8 "blue pill" (driver enable as a GPIO) |
-//! | `board-f429` | [`f429`] | ST NUCLEO-F429ZI (STM32F429ZI, driver enable as a GPIO, Ethernet: Modbus TCP) |
+//! | `board-f429` | [`f429`] (its Ethernet: `f429/ethernet.rs`) | ST NUCLEO-F429ZI (STM32F429ZI, driver enable as a GPIO, Ethernet: Modbus TCP) |
 //!
 //! A board module supplies the pins and peripherals ([`board`]), the clock tree, this chip's
 //! part of a UART's settings, the reset cause, the settings' flash range and the board's name;
