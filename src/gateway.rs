@@ -28,6 +28,7 @@ use embassy_futures::select::{select4, Either4};
 use embassy_time::Timer;
 
 use crate::board::Board;
+use crate::emu;
 use crate::io::{self, Sample, SAMPLED};
 #[cfg(feature = "net")]
 use crate::net::PORT;
@@ -106,20 +107,6 @@ async fn fed(watchdog: &mut crate::board::Watchdog, work: Pin<&mut dyn Future<Ou
     select(work, feed).await;
 }
 
-/// The emulator build only: the harness writes `true` here (QEMU's qtest, found by its symbol)
-/// to make the gateway task panic, so that the fail-safe is proven on the real ELF. `#[used]`:
-/// nothing in the program stores to it, which would otherwise let the compiler drop the check.
-#[cfg(feature = "emulator")]
-#[used]
-static EMU_PANIC: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
-
-/// The emulator build only: the harness writes `true` here to make the gateway task stop making
-/// progress (it spins without yielding), so that the emulator's model of the watchdog
-/// (`systick`) is shown to reset a stuck firmware.
-#[cfg(feature = "emulator")]
-#[used]
-static EMU_STALL: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
-
 /// Runs the gateway forever.
 #[embassy_executor::task]
 pub async fn run(
@@ -176,14 +163,8 @@ pub async fn run(
             Either4::Third(()) => samples(node, &mut stop),
             Either4::Fourth(()) => {}
         }
-        #[cfg(feature = "emulator")]
-        if EMU_PANIC.load(core::sync::atomic::Ordering::Relaxed) {
-            panic!("requested by the emulator harness");
-        }
-        #[cfg(feature = "emulator")]
-        while EMU_STALL.load(core::sync::atomic::Ordering::Relaxed) {
-            core::hint::spin_loop();
-        }
+        // The emulator harness' panic and stall (nothing on the board).
+        emu::serve_gateway_requests();
         // Whatever else has arrived meanwhile goes in before anything goes out.
         loop {
             let n = board.bus.read_ready(&mut bus_buf);

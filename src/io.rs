@@ -24,6 +24,7 @@ use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Ticker, Timer};
 
 use crate::discrete::{Inputs, Leds, Outputs};
+use crate::emu;
 use protocol::node::Indicators;
 use protocol::pio::{PioInputs, PioOutputs};
 
@@ -196,26 +197,6 @@ pub struct Pins {
     pub leds: Leds,
 }
 
-/// The emulator build only: how many times the stop input's interrupt woke this task, read by
-/// the emulator tests (through QEMU's qtest, by its symbol) to prove the interrupt path.
-#[cfg(feature = "emulator")]
-#[used]
-static EMU_STOP_WAKES: AtomicU32 = AtomicU32::new(0);
-
-/// The emulator build only: the span between the first and the last sample that read an input
-/// of [`EMU_PULSE_MASK`] ON in its latest pulse, µs, read by the emulator tests (qtest, by its
-/// symbol): what the firmware saw of a pulse the harness timed on the host, whose own timing
-/// QEMU does not keep under load.
-#[cfg(feature = "emulator")]
-#[used]
-static EMU_CSTR_SPAN_US: AtomicU32 = AtomicU32::new(0);
-
-/// The emulator build only: the inputs whose pulses [`EMU_CSTR_SPAN_US`] times (bit n = INn;
-/// CSTR until a test writes another mask, such as an ST input's).
-#[cfg(feature = "emulator")]
-#[used]
-static EMU_PULSE_MASK: AtomicU32 = AtomicU32::new(PioInputs::CSTR.bits() as u32);
-
 /// Samples the inputs and drives the outputs and LEDs, forever: every millisecond while a PIO
 /// axis is configured, else on a change of the stop input and every [`INDICATORS_PERIOD`].
 #[embassy_executor::task]
@@ -227,23 +208,14 @@ pub async fn run(pins: &'static mut Pins) -> ! {
     } = pins;
     let mut ticker = Ticker::every(SAMPLE_PERIOD);
     let mut sent: Option<Sample> = None;
-    #[cfg(feature = "emulator")]
-    let mut cstr_on: Option<u32> = None;
+    // What the emulator harness reads of an input pulse (nothing on the board).
+    let mut pulse = emu::PulseTimer::new();
     loop {
         // Stamped as read: the gateway task may take it much later.
         let now = embassy_time::Instant::now();
         let sample = Sample::of(inputs);
         let every_sample = EVERY_SAMPLE.load(Ordering::Relaxed);
-        #[cfg(feature = "emulator")]
-        {
-            let us = now.as_micros() as u32;
-            let mask = EMU_PULSE_MASK.load(Ordering::Relaxed);
-            let on = u32::from(sample.inputs.bits()) & mask != 0;
-            cstr_on = on.then(|| cstr_on.unwrap_or(us));
-            if let Some(first) = cstr_on {
-                EMU_CSTR_SPAN_US.store(us.wrapping_sub(first), Ordering::Relaxed);
-            }
-        }
+        pulse.sample(now, sample.inputs);
         if sent != Some(sample) || every_sample {
             push(sample, now.as_micros());
             sent = Some(sample);
@@ -260,8 +232,7 @@ pub async fn run(pins: &'static mut Pins) -> ! {
         } else {
             let stop_moved = inputs.stop_other_than(sample.stop);
             if let Either::First(()) = select(stop_moved, Timer::after(INDICATORS_PERIOD)).await {
-                #[cfg(feature = "emulator")]
-                EMU_STOP_WAKES.fetch_add(1, Ordering::Relaxed);
+                emu::count_stop_wake();
             }
             // The millisecond samples, if a PIO axis comes, start from now, not in a burst
             // that catches up on the time spent here.

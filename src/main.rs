@@ -18,11 +18,12 @@
 //! | `net` | Modbus TCP over Ethernet: the network stack and its socket tasks (feature `net`) |
 //! | [`io`] | The task that samples the inputs and drives the outputs and LEDs |
 //! | [`settings`] | The settings at start-up and on SAVE, factory reset, reset cause |
-//! | [`rt`] | Executor loop, panic and HardFault handlers (all the `unsafe`) |
-//! | `systick` | The emulator's time driver |
+//! | [`rt`] | Executor loop, panic and HardFault handlers (the `unsafe`, but the emulator's fault requests) |
+//! | [`emu`] | The emulator build's hooks (time driver, watchdog model, pacing, the harness' requests): no-ops on the board |
 //!
 //! Two builds (Cargo features): `hw` (default) for the board, `emulator` for QEMU
-//! (`scripts/emu-build.sh`). They differ in the time driver, the log channel and the watchdog.
+//! (`scripts/emu-build.sh`). They differ in the time driver, the log channel and the watchdog:
+//! the product code calls the emulator's hooks ([`emu`]) in both, and they do nothing on the board.
 
 #![no_std]
 #![no_main]
@@ -47,6 +48,7 @@ compile_error!("the emulator build is the L475's: QEMU has no STM32 with Etherne
 mod log;
 mod board;
 mod discrete;
+mod emu;
 mod gateway;
 mod io;
 #[cfg(feature = "net")]
@@ -57,8 +59,6 @@ mod pins;
 mod rt;
 mod serial;
 mod settings;
-#[cfg(feature = "emulator")]
-mod systick;
 
 #[cfg(feature = "hw")]
 use defmt_rtt as _;
@@ -106,6 +106,9 @@ struct Parts {
 #[inline(never)]
 fn start() -> Started {
     let mut config = node::default_config();
+    // The emulator's timing: no wire timing on the bus, reply slack, the PLC line's frame gap
+    // (nothing on the board).
+    emu::loosen_timing(&mut config);
     let mut parts = bring_up(config.plc);
     if let Some(Parts {
         board,
@@ -144,10 +147,7 @@ fn bring_up(plc: protocol::plc::PlcLine) -> Option<&'static mut Parts> {
     #[cfg(feature = "hw")]
     board::start_watchdog();
     let p = embassy_stm32::init(board::clock_config());
-    #[cfg(feature = "emulator")]
-    if let Some(core) = cortex_m::Peripherals::take() {
-        systick::init(core.SYST);
-    }
+    emu::start_time();
     info!("rc-gateway {} starting", VERSION);
 
     match board::board(p, plc) {

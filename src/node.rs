@@ -24,19 +24,5 @@ pub const fn default_config() -> GatewayConfig {
         model_name: MODEL_NAME,
         ..IDENTITY
     };
-    // QEMU's UART moves bytes without wire time: a command "leaves" at once, so an answer can
-    // complete sooner after the hand-over than a real line allows, and the emulator's virtual
-    // clock is only kept near real time. The earliest-answer bound is a property of a wire
-    // (`protocol::engine::Config::wire_timing`); on the board it stays on.
-    // And its host can stall QEMU for a few hundred ms with a controller's answer already sent
-    // (rc-sim keeps real time): the response time-outs get that much slack, so that a stall of
-    // the emulator is not taken for a silent axis. Its PLC line is a socket whose bytes the task
-    // may read in bursts further apart than t3.5: a frame ends after 20 ms of silence there.
-    #[cfg(feature = "emulator")]
-    {
-        config.bus.wire_timing = false;
-        config.bus.reply_slack = protocol::time::Duration::from_millis(250);
-        config.plc_frame_gap = Some(protocol::time::Duration::from_millis(20));
-    }
     config
 }

@@ -1,6 +1,7 @@
-//! The runtime glue that needs `unsafe`, all of it here: the executor loop, the panic handler,
-//! the HardFault handler and the handler of every other exception and interrupt
-//! (`DefaultHandler`: NMI, and any interrupt no driver binds).
+//! The runtime glue that needs `unsafe`, all of it here but the emulator's fault requests
+//! ([`emu`](crate::emu)): the executor loop, the panic handler, the HardFault handler and the
+//! handler of every other exception and interrupt (`DefaultHandler`: NMI, and any interrupt no
+//! driver binds).
 //!
 //! The stack: flip-link (`.cargo/config.toml`) links the firmware with the stack at the bottom of
 //! RAM, from `_stack_start` (right below `.data`) down to the start of RAM, and the statics above
@@ -19,7 +20,7 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use embassy_executor::{raw, Spawner};
 use static_cell::StaticCell;
 
-use crate::pins;
+use crate::{emu, pins};
 
 /// Set by a waker (from a task or an interrupt): the executor has work.
 static WORK: AtomicBool = AtomicBool::new(false);
@@ -49,23 +50,19 @@ pub fn run<T: 'static>(make: impl FnOnce() -> T, init: impl FnOnce(Spawner, &'st
     // `value` is not named again: the reference handed out is the only way to it.
     let value: &'static mut T = unsafe { &mut *core::ptr::addr_of_mut!(value) };
     start(executor.spawner(), value, init);
-    #[cfg(feature = "emulator")]
-    let mut load = load::Meter::start();
+    let mut load = emu::LoadMeter::start();
     loop {
         WORK.store(false, Ordering::Release);
         // SAFETY: `poll` is called only here, in thread mode, never re-entrantly; the executor is
         // 'static and every task was spawned on it through its own spawner.
         unsafe { executor.poll() };
-        #[cfg(feature = "emulator")]
-        requests::on_request();
+        emu::serve_fault_requests();
         // Sleep unless something was woken meanwhile. Interrupts are masked for the check, so a
         // wake between the check and WFI leaves the interrupt pending, and WFI returns at once.
         cortex_m::interrupt::free(|_| {
             if !WORK.load(Ordering::Acquire) {
-                #[cfg(feature = "emulator")]
                 load.asleep();
                 cortex_m::asm::wfi();
-                #[cfg(feature = "emulator")]
                 load.awake();
             }
         });
@@ -84,47 +81,6 @@ fn start<T: 'static>(
     init(spawner, value)
 }
 
-/// The emulator build only: how much of the time the CPU is not asleep in WFI, for
-/// `scripts/cpu-load.sh`, which runs QEMU with `-icount` (guest time then follows the instructions
-/// executed) and reads these two statics through qtest. The interrupt handlers that a wake runs
-/// count as busy: they run right after `awake`, before the next `asleep`.
-#[cfg(feature = "emulator")]
-mod load {
-    use core::sync::atomic::{AtomicU32, Ordering};
-
-    /// µs spent outside WFI since start (wraps after 71 minutes: read by difference).
-    #[used]
-    static EMU_BUSY_US: AtomicU32 = AtomicU32::new(0);
-    /// The time of the last `asleep`, µs since start (the window the busy time is taken over).
-    #[used]
-    static EMU_CLOCK_US: AtomicU32 = AtomicU32::new(0);
-
-    fn now_us() -> u32 {
-        // Wraps with the statics: the harness reads differences.
-        embassy_time::Instant::now().as_micros() as u32
-    }
-
-    pub(super) struct Meter {
-        woke: u32,
-    }
-
-    impl Meter {
-        pub(super) fn start() -> Meter {
-            Meter { woke: now_us() }
-        }
-
-        pub(super) fn asleep(&mut self) {
-            let now = now_us();
-            EMU_BUSY_US.fetch_add(now.wrapping_sub(self.woke), Ordering::Relaxed);
-            EMU_CLOCK_US.store(now, Ordering::Relaxed);
-        }
-
-        pub(super) fn awake(&mut self) {
-            self.woke = now_us();
-        }
-    }
-}
-
 /// Outputs safe first, then the message, then stop (see [`halt`]).
 #[panic_handler]
 fn panic(info: &PanicInfo) -> ! {
@@ -133,17 +89,10 @@ fn panic(info: &PanicInfo) -> ! {
     // the handler would read) cost 6.9 KB of flash (measured on the F103 build), and a debug
     // probe shows where it stopped anyway (`probe-rs run` prints the backtrace at the `udf` of
     // `halt`). The message is never formatted: that would pull `core::fmt` in. The emulator,
-    // whose flash is not counted, names the place for the harness.
+    // whose flash is not counted, names the place for the harness (`emu::report_panic`).
     #[cfg(feature = "hw")]
-    {
-        let _ = info;
-        error!("panic (the probe's backtrace shows where)");
-    }
-    #[cfg(feature = "emulator")]
-    match info.location() {
-        Some(at) => error!("panic at {}:{}", at.file(), at.line()),
-        None => error!("panic"),
-    }
+    error!("panic (the probe's backtrace shows where)");
+    emu::report_panic(info);
     halt()
 }
 
@@ -200,12 +149,10 @@ extern "C" fn hard_fault(sp: u32) -> ! {
             error!("HardFault, sp {:#x} outside the stack: stack overflow", sp);
         }
     });
-    // The board: start again. The emulator: halt, as after a panic, so that the harness can read
-    // the pins (tests/emu/test_firmware.py).
-    #[cfg(feature = "hw")]
-    reset();
-    #[cfg(feature = "emulator")]
-    halt()
+    // The emulator: halt, as after a panic, so that the harness can read the pins
+    // (tests/emu/test_firmware.py). The board: start again.
+    emu::halt_for_harness();
+    reset()
 }
 
 /// NMI (exception 2) as cortex-m-rt numbers it for [`DefaultHandler`] (the exception's number
@@ -253,99 +200,18 @@ fn fail_safe(report: impl FnOnce()) {
 /// After a fault: a system reset. The outputs stay OFF through it: every pin is an input from
 /// reset until start-up drives it OFF, and the carrier's pull-downs hold the output stages and
 /// the drivers' DE low meanwhile. The emulator waits first until the harness has read the pins
-/// (bounded: `requests::hold`).
+/// (bounded: `emu::hold_for_harness`).
 fn reset() -> ! {
-    #[cfg(feature = "emulator")]
-    requests::hold();
+    emu::hold_for_harness();
     cortex_m::peripheral::SCB::sys_reset()
-}
-
-/// The emulator build only: faults on request, to prove the handlers on the real ELF (tests/emu):
-/// a stack overflow (`test_stack_overflow_faults_and_leaves_outputs_safe` in
-/// tests/emu/test_firmware.py), an NMI and an interrupt without a handler (tests/emu/test_faults.py).
-#[cfg(feature = "emulator")]
-mod requests {
-    use core::hint::black_box;
-    use core::sync::atomic::{AtomicBool, AtomicU8, Ordering};
-
-    use cortex_m::peripheral::{SCB, SYST};
-    use embassy_stm32::interrupt::{self, InterruptExt};
-
-    /// Set by the harness through qtest, by its symbol (`request_stack_overflow` in
-    /// tests/pyshared/emu.py). `#[used]` and an atomic, like `EMU_PANIC` in src/gateway.rs: nothing
-    /// in the program stores to it, which would otherwise let the compiler drop the check.
-    #[used]
-    static EMU_OVERFLOW: AtomicBool = AtomicBool::new(false);
-
-    /// Set by the harness (`request_fault`): [`NMI`] or [`UNBOUND_IRQ`].
-    #[used]
-    static EMU_FAULT_REQUEST: AtomicU8 = AtomicU8::new(0);
-    const NMI: u8 = 1;
-    const UNBOUND_IRQ: u8 = 2;
-    /// Set by the harness once it has read the pins after a fault that resets (`release_fault`).
-    #[used]
-    static EMU_FAULT_SEEN: AtomicBool = AtomicBool::new(false);
-
-    /// Checked after every poll of the executor (every wake).
-    pub(super) fn on_request() {
-        if EMU_OVERFLOW.load(Ordering::Relaxed) {
-            black_box(recurse(0));
-        }
-        match EMU_FAULT_REQUEST.swap(0, Ordering::Relaxed) {
-            // SCB ICSR NMIPENDSET: the NMI, taken at once.
-            // SAFETY: a write to a system control register, whose only effect is the NMI.
-            NMI => unsafe { (*SCB::PTR).icsr.write(1 << 31) },
-            // SWPMI1: no peripheral this firmware uses, so no handler is bound to it (its vector
-            // is cortex-m-rt's `DefaultHandler`). Enabled, then pended in the NVIC.
-            UNBOUND_IRQ => {
-                // SAFETY: unmasking an interrupt only runs its handler, which is the point.
-                unsafe { interrupt::SWPMI1.enable() };
-                interrupt::SWPMI1.pend();
-            }
-            _ => {}
-        }
-    }
-
-    /// Holds a fault that resets until the harness has read the pins ([`EMU_FAULT_SEEN`]), at
-    /// most 10 s: counted in SysTick wraps (1 ms each, `systick`), which go on with its interrupt
-    /// held off by this handler.
-    pub(super) fn hold() {
-        // SAFETY: a read of SysTick's control register (it clears COUNTFLAG, which the time
-        // driver does not use; the reset follows anyway).
-        let wrapped = || unsafe { (*SYST::PTR).csr.read() } & 1 << 16 != 0;
-        let mut ms = 0u32;
-        while !EMU_FAULT_SEEN.load(Ordering::Relaxed) && ms < 10_000 {
-            if wrapped() {
-                ms += 1;
-            }
-        }
-    }
-
-    /// Recursion without bound, 512 bytes of stack a level: the array is handed to `black_box`
-    /// (so it is really in the frame) and read after the call (so the call is not a tail call).
-    #[inline(never)]
-    fn recurse(depth: u32) -> u32 {
-        let mut frame = [0u8; 512];
-        black_box(&mut frame);
-        if black_box(depth) == u32::MAX {
-            return 0;
-        }
-        recurse(depth + 1).wrapping_add(u32::from(frame[depth as usize % frame.len()]))
-    }
 }
 
 /// After a panic. On the board: an undefined instruction, which a debug probe (`probe-rs run`)
 /// stops at, showing the log above; without a probe it is a HardFault, which resets the chip
 /// (outputs stay OFF through the reset). In the emulator (after a panic or a HardFault): stay
-/// halted with interrupts masked, so that the harness can read the pins.
+/// halted with interrupts masked, so that the harness can read the pins
+/// (`emu::halt_for_harness`, which never returns there).
 fn halt() -> ! {
-    #[cfg(feature = "hw")]
-    cortex_m::asm::udf();
-    #[cfg(feature = "emulator")]
-    {
-        cortex_m::interrupt::disable();
-        loop {
-            cortex_m::asm::wfi();
-        }
-    }
+    emu::halt_for_harness();
+    cortex_m::asm::udf()
 }

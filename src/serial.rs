@@ -15,12 +15,11 @@ use core::pin::Pin;
 use embassy_futures::select::select;
 use embassy_stm32::gpio::Output;
 use embassy_stm32::usart::BufferedUart;
-#[cfg(feature = "emulator")]
-use embassy_time::{Duration, Instant, Timer};
 use embedded_io_async::{Read, ReadReady, Write};
 use protocol::plc::Parity;
 
 use crate::board::{line_config, UartRegs};
+use crate::emu;
 use crate::pins::LineBreak;
 
 /// One RS485 line. Receiving continues in the UART's ring buffer while the task awaits a send.
@@ -38,12 +37,8 @@ pub struct Rs485 {
     parity: Parity,
     /// Bytes have been started and not yet settled.
     sending: bool,
-    /// The emulator build only: until when the bytes started last are on the wire (QEMU moves
-    /// them at once), if this line is paced ([`Rs485::paced`]).
-    #[cfg(feature = "emulator")]
-    wire_until: Option<Instant>,
-    #[cfg(feature = "emulator")]
-    paced: bool,
+    /// The emulator's wire time (QEMU moves the bytes at once; nothing on the board).
+    pace: emu::Pace,
 }
 
 impl Rs485 {
@@ -66,20 +61,8 @@ impl Rs485 {
             baud,
             parity,
             sending: false,
-            #[cfg(feature = "emulator")]
-            wire_until: None,
-            #[cfg(feature = "emulator")]
-            paced: false,
+            pace: emu::Pace::new(),
         }
-    }
-
-    /// The emulator build only: a send lasts as long as its bytes would take on the wire, as on
-    /// the board (QEMU's UART moves them at once), so that the emulator tests see a long reply
-    /// at a low rate as the board's gateway task does.
-    #[cfg(feature = "emulator")]
-    pub fn paced(mut self) -> Rs485 {
-        self.paced = true;
-        self
     }
 
     /// Waits for received bytes; how many were copied. Framing, parity, noise and overrun
@@ -134,10 +117,7 @@ impl Rs485 {
             de.set_high();
         }
         self.sending = true;
-        #[cfg(feature = "emulator")]
-        if self.paced {
-            self.wire_until = Some(Instant::now() + self.wire_time(bytes.len()));
-        }
+        self.pace.start(bytes.len(), self.baud, self.parity);
         // One write: a frame always fits the empty ring (a PLC ADU is 256 bytes at most, a bus
         // frame 16), and the driver's `write` takes all of it or waits for room without
         // registering a waker; a longer one it refuses.
@@ -163,11 +143,8 @@ impl Rs485 {
         while !self.regs.transmission_complete() {
             embassy_futures::yield_now().await;
         }
-        #[cfg(feature = "emulator")]
-        if let Some(until) = self.wire_until {
-            Timer::at(until).await;
-            self.wire_until = None;
-        }
+        // The emulator's wire time, once the UART is done (nothing on the board).
+        emu::wait_wire_time!(self.pace);
         // Transmission complete: the line may turn around (unless a break holds it).
         if let Some(de) = self.de.as_mut().filter(|_| !self.in_break) {
             de.set_low();
@@ -207,24 +184,6 @@ impl Rs485 {
             }
             error!("uart: rate {} refused", baud);
         }
-    }
-
-    /// The time one character takes: a start bit, 8 data bits, the parity bit if any, a stop
-    /// bit; rounded up to the microsecond.
-    #[cfg(feature = "emulator")]
-    fn char_time(&self) -> Duration {
-        let bits: u64 = if matches!(self.parity, Parity::None) {
-            10
-        } else {
-            11
-        };
-        Duration::from_micros((bits * 1_000_000).div_ceil(u64::from(self.baud.max(1))))
-    }
-
-    /// The time `n` characters take on the wire.
-    #[cfg(feature = "emulator")]
-    fn wire_time(&self, n: usize) -> Duration {
-        self.char_time() * n as u32
     }
 
     /// Waits until everything written has left the line. (Not `async`, as `set_baud`.)

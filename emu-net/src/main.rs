@@ -29,7 +29,6 @@ macro_rules! log {
 }
 
 mod rt;
-mod time;
 
 use embassy_executor::Spawner;
 use embassy_futures::select::{select, Either};
@@ -85,7 +84,7 @@ fn main() -> ! {
             cortex_m::asm::wfi();
         }
     };
-    time::init(core.SYST);
+    rt::start_time(core.SYST);
     rt::run(start)
 }
 

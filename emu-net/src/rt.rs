@@ -1,14 +1,17 @@
 //! The runtime: the executor loop (embassy's raw executor, polled in thread mode, WFI between
-//! polls: embassy's own thread executor sleeps with WFE, which busy-waits under QEMU), the
-//! LAN9118's interrupt, and the panic and fault handlers (reported over semihosting).
+//! polls: embassy's own thread executor sleeps with WFE, which busy-waits under QEMU), the time
+//! driver's SysTick interrupt, the LAN9118's interrupt, and the panic and fault handlers (reported
+//! over semihosting).
 
 use core::panic::PanicInfo;
 use core::sync::atomic::{AtomicBool, Ordering};
 
 use cortex_m::interrupt::InterruptNumber;
+use cortex_m::peripheral::SYST;
 use cortex_m_rt::{exception, ExceptionFrame};
 use embassy_executor::{raw, Spawner};
 use static_cell::StaticCell;
+use systick_time::SysTickTime;
 
 /// Set by a waker (from a task or an interrupt): the executor has work.
 static WORK: AtomicBool = AtomicBool::new(false);
@@ -18,6 +21,22 @@ static EXECUTOR: StaticCell<raw::Executor> = StaticCell::new();
 #[unsafe(no_mangle)]
 fn __pender(_context: *mut ()) {
     WORK.store(true, Ordering::Release);
+}
+
+/// The AN386's system clock, which SysTick counts (QEMU's hw/arm/mps2.c: `SYSCLK_FRQ`).
+const SYSCLK_HZ: u32 = 25_000_000;
+
+// embassy-time's driver: the SysTick driver the firmware's emulator build runs too.
+systick_time::time_driver_impl!(static TIME: SysTickTime<SYSCLK_HZ> = SysTickTime::new());
+
+/// Starts embassy-time's clock: the SysTick interrupt, every millisecond.
+pub fn start_time(syst: SYST) {
+    TIME.start(syst);
+}
+
+#[exception]
+fn SysTick() {
+    TIME.tick();
 }
 
 /// Runs `init` to spawn the tasks, then the executor, forever.

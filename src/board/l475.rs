@@ -389,9 +389,6 @@ pub fn board(
         None,
         None,
     );
-    // The emulator's PLC replies last as long as on the wire (`Rs485::paced`).
-    #[cfg(feature = "emulator")]
-    let plc = plc.paced();
     let bus = Rs485::new(
         bus,
         UartRegs(embassy_stm32::pac::UART4),
@@ -399,10 +396,6 @@ pub fn board(
         Some(line_break),
         None,
     );
-    // The bus' commands too: the gateway task waits for each as on the board (16.7 ms at 9.6
-    // kbit/s), which the input samples must survive.
-    #[cfg(feature = "emulator")]
-    let bus = bus.paced();
     let board = Board {
         bus,
         plc,

@@ -5,7 +5,7 @@
 //! |---|---|---|
 //! | `board-l475` (default) | [`l475`] | ST B-L475E-IOT01A (STM32L475VG, hardware driver enable); what QEMU emulates |
 //! | `board-f103` | [`f103`] | an STM32F103C8 "blue pill" (driver enable as a GPIO) |
-//! | `board-f429` | [`f429`] | ST NUCLEO-F429ZI (STM32F429ZI, driver enable as a GPIO, Ethernet: Modbus TCP) |
+//! | `board-f429` | [`f429`] (its Ethernet: `f429/ethernet.rs`) | ST NUCLEO-F429ZI (STM32F429ZI, driver enable as a GPIO, Ethernet: Modbus TCP) |
 //!
 //! A board module supplies the pins and peripherals ([`board`]), the clock tree, this chip's
 //! part of a UART's settings, the reset cause, the settings' flash range and the board's name;
@@ -31,8 +31,6 @@ pub use f429::{
 /// The emulator has no settings store.
 #[cfg(all(feature = "board-l475", feature = "hw"))]
 pub use l475::SETTINGS_RANGE;
-#[cfg(feature = "emulator")]
-pub use l475::SYSCLK_HZ;
 #[cfg(feature = "board-l475")]
 pub use l475::{
     board, clock_config, reset_cause, uart_config, BUS_UART_HZ, LED_ON, MODEL_NAME, PLC_UART_HZ,
@@ -65,9 +63,9 @@ const WATCHDOG_TIMEOUT_US: u32 = 1_000_000;
 /// The shortest time [`WATCHDOG_TIMEOUT_US`] may really be: the IWDG counts the LSI, which the
 /// firmware takes for its nominal 40 kHz (F103) or 32 kHz (L4, F4); it runs at 30-60 kHz on the
 /// F103 (datasheet), so the timeout is 0.67-1.33 s there (29.5-34 kHz on the L4: 0.94-1.08 s;
-/// 17-47 kHz on the F429: 0.68-1.88 s). The emulator's model of the watchdog expires after this.
-#[cfg(feature = "emulator")]
-pub const WATCHDOG_SHORTEST_US: u32 = WATCHDOG_TIMEOUT_US / 60 * 40;
+/// 17-47 kHz on the F429: 0.68-1.88 s). The emulator's model of the watchdog expires after this
+/// ([`crate::emu::watchdog_start`]).
+const WATCHDOG_SHORTEST_US: u32 = WATCHDOG_TIMEOUT_US / 60 * 40;
 
 // UART ring buffers, in .bss. Each holds at least what the task writes or may leave unread at
 // once: a 16-byte bus frame (the task takes a bus frame once it is whole: four fit), a Modbus RTU
@@ -269,7 +267,8 @@ pub(crate) fn settings_flash(
 }
 
 /// The independent watchdog on the board; in the emulator (QEMU has no IWDG model) a model of
-/// it on the SysTick interrupt (`systick`), with the shortest timeout the board's may have.
+/// it on the SysTick interrupt ([`crate::emu::watchdog_start`]), with the shortest timeout the
+/// board's may have.
 ///
 /// On the board the IWDG runs from [`start_watchdog`], before the clocks and the PHY are brought
 /// up: every wait there that is not bounded by the firmware itself (embassy-stm32's, for a clock
@@ -279,16 +278,12 @@ pub struct Watchdog {
 }
 
 impl Watchdog {
-    /// The watchdog, fed once: on the board it runs already ([`start_watchdog`]).
-    #[cfg(feature = "hw")]
+    /// The watchdog, fed once: on the board it runs already ([`start_watchdog`]); the emulator's
+    /// model starts here.
     pub(crate) fn new(_iwdg: Peri<'static, embassy_stm32::peripherals::IWDG>) -> Watchdog {
+        #[cfg(feature = "hw")]
         pet_watchdog();
-        Watchdog { _private: () }
-    }
-
-    #[cfg(feature = "emulator")]
-    pub(crate) fn new(_iwdg: Peri<'static, embassy_stm32::peripherals::IWDG>) -> Watchdog {
-        crate::systick::watchdog_start(WATCHDOG_SHORTEST_US);
+        crate::emu::watchdog_start(WATCHDOG_SHORTEST_US);
         Watchdog { _private: () }
     }
 
@@ -296,8 +291,7 @@ impl Watchdog {
     pub fn pet(&mut self) {
         #[cfg(feature = "hw")]
         pet_watchdog();
-        #[cfg(feature = "emulator")]
-        crate::systick::watchdog_pet();
+        crate::emu::watchdog_pet();
     }
 }
 

@@ -4,7 +4,7 @@ time.
 
 How: QEMU runs with `-icount shift=4,sleep=on`, so guest time follows the instructions executed
 (2^4 = 16 ns each) while the CPU runs, and real time while it sleeps. The firmware's executor loop
-(emulator build, src/rt.rs `load`) adds up the time spent outside WFI (tasks and interrupt
+(emulator build, `LoadMeter` in src/emu.rs) adds up the time spent outside WFI (tasks and interrupt
 handlers) in `EMU_BUSY_US`, and the time of its last sleep in `EMU_CLOCK_US`; both are read over
 qtest at the start and end of the window. The transactions in the window are the frames the
 gateway sent (DIAG, unit 63), read over Modbus before and after.

@@ -5,7 +5,7 @@ making progress.
 
 QEMU moves UART bytes at once and has no IWDG. The emulator build therefore models both: its PLC
 line lasts as long as a reply's characters take on the wire at the line's rate and framing
-(`Rs485::paced`), and a watchdog on the SysTick interrupt resets the machine after the shortest
+(`emu::Pace` in src/emu.rs), and a watchdog on the SysTick interrupt resets the machine after the shortest
 time the board's IWDG may take (0.67 s: the F103's LSI at its fastest). What they stand in for,
 the UART's timing and the IWDG itself, is for the board's bring-up checklist.
 """

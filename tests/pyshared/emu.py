@@ -398,12 +398,12 @@ class Emulator:
         return high - (low + untouched)
 
     def request_panic(self):
-        """Makes the gateway task panic (emulator build only: `EMU_PANIC` in src/gateway.rs)."""
+        """Makes the gateway task panic (emulator build only: `EMU_PANIC` in src/emu.rs)."""
         self.qtest.cmd(f"writeb {self.symbols['EMU_PANIC']:#x} 0x1")
 
     def request_stack_overflow(self):
         """Makes the firmware recurse without bound on its next wake (emulator build only:
-        `EMU_OVERFLOW` in src/rt.rs). Its stack high-water mark is then the whole stack region, not
+        `EMU_OVERFLOW` in src/emu.rs). Its stack high-water mark is then the whole stack region, not
         a figure of the firmware's: `stop()` does not measure it."""
         self.measure_stack = False
         self.qtest.cmd(f"writeb {self.symbols['EMU_OVERFLOW']:#x} 0x1")
@@ -413,12 +413,12 @@ class Emulator:
     def request_fault(self, fault):
         """Raises `Emulator.NMI` (SCB ICSR NMIPENDSET) or `Emulator.UNBOUND_IRQ` (an interrupt
         no handler is bound to, enabled and pended in the NVIC) on the firmware's next wake
-        (emulator build only: `EMU_FAULT_REQUEST` in src/rt.rs). The handler forces the outputs
+        (emulator build only: `EMU_FAULT_REQUEST` in src/emu.rs). The handler forces the outputs
         safe and then holds until `release_fault()` (10 s at most) before it resets the machine."""
         self.qtest.cmd(f"writeb {self.symbols['EMU_FAULT_REQUEST']:#x} {fault:#x}")
 
     def release_fault(self):
-        """Lets a held fault handler reset the machine (`EMU_FAULT_SEEN` in src/rt.rs)."""
+        """Lets a held fault handler reset the machine (`EMU_FAULT_SEEN` in src/emu.rs)."""
         self.qtest.cmd(f"writeb {self.symbols['EMU_FAULT_SEEN']:#x} 0x1")
 
     # ------------------------------------------------------------------ the bus, as rc-sim saw it
@@ -538,7 +538,7 @@ def elf_symbols(path):
         for symbol in table.iter_symbols():
             if symbol.name in wanted:
                 found[symbol.name] = symbol["st_value"]
-            else:  # mangled: rc_gateway::gateway::EMU_PANIC, rc_gateway::rt::load::EMU_BUSY_US
+            else:  # mangled: rc_gateway::emu::qemu::EMU_PANIC, ...::requests::EMU_OVERFLOW
                 for name in ("EMU_PANIC", "EMU_STALL", "EMU_OVERFLOW", "EMU_BUSY_US", "EMU_CLOCK_US",
                              "EMU_STOP_WAKES", "EMU_CSTR_SPAN_US", "EMU_PULSE_MASK",
                              "EMU_FAULT_REQUEST", "EMU_FAULT_SEEN"):
