@@ -39,6 +39,17 @@
 //!
 //! Measured by `scripts/bench.sh` (scenario 5: four of 16 axes moving at 115.2 kbit/s).
 //!
+//! **The trade-off left** (issue 34, `rt-bench` in docs/performance.md): two movers that arrive
+//! together are polled in turn, and after [`ARRIVAL_RUN`] arrival polls one other frame goes, so
+//! one of them waits 8/3 transactions between polls and is seen up to 1 + 8/3 T after it enters
+//! its band (the 3.6-3.7 T p99 of the real-time runs, against a target of 3). Two movers each
+//! polled every other transaction would take the whole bus while their windows overlap, holding
+//! job frames and idle axes off; estimates within a transaction would keep the windows apart.
+//! And four movers cost some 13 transactions a move (two commands, four or five position reads,
+//! six or seven status polls), more than a round leaves the twelve idle axes for a status age
+//! under two cycles in real time (2.4-2.9 there; 1.9 in virtual time, where moves rest between
+//! runs).
+//!
 //! [`Config::position_reads_per_cycle`]: super::Config::position_reads_per_cycle
 //! [`Config::probe_interval`]: super::Config::probe_interval
 //! [`Config::rejoin_while_moving`]: super::Config::rejoin_while_moving
