@@ -163,6 +163,32 @@ impl Pattern {
     }
 }
 
+/// What the outputs show of a latched fail-safe depends on the pattern's outputs.
+impl PioOutputs {
+    /// The outputs with the gateway's latched fail-safe (`failsafe`, the FAILSAFE register)
+    /// shown, so that a machine wired by 24 V only sees what its RES pulse is to acknowledge:
+    /// *ALM OFF and PM1-PM8 = FAILSAFE (PM1 the PLC watchdog, PM2 the stop input). These codes
+    /// (1-3) are none of the controller's abbreviated alarm codes (complete edition §8-1-1: 6
+    /// and up), and the axis' own alarm, or a link down, is shown first.
+    ///
+    /// In the solenoid patterns, whose OUT0-OUT3 are no position number, *ALM alone shows it:
+    /// pattern 4's PE outputs go OFF with it (as with any alarm), pattern 5's reed switches
+    /// keep showing where the axis is.
+    #[must_use]
+    pub const fn with_failsafe(self, failsafe: u16, pattern: Pattern) -> PioOutputs {
+        if failsafe == 0 || self.alarm() {
+            return self;
+        }
+        let alarmed = self.with(PioOutputs::ALM_N, false);
+        match pattern {
+            // FAILSAFE's two causes are bits 0 and 1: the cast keeps them.
+            Pattern::Positioning | Pattern::Teaching => alarmed.with_pm((failsafe & 0x3) as u8),
+            Pattern::Solenoid7 => PioOutputs::from_bits(alarmed.bits() & !pattern.st_inputs()),
+            Pattern::Solenoid3 => alarmed,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
