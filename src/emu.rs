@@ -62,9 +62,9 @@ mod hw {
         pub fn start(&mut self, _n: usize, _baud: u32, _parity: Parity) {}
     }
 
-    /// The wait for a send's wire time ([`Pace`]): on the board nothing, not even an `await`. A
-    /// macro, not a function: the await of a future that is ready at once still adds a state to
-    /// the caller's future (measured: 24 bytes more of the F103's flash in `Rs485::settle`).
+    /// The wait for a send's wire time ([`Pace`]): on the board nothing, not even an `await`.
+    // A macro, not a function: the await of a future that is ready at once still adds a state to
+    // the caller's future (measured: 24 bytes more of the F103's flash in `Rs485::settle`).
     macro_rules! wait_wire_time {
         ($pace:expr) => {};
     }

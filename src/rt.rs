@@ -36,12 +36,12 @@ fn __pender(_context: *mut ()) {
 /// then the executor, forever.
 ///
 /// The value (the protocol node, 11 KB) lives in this function's frame, built there in place
-/// (`make`'s result is written straight into it), and is lent to the tasks for good. Rust has
-/// no placement into a `static`: a `StaticCell` would build it on the stack first and copy it
-/// (measured: 23 KB of stack at start-up), and a `static` with a const initializer costs its
-/// image in flash (11.4 KB of `.data`, a fifth of the F103's flash budget), though the node is
-/// nearly all zeros. Here it costs its size in RAM, as in `.bss`, counted in the measured
-/// stack.
+/// (`make`'s result is written straight into it), and is lent to the tasks for good.
+// Rust has no placement into a `static`: a `StaticCell` would build it on the stack first and
+// copy it (measured: 23 KB of stack at start-up), and a `static` with a const initializer costs
+// its image in flash (11.4 KB of `.data`, a fifth of the F103's flash budget), though the node
+// is nearly all zeros. Here it costs its size in RAM, as in `.bss`, counted in the measured
+// stack.
 pub fn run<T: 'static>(make: impl FnOnce() -> T, init: impl FnOnce(Spawner, &'static mut T)) -> ! {
     let executor: &'static raw::Executor = EXECUTOR.init(raw::Executor::new(core::ptr::null_mut()));
     let mut value = make();
@@ -70,8 +70,8 @@ pub fn run<T: 'static>(make: impl FnOnce() -> T, init: impl FnOnce(Spawner, &'st
 }
 
 /// `init`, in a frame of its own: the peripherals and the board it builds are moved into the
-/// tasks and gone when it returns, instead of staying under every poll of the loop below
-/// (measured: 832 bytes of stack under the whole firmware).
+/// tasks and gone when it returns, instead of staying under every poll of the loop below.
+// Measured: 832 bytes of stack under the whole firmware.
 #[inline(never)]
 fn start<T: 'static>(
     spawner: Spawner,

@@ -69,11 +69,10 @@ impl Settings {
         );
     }
 
-    /// What the store holds, into `config`. Not inlined, like each store operation here: each
-    /// one's frames (its nested calls, what it returns) are then on the stack only while it
-    /// runs, not all of them at once under [`Settings::load`]; and the settings loaded are
-    /// applied here, not returned (the deepest stack at start-up is this one:
-    /// `scripts/stack_depth.py`).
+    /// What the store holds, into `config`: the settings loaded are applied here, not returned.
+    // Not inlined, like each store operation here: each one's frames (its nested calls, what it
+    // returns) are then on the stack only while it runs, not all of them at once under
+    // `Settings::load` (the deepest stack at start-up is this one: `scripts/stack_depth.py`).
     #[cfg(feature = "hw")]
     #[inline(never)]
     fn apply_stored(&mut self, config: &mut GatewayConfig) {

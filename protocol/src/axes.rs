@@ -116,10 +116,10 @@ pub struct AxisMap<T>([T; AXES]);
 impl<T: Copy> AxisMap<T> {
     /// `value` for every axis: the array made by a function of its own (`repeat`, not inlined),
     /// whose result is its return place, so the map is written where the caller wants it.
-    /// (`AxisMap([value; AXES])` made the array in this frame and copied it out: 1.7 KB of stack
-    /// at start-up for the engine's per-axis state, `scripts/stack_depth.py`.) Inlined itself: a
-    /// call of `repeat` is all it is, and out of line it was a 12-byte copy per type (120 B of
-    /// the F103's flash; the constructors' frames the same, measured).
+    // (`AxisMap([value; AXES])` made the array in this frame and copied it out: 1.7 KB of stack
+    // at start-up for the engine's per-axis state, `scripts/stack_depth.py`.) Inlined itself: a
+    // call of `repeat` is all it is, and out of line it was a 12-byte copy per type (120 B of
+    // the F103's flash; the constructors' frames the same, measured).
     #[inline(always)]
     pub const fn new(value: T) -> AxisMap<T> {
         AxisMap(repeat(value))

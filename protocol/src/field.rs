@@ -106,7 +106,7 @@ impl Writer {
     }
 
     /// One character. Layouts are fixed and tested to fit; a write past the end is ignored.
-    /// Not inlined: its bounds check at each of its ten uses took 48 B more of the F103's flash.
+    // Not inlined: its bounds check at each of its ten uses took 48 B more of the F103's flash.
     #[inline(never)]
     pub(crate) fn byte(&mut self, byte: u8) -> &mut Self {
         if let Some(slot) = self.data.get_mut(self.pos) {

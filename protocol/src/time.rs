@@ -66,8 +66,8 @@ impl Instant {
         div(self.0, US_PER_S)
     }
 
-    /// The time elapsed since `earlier` (zero if `earlier` is later). Not inlined, as
-    /// `Instant + Duration` below: 20 B less of the F103's flash.
+    /// The time elapsed since `earlier` (zero if `earlier` is later).
+    // Not inlined, as `Instant + Duration` below: 20 B less of the F103's flash.
     #[inline(never)]
     pub const fn since(self, earlier: Instant) -> Duration {
         Duration(self.0.saturating_sub(earlier.0))
@@ -78,8 +78,7 @@ impl Instant {
 ///
 /// `Option::min` would take `None` as the smaller value and so lose every real deadline merged
 /// with an empty one: a loop sleeping on the result would sleep forever.
-///
-/// Not inlined: two 64-bit options compared at each use took 44 B more of the F103's flash.
+// Not inlined: two 64-bit options compared at each use took 44 B more of the F103's flash.
 #[inline(never)]
 pub const fn earliest(a: Option<Instant>, b: Option<Instant>) -> Option<Instant> {
     match (a, b) {
@@ -91,8 +90,8 @@ pub const fn earliest(a: Option<Instant>, b: Option<Instant>) -> Option<Instant>
 
 impl Add<Duration> for Instant {
     type Output = Instant;
-    /// Not inlined: a 64-bit saturating add at each of its 28 uses took 340 B more of the
-    /// F103's flash (`scripts/size-report.sh`).
+    // Not inlined: a 64-bit saturating add at each of its 28 uses took 340 B more of the
+    // F103's flash (`scripts/size-report.sh`).
     #[inline(never)]
     fn add(self, d: Duration) -> Instant {
         Instant(self.0.saturating_add(d.0))

@@ -54,8 +54,9 @@ pub(super) struct Approach {
     /// Where it was then (the last position read), if it rested there: the first point of its
     /// speed.
     start: Option<Pulses>,
-    /// When it is expected at its target, if `eta_known` (an `Option<Instant>` would take 8
-    /// bytes more per axis, in a node the F103 budget holds to the byte).
+    /// When it is expected at its target, if `eta_known`.
+    // Not an `Option<Instant>`: 8 bytes more per axis, in a node the F103 budget holds to the
+    // byte.
     eta: Instant,
     eta_known: bool,
     /// Whether `eta` comes from two reads during the move (at its speed), not from its start.
@@ -192,7 +193,8 @@ impl Approach {
     }
 
     /// µs from the command to `at`, in 32 bits (71 minutes, saturating: no move's estimate
-    /// needs more, and 32-bit products spare the F103 64-bit multiplications).
+    /// needs more).
+    // 32-bit products spare the F103 64-bit multiplications.
     fn elapsed(&self, at: Instant) -> u32 {
         u32::try_from(at.0.saturating_sub(self.since.0)).unwrap_or(u32::MAX)
     }

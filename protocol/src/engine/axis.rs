@@ -96,7 +96,7 @@ impl AxisState {
     }
 
     /// Whether the last status shows the axis moving: servo on and positioning not complete.
-    /// Not inlined: its nine uses took 100 B more of the F103's flash.
+    // Not inlined: its nine uses took 100 B more of the F103's flash.
     #[inline(never)]
     pub fn moving(&self) -> bool {
         self.report

@@ -356,8 +356,7 @@ impl Engine {
     /// ([`complete`](Self::complete)), so that an Online, a status or a position cannot put the
     /// axis back into the schedule. Polls, probes and the establishment look only at the axes on
     /// the bus.
-    ///
-    /// Not inlined: inlined in the gateway's APPLY it took 12 B more of the F103's flash.
+    // Not inlined: inlined in the gateway's APPLY it took 12 B more of the F103's flash.
     #[inline(never)]
     fn leave(&mut self, axis: Axis) {
         self.cancel_jobs(axis, JobError::Cancelled);

@@ -129,9 +129,9 @@ pub(super) struct Schedule {
 }
 
 /// A new transaction time counts for 1/2^3 = 1/8 of the measured one (an average over about the
-/// last eight transactions: a late reply moves it little, a different bus within a cycle). A
-/// shift, not a division: a 64-bit division would pull 1 KB of the compiler's routines into the
-/// F103's flash.
+/// last eight transactions: a late reply moves it little, a different bus within a cycle).
+// A shift, not a division: a 64-bit division would pull 1 KB of the compiler's routines into
+// the F103's flash.
 pub const MEASURE_SHIFT: u32 = 3;
 
 impl Schedule {

@@ -105,7 +105,8 @@ pub enum Framing {
 
 /// Writes a frame into a byte slice, never past its end. A field that does not fit spoils the
 /// frame (nothing more is written) and [`finish`](Writer::finish) says `None`: one check at the
-/// end rather than one after every field, which took flash at each of the many fields written.
+/// end.
+// Rather than one after every field, which took flash at each of the many fields written.
 pub(crate) struct Writer<'a> {
     buf: &'a mut [u8],
     /// Bytes written; past `buf`'s end once the frame is spoilt.

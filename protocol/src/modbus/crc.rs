@@ -13,8 +13,9 @@
 const POLY: u16 = 0xA001;
 
 /// The CRC step of each 4-bit value: half a byte at a time, a 32-byte table instead of the
-/// usual 256-entry one (512 bytes: 1 % of the F103's flash), at two look-ups per byte. Modbus
-/// frames are short and come at the PLC's pace, so the extra look-up is not measurable.
+/// usual 256-entry one, at two look-ups per byte. Modbus frames are short and come at the
+/// PLC's pace, so the extra look-up is not measurable.
+// The usual table is 512 bytes: 1 % of the F103's flash.
 // Evaluated at compile time: an index out of range would be a build error, not a panic.
 #[allow(clippy::indexing_slicing)]
 const NIBBLE: [u16; 16] = {

@@ -41,9 +41,8 @@ pub struct Identity {
 impl Identity {
     /// The revision's first three numbers ("1.2.3" and "1.2.3-rc1" give (1, 2, 3)); missing or
     /// unreadable parts read 0.
-    ///
-    /// A byte loop rather than `split` and `str::parse`, whose code took 350 B of the F103's
-    /// flash for the VERSION register.
+    // A byte loop rather than `split` and `str::parse`, whose code took 350 B of the F103's
+    // flash for the VERSION register.
     pub fn version(&self) -> (u8, u8, u16) {
         version_of(self.revision)
     }

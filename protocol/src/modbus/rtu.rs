@@ -39,14 +39,13 @@ const fn tenths_of_char(tenths: u64, baud_bps: u32) -> Duration {
 /// How long `len` characters take on the line at `baud_bps` (11 bits each), rounded up to a
 /// microsecond; a frame is at most [`MAX_ADU_LEN`] characters (longer counts as that many).
 ///
-/// In 32 bits: 256 x 11 x 10^6 < 2^32, and a 64-bit division would pull a kilobyte of
-/// compiler builtins into the F103's firmware.
-///
 /// ```
 /// use protocol::modbus::chars_time;
 /// assert_eq!(chars_time(255, 1_200).as_micros(), 2_337_500); // a 125-register reply
 /// assert_eq!(chars_time(8, 115_200).as_micros(), 764);
 /// ```
+// In 32 bits: 256 x 11 x 10^6 < 2^32, and a 64-bit division would pull a kilobyte of
+// compiler builtins into the F103's firmware.
 pub const fn chars_time(len: usize, baud_bps: u32) -> Duration {
     let len = if len > MAX_ADU_LEN { MAX_ADU_LEN } else { len } as u32;
     let bps = if baud_bps == 0 { 1 } else { baud_bps };

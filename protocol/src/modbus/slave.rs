@@ -114,7 +114,8 @@ pub struct Slave {
 }
 
 /// What a request reads or writes: packed bits or registers, never both (one request at a time),
-/// so they share their bytes: 250 bytes of the node, which lives on the MCU's stack.
+/// so they share their bytes.
+// 250 bytes of the node, which lives on the MCU's stack.
 #[derive(Clone, Debug)]
 enum Scratch {
     /// FC01/FC02: at most 2000 bits.
@@ -135,10 +136,10 @@ impl Default for Slave {
 }
 
 impl Slave {
-    /// A slave with zeroed counters. Not inlined: it makes its scratch in a temporary of its
-    /// own frame, which is then gone; inlined, the temporary sat in the frame of
-    /// [`Node::new`](crate::node::Node::new), on the deepest path at start-up (264 B,
-    /// `scripts/stack_depth.py`).
+    /// A slave with zeroed counters.
+    // Not inlined: it makes its scratch in a temporary of its own frame, which is then gone;
+    // inlined, the temporary sat in the frame of `Node::new`, on the deepest path at start-up
+    // (264 B, `scripts/stack_depth.py`).
     #[inline(never)]
     pub const fn new() -> Slave {
         Slave {

@@ -17,8 +17,9 @@ use crate::Rtim;
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Store {
     /// Store the settings record [`Node::settings_record`](crate::node::Node::settings_record)
-    /// gives now (not carried here: 213 bytes in every action and in the node, on a stack with
-    /// a hundred bytes to spare on the F103).
+    /// gives now.
+    // Not carried here: 213 bytes in every action and in the node, on a stack with a hundred
+    // bytes to spare on the F103.
     Save,
     /// Erase the stored settings, then restart (with the defaults).
     FactoryReset,

@@ -301,8 +301,8 @@ impl SyncStart {
 
     /// Cancel what `axes` may hold by buffering `n` (complete edition §4-4-10), on each that has
     /// no job of the start's under way (one whose `h` is still out: when it ends). No room: again
-    /// at the next chance. An axis taken off the bus is no longer the gateway's to clear. (A set,
-    /// not one axis in a loop: the callers' stack is a frame shallower.)
+    /// at the next chance. An axis taken off the bus is no longer the gateway's to clear.
+    // A set, not one axis in a loop: the callers' stack is a frame shallower.
     fn cancel(&mut self, axes: AxisSet, engine: &mut Engine) {
         for axis in axes.iter() {
             if self.jobs[axis].is_some() {
