@@ -10,6 +10,7 @@
 //!
 //! | Module | What it answers |
 //! |---|---|
+//! | [`rc`] | The Robo Cylinder codec, each of its modules also at the crate's root: |
 //! | [`frame`] | What is a frame: STX, 12 characters, BCC, ETX |
 //! | [`deframer`] | Where are the frames in a byte stream |
 //! | [`command`] | What the host can say ([`Request`], [`Command`]) |
@@ -17,8 +18,7 @@
 //! | [`status`], [`alarm`] | What the status bits and alarm codes mean |
 //! | [`units`] | mm, mm/s and G in the controller's units |
 //! | [`memory`] | The controller's memory map |
-//! | [`jobs`] | Point-table reads and writes as frame sequences |
-//! | [`engine`] | The bus master: what to send next, time-outs, retries, polling, jobs |
+//! | [`engine`] | The bus master: what to send next, time-outs, retries, polling, jobs ([`engine::point_jobs`]: point-table reads and writes as frame sequences) |
 //! | [`line`](mod@line) | Break, baud rates, the communication-change broadcast |
 //! | [`modbus`] | The gateway's other side: a Modbus slave for the PLC ([`modbus::Slave`]), RTU and (feature `tcp`) TCP |
 //! | [`net`] | The network settings: the board's address, who may connect over TCP |
@@ -56,30 +56,23 @@
     )
 )]
 
-pub mod alarm;
 pub mod axes;
 mod bits;
-pub mod command;
-pub mod deframer;
 mod div;
 pub mod engine;
 pub mod error;
-mod field;
-pub mod frame;
 mod hex;
-pub mod jobs;
-pub mod line;
-pub mod memory;
 pub mod modbus;
 pub mod net;
 pub mod node;
 pub mod pio;
 pub mod plc;
-pub mod reply;
-pub mod status;
+pub mod rc;
 pub mod time;
 mod types;
 pub mod units;
+
+pub use rc::{alarm, command, deframer, frame, line, memory, reply, status};
 
 pub use alarm::AlarmCode;
 pub use axes::{AxisMap, AxisSet};

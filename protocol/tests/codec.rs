@@ -2,8 +2,8 @@
 //! kinds and rejections (complete edition §4-2, §4-3), §5 matching, status bits, alarm codes, jobs.
 
 use protocol::alarm::{self, Level};
+use protocol::engine::point_jobs::{self as jobs, Expect, StepError};
 use protocol::frame::{bcc, Frame, ETX, STX};
-use protocol::jobs::{self, Expect, StepError};
 use protocol::memory::PointField;
 use protocol::*;
 

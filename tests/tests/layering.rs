@@ -18,12 +18,12 @@ use syn::UseTree;
 
 /// The layers of `protocol`'s top-level modules, lowest first, as `layer: modules`. A module may
 /// refer to modules of its own layer (without a circle) and of the layers below, never above.
-/// `values` know no protocol; `wire` is what the bytes on either side mean (RS485 frames,
-/// commands, replies, the memory map, jobs as frame sequences, the line; Modbus PDUs and framing,
+/// `values` know no protocol; `wire` is what the bytes on either side mean (`rc`, the Robo
+/// Cylinder codec: frames, commands, replies, the memory map, the line; Modbus PDUs and framing,
 /// the network settings). A new top-level module must be placed here: the test fails until it is.
 const LAYERS: &str = "
     values: div time hex error bits types units axes
-    wire:   frame deframer field command reply status alarm line memory jobs net modbus
+    wire:   rc net modbus
     engine: engine
     pio:    pio
     plc:    plc

@@ -4,7 +4,9 @@
 //! description and a cursor: nothing is stored per step, nothing is allocated.
 
 use crate::axes::AxisSet;
-use crate::jobs::{self, Expect, PointData, PointReadback, Step, READ_POINT_LEN, WRITE_POINT_LEN};
+use crate::engine::point_jobs::{
+    self as jobs, Expect, PointData, PointReadback, Step, READ_POINT_LEN, WRITE_POINT_LEN,
+};
 use crate::memory::PointField;
 use crate::{
     Acceleration, AlarmCode, Axis, Command, HomeDirection, PositionNo, Pulses, Request, ResetKind,

@@ -43,6 +43,7 @@
 //! | `output` | [`Output`], [`Event`], [`SubmitError`], [`BusCounters`] |
 //! | `axis` | What the engine knows about each axis ([`AxisState`]) |
 //! | `job` | Jobs as programs of frames and waits |
+//! | [`point_jobs`] | Point-table reads and writes as frame sequences (a `job`'s frames) |
 //! | `run` | Running the jobs: activation, responses, waits, completion |
 //! | `schedule` | Polling: status round robin, position reads, probes of offline axes |
 //! | `approach` | When a mover is expected at its target (the schedule polls it then) |
@@ -57,6 +58,7 @@ mod config;
 mod establish;
 mod job;
 mod output;
+pub mod point_jobs;
 mod rejoin;
 mod reply;
 mod run;

@@ -5,7 +5,7 @@
 use super::job::{self, program, readback_slot, reads_position, written, Op, STORE_COMPARED};
 use super::{Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Next, Origin, WaitingStop};
 use crate::axes::AxisSet;
-use crate::jobs::{PointReadback, StepError};
+use crate::engine::point_jobs::{PointReadback, StepError};
 use crate::time::Instant;
 use crate::{Axis, Command, Reply, Request, StatusReport};
 

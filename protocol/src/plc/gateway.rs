@@ -18,10 +18,10 @@ use super::refused::Refused;
 use super::sync::{SyncEnd, SyncStart};
 use super::teach::{Step, Teach};
 use crate::axes::{AxisMap, AxisSet};
+use crate::engine::point_jobs::PointReadback;
 use crate::engine::{
     Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Link, Output, SubmitError,
 };
-use crate::jobs::PointReadback;
 use crate::pio::TEACHING;
 use crate::time::{earliest, Duration, Instant};
 use crate::{Axis, PositionNo};

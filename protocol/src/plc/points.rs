@@ -17,8 +17,8 @@
 
 use super::refused::Refused;
 use crate::axes::AxisMap;
+use crate::engine::point_jobs::{PointData, PointReadback};
 use crate::engine::{Engine, Job, JobError, JobId, JobKind, JobOutput};
-use crate::jobs::{PointData, PointReadback};
 use crate::memory::PointField;
 use crate::{Axis, PositionNo, Pulses};
 

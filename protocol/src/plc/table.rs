@@ -14,7 +14,7 @@ use core::num::NonZeroU16;
 use super::config::{complement_of, home_of, stroke_of, AxisConfig};
 use super::refused::Refused;
 use super::registers::{join, split};
-use crate::jobs::{PointData, PointReadback};
+use crate::engine::point_jobs::{PointData, PointReadback};
 use crate::memory::PointField;
 use crate::units::{Accel, Lead, Length, Scale, Speed};
 use crate::{Acceleration, Pulses, Velocity};

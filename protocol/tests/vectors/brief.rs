@@ -1,6 +1,7 @@
 //! The brief edition's worked examples: the BCC, status and moves (§4-1, §5-1, §5-2), the
 //! position conversions (§4-3), the point table (§5-3), jog (§5-4), and the §4-3 charts.
 
+use protocol::engine::point_jobs as jobs;
 use protocol::frame::{bcc, Frame};
 use protocol::memory::{self, PointField};
 use protocol::units::{Accel, Complement, Lead, Length, Scale, Speed};

@@ -1,6 +1,7 @@
 //! The complete edition's worked examples: the BCC (§3), every command of §4-4, the
 //! procedures of §6, and the §7-2-1 codes.
 
+use protocol::engine::point_jobs as jobs;
 use protocol::frame::{bcc, Frame};
 use protocol::memory;
 use protocol::units::{Accel, Complement, Lead, Length, Scale, Speed};

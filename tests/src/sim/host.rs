@@ -6,8 +6,8 @@
 //! a reply counts when it [`answers`](Reply::answers) the request. Everything else the host
 //! receives is kept in [`ScriptedHost::strays`].
 
+use protocol::engine::point_jobs::{Step, StepError};
 use protocol::frame::{Packet, COMM_CHANGE, FRAME_LEN};
-use protocol::jobs::{Step, StepError};
 use protocol::line::{Baud, HOST_GAP_MS};
 use protocol::{Axis, Command, Deframer, Reply, Request, StatusReport};
 

@@ -1,8 +1,8 @@
 //! Jobs end to end: homing, moves, point writes with verify, rejections, stops, the
 //! synchronized start, jog, servo and velocity, alarms and single-field writes.
 
+use protocol::engine::point_jobs::PointData;
 use protocol::engine::*;
-use protocol::jobs::PointData;
 use protocol::line::Baud;
 use protocol::units::{Accel, Length, Scale, Speed};
 use protocol::*;

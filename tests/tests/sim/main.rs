@@ -10,7 +10,7 @@ mod line;
 mod motion;
 mod points;
 
-use protocol::jobs::PointData;
+use protocol::engine::point_jobs::PointData;
 use protocol::line::Baud;
 use protocol::memory::common;
 use protocol::{

@@ -1,7 +1,7 @@
 //! The point table and the memory map: writes, read-back, auto-increment, illegal addresses.
 
+use protocol::engine::point_jobs as jobs;
 use protocol::frame::Frame;
-use protocol::jobs;
 use protocol::memory::{self, PointField};
 use protocol::{Address, AlarmCode, Command, Transfer};
 use rc_host::sim::wire::ms;

@@ -1,8 +1,8 @@
 //! Jobs: what each job may send, the engine's events, the JobId bookkeeping and the attribution
 //! of every frame sent to a job.
 
+use protocol::engine::point_jobs as jobs;
 use protocol::engine::{Event, Job, JobError, JobKind, JobOutput, SubmitError};
-use protocol::jobs;
 use protocol::memory::PNOW;
 use protocol::{Axis, Command, Pulses, Request};
 

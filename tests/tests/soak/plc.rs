@@ -1,7 +1,7 @@
 //! The seeded PLC workload that keeps every axis busy.
 
+use protocol::engine::point_jobs::PointData;
 use protocol::engine::JobKind;
-use protocol::jobs::PointData;
 use protocol::memory::PointField;
 use protocol::{Acceleration, Axis, HomeDirection, PositionNo, Pulses, Velocity};
 

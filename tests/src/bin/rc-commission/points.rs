@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use protocol::jobs::{PointData, PointReadback};
+use protocol::engine::point_jobs::{PointData, PointReadback};
 use protocol::memory::PointField;
 use protocol::units::{Accel, Length, Scale, Speed, UnitError};
 use protocol::{Acceleration, PositionNo, Pulses, Velocity};

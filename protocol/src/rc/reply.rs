@@ -1,10 +1,10 @@
 //! Responses from a controller (complete edition §3, §4-2, §4-3) and the §5 rules that decide
 //! whether a response answers a given command.
 
+use super::field::{Reader, Writer};
 use crate::alarm::AlarmCode;
 use crate::command::{Code, Request};
 use crate::error::{Error, Field};
-use crate::field::{Reader, Writer};
 use crate::frame::Frame;
 use crate::status::{Inputs, Outputs, Status, StatusReport};
 use crate::types::{Axis, Pulses};

@@ -3,8 +3,8 @@
 //! A [`Request`] is an axis and a [`Command`]; [`Request::emit`] writes the 12 data characters and
 //! [`Request::parse`] reads them back, rejecting anything the documents do not define.
 
+use super::field::{Reader, Writer};
 use crate::error::{Error, Field};
-use crate::field::{Reader, Writer};
 use crate::frame::{Frame, DATA_LEN};
 use crate::types::{
     Acceleration, Address, Axis, DataType, HomeDirection, PositionNo, Pulses, ResetKind, Rtim,
