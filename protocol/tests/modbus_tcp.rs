@@ -254,6 +254,39 @@ fn beyond_the_limit_a_new_client_replaces_the_one_idle_longest() {
     assert_eq!(rig.tcp_read(2, 63, G_NET + 7, 1), Ok(vec![2]), "TCPCONN");
 }
 
+/// Ten clients connect at one instant and none sends a request: the sockets take them as they
+/// free up, and each newcomer replaces the connection idle the longest, the oldest of those idle
+/// as long; it is never closed itself, so the last four clients hold the slots.
+#[test]
+fn in_a_burst_of_connects_each_new_client_replaces_the_one_idle_longest() {
+    use protocol::modbus::tcp::SOCKETS;
+    let mut rig = Rig::ready(1, |_| {});
+    let at = Instant(rig.now);
+    // The client on each socket (the tenth connects at the same instant as the first).
+    let mut on: Vec<Option<u8>> = vec![None; SOCKETS];
+    let mut clients = 0u8..10;
+    let mut closed = Vec::new();
+    while let Some(socket) = on.iter().position(Option::is_none) {
+        let Some(client) = clients.next() else { break };
+        assert!(rig
+            .node
+            .tcp_opened(at, socket, Ipv4([192, 168, 1, 100 + client])));
+        on[socket] = Some(client);
+        rig.drain();
+        for (_, socket) in rig.tcp_closes.drain(..) {
+            let gone = on[socket].take().expect("a close of an open connection");
+            assert_ne!(gone, client, "client {client} closed as it connected");
+            closed.push(gone);
+        }
+    }
+    assert_eq!(closed, (0..6).collect::<Vec<_>>(), "the oldest idle first");
+    let mut open: Vec<u8> = on.into_iter().flatten().collect();
+    open.sort_unstable();
+    assert_eq!(open, vec![6, 7, 8, 9]);
+    assert_eq!(rig.node.tcp_connections(), 4);
+    assert_eq!(rig.node.tcp_counters().replaced, 6);
+}
+
 #[test]
 fn a_silent_connection_is_closed_after_the_idle_time() {
     let mut rig = Rig::ready(1, |c| c.net.policy.idle_s = 2);

@@ -371,7 +371,8 @@ impl Rig {
         rig
     }
 
-    fn drain(&mut self) {
+    /// Polls the node at `now` until it is idle, handling what it asks for.
+    pub fn drain(&mut self) {
         let now = Instant(self.now);
         for _ in 0..10_000 {
             match self.node.poll(now) {

@@ -52,6 +52,9 @@ struct Connection {
     peer: Ipv4,
     /// When it was opened or last sent a byte.
     last: Instant,
+    /// Its place in the order of opening ([`Server::opened`] when it opened): of connections
+    /// idle as long (a burst of connects at one instant), the one opened first goes first.
+    order: u32,
     stream: Stream,
 }
 
@@ -66,6 +69,8 @@ pub struct Server {
     /// Sockets whose send side has no room for a reply now (bit n = socket n): their requests
     /// wait ([`set_writable`](Server::set_writable)).
     blocked: u8,
+    /// Connections opened so far (wrapping): the next one's [`Connection::order`].
+    opened: u32,
     counters: TcpCounters,
 }
 
@@ -89,6 +94,7 @@ impl Server {
             close: 0,
             turn: 0,
             blocked: 0,
+            opened: 0,
             counters: TcpCounters {
                 accepted: 0,
                 refused: 0,
@@ -116,22 +122,29 @@ impl Server {
             *slot = Some(Connection {
                 peer,
                 last: now,
+                order: self.opened,
                 stream: Stream::new(),
             });
         }
+        self.opened = self.opened.wrapping_add(1);
         bump(&mut self.counters.accepted);
         self.trim(policy);
         true
     }
 
-    /// Marks connections beyond the limit for closing, the ones idle the longest first. The
-    /// newest connection is never the one chosen: it has just been admitted.
+    /// Marks connections beyond the limit for closing, the ones idle the longest first and, of
+    /// those idle as long, the one opened first. The newest connection is never the one chosen:
+    /// it has just been admitted, and is idle no longer than any other (a burst of connects at
+    /// one instant once closed each newcomer instead, the lowest socket winning the tie).
     fn trim(&mut self, policy: &Policy) {
         let limit = usize::from(policy.max_connections.clamp(1, MAX_CONNECTIONS as u8));
         while self.open_count() > limit {
+            let next = self.opened;
+            // How many connections opened after it (wrapping): the larger, the older.
+            let age = |c: &Connection| next.wrapping_sub(c.order);
             let oldest = self
                 .open_sockets()
-                .min_by_key(|&(_, c)| c.last)
+                .min_by_key(|&(_, c)| (c.last, core::cmp::Reverse(age(c))))
                 .map(|(socket, _)| socket);
             let Some(socket) = oldest else { return };
             self.drop_connection(socket);
