@@ -638,13 +638,6 @@ impl Node {
         self.tcp.server.is_open(socket)
     }
 
-    /// Whether a whole request on `socket` waits to be answered (one held back by
-    /// [`tcp_writable`](Node::tcp_writable), or not polled yet). A partial one does not count:
-    /// after the client's FIN it never completes.
-    pub fn tcp_pending(&self, socket: SocketHandle) -> bool {
-        self.tcp.server.has_frame(socket)
-    }
-
     /// The reply of the last [`TcpAction::Reply`], MBAP header included: read it where it is,
     /// before the next [`poll`](Node::poll).
     pub fn tcp_reply(&self) -> &[u8] {

@@ -291,11 +291,6 @@ impl Server {
         self.connection(socket).is_some()
     }
 
-    /// Whether a whole frame (or bytes that are to be refused) waits on `socket`.
-    pub fn has_frame(&self, socket: SocketHandle) -> bool {
-        self.connection(socket).is_some_and(|c| c.stream.is_ready())
-    }
-
     /// The next whole request and its socket, taking turns between the connections; frames that
     /// are not requests are counted and dropped on the way (a length out of range also closes
     /// its connection).
