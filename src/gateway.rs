@@ -9,8 +9,9 @@
 //! outputs and LEDs show; feed the watchdog.
 //!
 //! With Ethernet (feature `net`), the socket tasks' events ([`crate::net::PORT`]) are one more
-//! thing to wait for and to drain before egress, and the node's Modbus TCP replies go into the
-//! sockets' send pipes, never waiting on a client (`rc_net`).
+//! thing to wait for; `rc_net`'s two calls, the same as the emulator's network build makes, hand
+//! them to the node before egress and again after it (`Port::pump`) and carry out its TCP
+//! actions (`Port::act`): its replies go into the sockets' send pipes, never waiting on a client.
 //!
 //! No await in the loop lasts longer than a bus frame (16.7 ms at 9.6 kbit/s), a rate change or
 //! a flash write: a PLC reply is handed to its UART and left to it (255 bytes take 2.3 s at
@@ -36,8 +37,6 @@ use crate::node::{Action, Instant, Node};
 use crate::serial::Rs485;
 use crate::settings::Settings;
 use protocol::line::LineAction;
-#[cfg(feature = "net")]
-use protocol::modbus::tcp::MAX_TCP_ADU_LEN;
 use protocol::plc::Store;
 
 /// The loop passes at least this often, whatever happens on the lines: it feeds the watchdog
@@ -147,15 +146,12 @@ pub async fn run(
         );
         #[cfg(not(feature = "net"))]
         let event = lines.await;
-        // A network event is handed to the node here and then counts as the deadline's wake
-        // (nothing more to do for it before the ingress below).
+        // A network event counts as the deadline's wake: it is handed to the node with the
+        // others queued, after the ingress below (`rc_net::Port::pump`).
         #[cfg(feature = "net")]
-        let event = match select(lines, PORT.event()).await {
+        let event = match select(lines, PORT.ready()).await {
             Either::First(event) => event,
-            Either::Second(event) => {
-                PORT.handle(event, node, now());
-                Either4::Fourth(())
-            }
+            Either::Second(()) => Either4::Fourth(()),
         };
         match event {
             Either4::First(n) => node.bus_received(now(), bytes(&bus_buf, n)),
@@ -179,12 +175,9 @@ pub async fn run(
                 break;
             }
         }
-        #[cfg(feature = "net")]
-        while let Some(event) = PORT.try_event() {
-            PORT.handle(event, node, now());
-        }
-
         clock = now();
+        #[cfg(feature = "net")]
+        PORT.pump(node, clock);
         // One pass without Ethernet; with it, another while a socket's pipe still holds bytes
         // the node can take (a request that got no reply leaves room that no reply refills).
         #[cfg_attr(not(feature = "net"), allow(clippy::never_loop))]
@@ -245,23 +238,13 @@ pub async fn run(
                             }
                         }
                     }
-                    // Copied out first: the reply borrows the node, which `reply` hands more bytes.
                     #[cfg(feature = "net")]
-                    Action::TcpReply { socket, bytes } => {
-                        let mut reply = [0u8; MAX_TCP_ADU_LEN];
-                        let len = bytes.len().min(reply.len());
-                        if let (Some(to), Some(from)) = (reply.get_mut(..len), bytes.get(..len)) {
-                            to.copy_from_slice(from);
-                        }
-                        PORT.reply(socket, self::bytes(&reply, len), node, clock);
-                    }
-                    #[cfg(feature = "net")]
-                    Action::TcpClose(socket) => PORT.close(socket, node),
+                    Action::Tcp(tcp) => PORT.act(tcp, node, clock),
                 }
                 clock = now();
             }
             #[cfg(feature = "net")]
-            if PORT.refill(node, clock) {
+            if PORT.pump(node, clock) {
                 continue;
             }
             break;

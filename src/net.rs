@@ -6,7 +6,7 @@
 use embassy_executor::Spawner;
 use embassy_net::{Config, Ipv4Address, Ipv4Cidr, Runner, Stack, StackResources, StaticConfigV4};
 use protocol::net::{prefix_ok, NetConfig};
-use rc_net::{Port, SOCKETS};
+use rc_net::{Port, SocketHandle, SOCKETS};
 use static_cell::ConstStaticCell;
 
 use crate::board::{Ethernet, EthernetDevice};
@@ -62,7 +62,7 @@ pub fn spawn(spawner: Spawner, ethernet: Ethernet, net: &NetConfig) {
         Err(_) => error!("net: stack task not started"),
     }
     let mut buffers = BUFFERS.take().iter_mut();
-    for index in 0..SOCKETS {
+    for index in SocketHandle::all() {
         let (Some(rx), Some(tx)) = (buffers.next(), buffers.next()) else {
             break;
         };
@@ -83,7 +83,7 @@ async fn run_stack(mut runner: Runner<'static, EthernetDevice>) -> ! {
 #[embassy_executor::task(pool_size = SOCKETS)]
 async fn socket(
     stack: Stack<'static>,
-    index: usize,
+    index: SocketHandle,
     rx: &'static mut [u8; SOCKET_BUFFER],
     tx: &'static mut [u8; SOCKET_BUFFER],
 ) -> ! {

@@ -31,7 +31,7 @@ macro_rules! log {
 mod rt;
 
 use embassy_executor::Spawner;
-use embassy_futures::select::{select, Either};
+use embassy_futures::select::select;
 use embassy_net::{Config, Ipv4Address, Ipv4Cidr, Stack, StackResources, StaticConfigV4};
 use embassy_time::Timer;
 use protocol::net::Ipv4;
@@ -39,7 +39,7 @@ use protocol::node::{Action, Node};
 use protocol::plc::{GatewayConfig, Store};
 use protocol::time::Instant;
 use protocol::AxisSet;
-use rc_net::{Port, SOCKETS};
+use rc_net::{Port, SocketHandle, SOCKETS};
 use static_cell::StaticCell;
 
 /// The LAN9118's register window on the AN386 (hw/arm/mps2.c: `ethernet_base`).
@@ -52,8 +52,8 @@ const SOCKET_BUF: usize = 1024;
 /// Shared by the driver and the LAN9118's interrupt handler (`rt::DefaultHandler`).
 pub static ETH_STATE: lan9118::State = lan9118::State::new();
 
-/// Where the socket tasks and the gateway task meet.
-static PORT: Port = Port::new();
+/// Where the socket tasks and the gateway task meet; each event is logged as the node gets it.
+static PORT: Port = Port::with_trace(trace);
 
 /// One socket's buffers.
 struct SocketBuffers {
@@ -134,7 +134,7 @@ fn start(spawner: Spawner) {
         Ok(token) => spawner.spawn(token),
         Err(_) => log!("net task not started"),
     }
-    for index in 0..SOCKETS {
+    for index in SocketHandle::all() {
         match socket_task(stack, index) {
             Ok(token) => spawner.spawn(token),
             Err(_) => log!("socket task {} not started", index),
@@ -155,8 +155,8 @@ async fn net_task(mut runner: embassy_net::Runner<'static, lan9118::Lan9118>) ->
 
 /// One task per socket, with the socket's buffers.
 #[embassy_executor::task(pool_size = SOCKETS)]
-async fn socket_task(stack: Stack<'static>, index: usize) {
-    let Some(buffers) = BUFFERS.get(index).and_then(|cell| {
+async fn socket_task(stack: Stack<'static>, index: SocketHandle) {
+    let Some(buffers) = BUFFERS.get(index.index()).and_then(|cell| {
         cell.try_init(SocketBuffers {
             rx: [0; SOCKET_BUF],
             tx: [0; SOCKET_BUF],
@@ -185,31 +185,14 @@ async fn gateway_task(node: &'static mut Node) -> ! {
                 None => core::future::pending().await,
             }
         };
-        if let Either::First(event) = select(PORT.event(), deadline).await {
-            trace(&event);
-            PORT.handle(event, node, now());
-        }
-        while let Some(event) = PORT.try_event() {
-            trace(&event);
-            PORT.handle(event, node, now());
-        }
+        // An event or the deadline: either way the node gets what is queued, then acts.
+        select(PORT.ready(), deadline).await;
         let clock = now();
+        PORT.pump(node, clock);
         loop {
             while let Some(action) = node.poll(clock) {
                 match action {
-                    Action::TcpReply { socket, bytes } => {
-                        // The reply borrows the node: copied out first (260 bytes at most).
-                        let mut reply = [0u8; protocol::modbus::tcp::MAX_TCP_ADU_LEN];
-                        let n = bytes.len().min(reply.len());
-                        reply[..n].copy_from_slice(&bytes[..n]);
-                        if !PORT.reply(socket, &reply[..n], node, clock) {
-                            log!("socket {}: a reply did not fit: closed", socket);
-                        }
-                    }
-                    Action::TcpClose(socket) => {
-                        log!("socket {}: closed by the node", socket);
-                        PORT.close(socket, node)
-                    }
+                    Action::Tcp(tcp) => PORT.act(tcp, node, clock),
                     Action::Store(Store::Save) => {
                         saves += 1;
                         node.stored(Ok(saves));
@@ -222,8 +205,8 @@ async fn gateway_task(node: &'static mut Node) -> ! {
                     | Action::Store(_) => {}
                 }
             }
-            // What a request that got no reply left waiting in a pipe.
-            if !PORT.refill(node, clock) {
+            // What came meanwhile, and what a request that got no reply left waiting in a pipe.
+            if !PORT.pump(node, clock) {
                 break;
             }
         }

@@ -12,22 +12,27 @@
 //! | [`Event::Opened`] with the client's address | `close`: close the connection (refused, replaced, idle, framing lost, not reading) |
 //! | bytes in the socket's receive pipe, and [`Event::Data`] | the replies, in the socket's send pipe |
 //! | [`Event::Sent`]: the send pipe has emptied | |
+//! | [`Event::Eof`]: the client has closed its side | `answered`: every request of it answered, end the connection after the replies |
 //! | [`Event::Closed`]: the connection has ended, and the task no longer touches the pipes | `released`: the pipes are empty, accept the next client |
 //!
-//! The gateway task hands each event to [`Port::handle`], each [`Action::TcpReply`] /
-//! [`Action::TcpClose`] to [`Port::reply`] / [`Port::close`], and calls [`Port::refill`] once the
-//! node has nothing more to do. It never waits on a socket. Back-pressure instead: once a
-//! socket's send pipe has no room for another whole reply, the node answers none of that
-//! client's requests ([`Node::tcp_writable`]) until its replies have left ([`Event::Sent`]); a
-//! client that pipelines many requests, or reads its replies slowly, waits in its pipe and in
-//! TCP's window, not in the gateway's time, and one that never reads is closed by the idle time.
-//! Every end of a connection goes through [`Event::Closed`] and `released`, so no byte of one
-//! client ever reaches the next one on the same socket; and the socket task looks at the close
-//! before anything else and around every wait of its own (a full pipe, a client that does not
-//! read), so a close always ends the connection.
+//! A gateway loop makes two calls, the same on every build: [`Port::pump`] before the node's
+//! actions and again after them (it hands the node every queued event and the bytes it has room
+//! for, and says whether the node has more to do), and [`Port::act`] for each [`Action::Tcp`]
+//! the node asks for; it waits for [`Port::ready`] beside its other inputs. It never waits on a socket.
+//! Back-pressure instead: once a socket's send pipe has no room for another whole reply, the
+//! node answers none of that client's requests ([`Node::tcp_writable`]) until its replies have
+//! left ([`Event::Sent`]); a client that pipelines many requests, or reads its replies slowly,
+//! waits in its pipe and in TCP's window, not in the gateway's time, and one that never reads is
+//! closed by the idle time. Every end of a connection goes through [`Event::Closed`] and
+//! `released`, so no byte of one client ever reaches the next one on the same socket; and the
+//! socket task looks at the close before anything else and around every wait of its own (a full
+//! pipe, a client that does not read), so a close always ends the connection.
 //!
-//! [`Action::TcpReply`]: protocol::node::Action::TcpReply
-//! [`Action::TcpClose`]: protocol::node::Action::TcpClose
+//! What a connection is (open, its client, its stream, writable, past its FIN, idle since) is
+//! the node's alone ([`protocol::modbus::tcp::Server`]); a [`Port`] holds only what crosses
+//! between the tasks: the bytes in flight, the signals, and whether an event is queued.
+//!
+//! [`Action::Tcp`]: protocol::node::Action::Tcp
 
 #![no_std]
 #![forbid(unsafe_code)]
@@ -43,10 +48,10 @@ use embassy_sync::pipe::Pipe;
 use embassy_sync::signal::Signal;
 use protocol::modbus::tcp::MAX_TCP_ADU_LEN;
 use protocol::net::Ipv4;
-use protocol::node::Node;
+use protocol::node::{Node, TcpAction};
 use protocol::time::Instant;
 
-pub use protocol::modbus::tcp::{PORT, SOCKETS};
+pub use protocol::modbus::tcp::{SocketHandle, PORT, SOCKETS};
 
 type Cs = CriticalSectionRawMutex;
 
@@ -68,21 +73,21 @@ const EVENTS: usize = 4 * SOCKETS;
 pub enum Event {
     /// A client at this address connected on the socket.
     Opened {
-        /// The socket, 0 to [`SOCKETS`] - 1.
-        socket: usize,
+        /// The socket.
+        socket: SocketHandle,
         /// The client's IPv4 address.
         peer: Ipv4,
     },
     /// Bytes from the client wait in the socket's receive pipe.
-    Data(usize),
+    Data(SocketHandle),
     /// The socket's connection has ended (the client closed it, it broke, or the gateway
     /// closed it), and its task waits to be released.
-    Closed(usize),
+    Closed(SocketHandle),
     /// The socket's send pipe has emptied: it has room for replies again.
-    Sent(usize),
+    Sent(SocketHandle),
     /// The client has closed its side (TCP FIN): once what it sent before is answered, the
     /// connection ends.
-    Eof(usize),
+    Eof(SocketHandle),
 }
 
 /// How long a connection's end may wait for TCP to send its reset: a client that vanished (no
@@ -95,9 +100,8 @@ struct Socket {
     send: Pipe<Cs, SEND_PIPE>,
     close: Signal<Cs, ()>,
     released: Signal<Cs, ()>,
-    /// The client has closed its side ([`Event::Eof`]): the gateway says when everything it
-    /// sent has been answered ([`Socket::answered`]).
-    eof: AtomicBool,
+    /// After the client's FIN ([`Event::Eof`]): everything it sent has been answered
+    /// ([`Node::tcp_finish`]), the task ends the connection gracefully.
     answered: Signal<Cs, ()>,
     /// An [`Event::Data`] / [`Event::Sent`] is queued and not handled yet: at most one of each
     /// per socket waits in the channel, so that it never fills (a trickling client would
@@ -113,7 +117,6 @@ impl Socket {
             send: Pipe::new(),
             close: Signal::new(),
             released: Signal::new(),
-            eof: AtomicBool::new(false),
             answered: Signal::new(),
             data_queued: AtomicBool::new(false),
             sent_queued: AtomicBool::new(false),
@@ -125,6 +128,8 @@ impl Socket {
 pub struct Port {
     events: Channel<Cs, Event, EVENTS>,
     sockets: [Socket; SOCKETS],
+    /// Shown every event as it is handed to the node (a log), if set.
+    trace: Option<fn(&Event)>,
 }
 
 impl Default for Port {
@@ -136,24 +141,75 @@ impl Default for Port {
 impl Port {
     /// Empty pipes, no events.
     pub const fn new() -> Port {
+        Port::traced(None)
+    }
+
+    /// The same, with `trace` shown every event as it is handed to the node.
+    pub const fn with_trace(trace: fn(&Event)) -> Port {
+        Port::traced(Some(trace))
+    }
+
+    const fn traced(trace: Option<fn(&Event)>) -> Port {
         Port {
             events: Channel::new(),
             sockets: [const { Socket::new() }; SOCKETS],
+            trace,
         }
     }
 
-    /// The next event (the gateway task waits for it beside its lines and deadlines).
-    pub async fn event(&self) -> Event {
-        self.events.receive().await
+    /// Socket `socket`'s side (never `None`: a handle is always in range).
+    fn socket(&self, socket: SocketHandle) -> Option<&Socket> {
+        self.sockets.get(socket.index())
     }
 
-    /// An event already queued, if any.
-    pub fn try_event(&self) -> Option<Event> {
-        self.events.try_receive().ok()
+    /// Waits until an event is queued (the gateway task waits for it beside its lines and
+    /// deadlines), then leaves it for [`pump`](Port::pump).
+    pub async fn ready(&self) {
+        self.events.ready_to_receive().await
+    }
+
+    /// The one call a gateway loop makes before and after the node's actions: hands the node
+    /// at `now` every queued event and the received bytes it has room for (a frame that got no
+    /// reply, another protocol's or a malformed one, leaves room that no reply refills), and
+    /// ends the connections it has done with. Whether it gave the node anything: poll it again
+    /// then, and pump again after.
+    pub fn pump(&self, node: &mut Node, now: Instant) -> bool {
+        let mut gave = false;
+        while let Ok(event) = self.events.try_receive() {
+            if let Some(trace) = self.trace {
+                trace(&event);
+            }
+            self.handle(event, node, now);
+            gave = true;
+        }
+        for socket in SocketHandle::all() {
+            gave |= self.feed(socket, node, now);
+        }
+        if !gave {
+            // The node is idle: a client past its FIN whose every whole request has been
+            // answered (nothing in its pipe, no whole frame in the node: a fragment never
+            // completes now) is done, and no longer counted as connected (TCPCONN).
+            for socket in SocketHandle::all() {
+                if let Some(s) = self.socket(socket) {
+                    if s.receive.is_empty() && node.tcp_finish(socket) {
+                        s.answered.signal(());
+                    }
+                }
+            }
+        }
+        gave
+    }
+
+    /// Carries out what the node asked for on a socket at `now`.
+    pub fn act(&self, action: TcpAction, node: &mut Node, now: Instant) {
+        match action {
+            TcpAction::Reply(socket) => self.reply(socket, node, now),
+            TcpAction::Close(socket) => self.close(socket, node),
+        }
     }
 
     /// Hands an event to the node at `now`.
-    pub fn handle(&self, event: Event, node: &mut Node, now: Instant) {
+    fn handle(&self, event: Event, node: &mut Node, now: Instant) {
         match event {
             Event::Opened { socket, peer } => {
                 if !node.tcp_opened(now, socket, peer) {
@@ -161,13 +217,13 @@ impl Port {
                 }
             }
             Event::Data(socket) => {
-                if let Some(s) = self.sockets.get(socket) {
+                if let Some(s) = self.socket(socket) {
                     s.data_queued.store(false, Ordering::Relaxed);
                 }
                 self.feed(socket, node, now);
             }
             Event::Sent(socket) => {
-                if let Some(s) = self.sockets.get(socket) {
+                if let Some(s) = self.socket(socket) {
                     s.sent_queued.store(false, Ordering::Relaxed);
                     if s.send.free_capacity() >= MAX_TCP_ADU_LEN {
                         node.tcp_writable(socket, true);
@@ -176,18 +232,15 @@ impl Port {
                 self.feed(socket, node, now);
             }
             Event::Eof(socket) => {
-                if let Some(s) = self.sockets.get(socket) {
-                    s.eof.store(true, Ordering::Relaxed);
-                }
+                node.tcp_eof(socket);
                 self.feed(socket, node, now);
             }
             Event::Closed(socket) => {
                 node.tcp_closed(socket);
-                if let Some(s) = self.sockets.get(socket) {
+                if let Some(s) = self.socket(socket) {
                     s.receive.clear();
                     s.send.clear();
                     s.close.reset();
-                    s.eof.store(false, Ordering::Relaxed);
                     s.answered.reset();
                     s.data_queued.store(false, Ordering::Relaxed);
                     s.sent_queued.store(false, Ordering::Relaxed);
@@ -201,8 +254,8 @@ impl Port {
     /// socket the node holds no connection on stay: they are a new client's whose Opened is
     /// still queued (the gateway task may have awaited its bus meanwhile), or a closed one's,
     /// which its close empties (`close_socket`, [`Event::Closed`]).
-    pub fn feed(&self, socket: usize, node: &mut Node, now: Instant) -> bool {
-        let Some(s) = self.sockets.get(socket) else {
+    fn feed(&self, socket: SocketHandle, node: &mut Node, now: Instant) -> bool {
+        let Some(s) = self.socket(socket) else {
             return false;
         };
         if !node.tcp_connected(socket) {
@@ -223,49 +276,25 @@ impl Port {
         }
     }
 
-    /// Feeds every socket (after the node has answered what it had: a frame that got no reply,
-    /// another protocol's or a malformed one, leaves room that no reply refills); whether any
-    /// bytes went to the node, which then has more to do.
-    pub fn refill(&self, node: &mut Node, now: Instant) -> bool {
-        let mut fed = false;
-        for socket in 0..SOCKETS {
-            fed |= self.feed(socket, node, now);
-        }
-        if !fed {
-            // The node is idle: a client past its FIN whose every whole request has been
-            // answered (nothing in its pipe, no whole frame in the node: a fragment never
-            // completes now) is done, and no longer counted as connected (TCPCONN).
-            for (socket, s) in self.sockets.iter().enumerate() {
-                let nothing_left = s.receive.is_empty() && !node.tcp_pending(socket);
-                if s.eof.load(Ordering::Relaxed) && nothing_left {
-                    s.eof.store(false, Ordering::Relaxed);
-                    node.tcp_closed(socket);
-                    s.answered.signal(());
-                }
-            }
-        }
-        fed
-    }
-
-    /// Queues the node's reply on `socket`, whole, or closes the connection (`false`; it cannot
-    /// happen while the node is told, as here, when the pipe has no room for another reply);
-    /// then gives the node what came meanwhile.
-    pub fn reply(&self, socket: usize, bytes: &[u8], node: &mut Node, now: Instant) -> bool {
-        let Some(s) = self.sockets.get(socket) else {
-            return false;
+    /// Queues the node's reply ([`Node::tcp_reply`], read where it is) on `socket`, whole, or
+    /// closes the connection (it cannot happen while the node is told, as here, when the pipe
+    /// has no room for another reply); then gives the node what came meanwhile.
+    fn reply(&self, socket: SocketHandle, node: &mut Node, now: Instant) {
+        let Some(s) = self.socket(socket) else {
+            return;
         };
-        if s.send.free_capacity() < bytes.len() {
+        let mut rest = node.tcp_reply();
+        if s.send.free_capacity() < rest.len() {
             self.close(socket, node);
-            return false;
+            return;
         }
         // A pipe writes up to its end at a time: a reply across the wrap takes two writes.
-        let mut rest = bytes;
         while !rest.is_empty() {
             match s.send.try_write(rest) {
                 Ok(n) if n > 0 => rest = rest.get(n..).unwrap_or(&[]),
                 _ => {
                     self.close(socket, node);
-                    return false;
+                    return;
                 }
             }
         }
@@ -275,21 +304,18 @@ impl Port {
             node.tcp_writable(socket, false);
         }
         self.feed(socket, node, now);
-        true
     }
 
-    /// Closes the connection on `socket`, as the node asked ([`Action::TcpClose`]).
-    ///
-    /// [`Action::TcpClose`]: protocol::node::Action::TcpClose
-    pub fn close(&self, socket: usize, node: &mut Node) {
+    /// Closes the connection on `socket`, as the node asked ([`TcpAction::Close`]).
+    fn close(&self, socket: SocketHandle, node: &mut Node) {
         node.tcp_closed(socket);
         self.close_socket(socket);
     }
 
     /// Tells the socket task to close, and empties its receive pipe (the task may be waiting
     /// for room in it; the bytes are the closed client's).
-    fn close_socket(&self, socket: usize) {
-        if let Some(s) = self.sockets.get(socket) {
+    fn close_socket(&self, socket: SocketHandle) {
+        if let Some(s) = self.socket(socket) {
             s.close.signal(());
             s.receive.clear();
         }
@@ -314,11 +340,11 @@ fn peer_of(socket: &TcpSocket<'_>) -> Ipv4 {
 pub async fn serve(
     stack: Stack<'static>,
     port: &'static Port,
-    index: usize,
+    index: SocketHandle,
     rx: &'static mut [u8],
     tx: &'static mut [u8],
 ) -> ! {
-    let Some(s) = port.sockets.get(index) else {
+    let Some(s) = port.socket(index) else {
         loop {
             core::future::pending::<()>().await;
         }
@@ -371,7 +397,7 @@ async fn connected(
     socket: &mut TcpSocket<'_>,
     port: &Port,
     s: &Socket,
-    index: usize,
+    index: SocketHandle,
     buf: &mut [u8],
     out: &mut [u8],
 ) -> End {
@@ -413,7 +439,7 @@ async fn connected(
     }
 
     /// Tells the gateway bytes wait in the receive pipe, unless it has been told already.
-    async fn data(port: &Port, s: &Socket, index: usize) {
+    async fn data(port: &Port, s: &Socket, index: SocketHandle) {
         if !s.data_queued.swap(true, Ordering::Relaxed) {
             port.events.send(Event::Data(index)).await;
         }
@@ -425,7 +451,7 @@ async fn connected(
         writer: &mut embassy_net::tcp::TcpWriter<'_>,
         port: &Port,
         s: &Socket,
-        index: usize,
+        index: SocketHandle,
         bytes: &[u8],
     ) -> bool {
         use embedded_io_async::Write;
@@ -446,7 +472,7 @@ async fn connected(
         writer: &mut embassy_net::tcp::TcpWriter<'_>,
         port: &Port,
         s: &Socket,
-        index: usize,
+        index: SocketHandle,
         out: &mut [u8],
     ) -> End {
         port.events.send(Event::Eof(index)).await;

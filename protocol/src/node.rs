@@ -109,7 +109,7 @@
 //!             Action::Store(Store::FactoryReset | Store::Restart) => board.restart(),
 //!             // A board with Ethernet (feature `tcp`) sends or closes on its sockets.
 //!             #[cfg(feature = "tcp")]
-//!             Action::TcpReply { .. } | Action::TcpClose(_) => {}
+//!             Action::Tcp(_) => {}
 //!         }
 //!     }
 //!     board.write_output_pins(node.outputs().bits());
@@ -132,6 +132,9 @@ use crate::plc::{Gateway, GatewayConfig, PlcLine, Store, PIO_ACCEL};
 use crate::time::{earliest, Duration, Instant};
 use crate::units::{Accel, Length, Speed};
 use crate::{Axis, PositionNo, Pulses};
+
+#[cfg(feature = "tcp")]
+use crate::modbus::tcp::SocketHandle;
 
 /// The most the whole node may take on a microcontroller: 12 KiB for 16 axes (an STM32F103C8
 /// has 20 KiB of RAM in all); 16 KiB with the Modbus TCP side (feature `tcp`: five connection
@@ -162,20 +165,25 @@ pub enum Action<'a> {
     /// Do this with the flash (SAVE, FACTORY, RESTART), then report a save with
     /// [`Node::stored`]. A factory reset and a restart end with the board restarting.
     Store(Store),
-    /// Send this Modbus TCP reply on `socket` (feature `tcp`). Never wait for the client to
-    /// take it: if the socket's send buffer has no room for it, the client is not reading, so
-    /// close the socket (and report it with [`Node::tcp_closed`]).
+    /// Do this on a Modbus TCP socket (feature `tcp`).
     #[cfg(feature = "tcp")]
-    TcpReply {
-        /// The socket the request came on.
-        socket: usize,
-        /// The reply, MBAP header included.
-        bytes: &'a [u8],
-    },
-    /// Close `socket` (feature `tcp`): a refused, replaced or idle client, or a stream that
-    /// lost its framing. Report it with [`Node::tcp_closed`] once done.
-    #[cfg(feature = "tcp")]
-    TcpClose(usize),
+    Tcp(TcpAction),
+}
+
+/// What the caller does on a Modbus TCP socket (feature `tcp`). It holds no borrow of the node,
+/// so the caller can hand the node on while it carries it out.
+#[cfg(feature = "tcp")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TcpAction {
+    /// Send the reply [`Node::tcp_reply`] holds (MBAP header included) on this socket, the one
+    /// the request came on. Never wait for the client to take it: if the socket's send buffer
+    /// has no room for it, the client is not reading, so close the socket (and report it with
+    /// [`Node::tcp_closed`]).
+    Reply(SocketHandle),
+    /// Close this socket: a refused, replaced or idle client, or a stream that lost its
+    /// framing. Report it with [`Node::tcp_closed`] once done.
+    Close(SocketHandle),
 }
 
 /// The Modbus TCP side of the node: the connections, a slave of its own (its counters and
@@ -186,13 +194,6 @@ struct TcpPort {
     server: crate::modbus::tcp::Server,
     slave: Slave,
     reply: ReplyBuffer,
-}
-
-/// What the TCP side has for the caller (the reply is in [`TcpPort::reply`]).
-#[cfg(feature = "tcp")]
-enum TcpOut {
-    Reply(usize),
-    Close(usize),
 }
 
 /// The state of the indicator LEDs (besides a run LED the firmware blinks itself).
@@ -426,15 +427,8 @@ impl Node {
             self.gateway.plc_activity(now, now);
         }
         #[cfg(feature = "tcp")]
-        match self.poll_tcp(now) {
-            Some(TcpOut::Reply(socket)) => {
-                return Some(Action::TcpReply {
-                    socket,
-                    bytes: self.tcp.reply.as_bytes(),
-                })
-            }
-            Some(TcpOut::Close(socket)) => return Some(Action::TcpClose(socket)),
-            None => {}
+        if let Some(action) = self.poll_tcp(now) {
+            return Some(Action::Tcp(action));
         }
         if let Some(line) = self.gateway.take_plc_line() {
             self.receiver = plc_receiver(line.baud, self.gateway.config().plc_frame_gap);
@@ -567,8 +561,9 @@ impl Node {
 }
 
 /// The Modbus TCP side (feature `tcp`): the caller owns [`SOCKETS`](crate::modbus::tcp::SOCKETS)
-/// sockets listening on one port (502), numbered from 0, and reports what happens on them; the
-/// node answers through [`Action::TcpReply`] and closes through [`Action::TcpClose`]. The
+/// sockets listening on one port (502), each named by a [`SocketHandle`], and reports what
+/// happens on them; the node answers through [`TcpAction::Reply`] and closes through
+/// [`TcpAction::Close`]. Each connection's state is the node's alone (its TCP server's). The
 /// same register map, units and exceptions as the serial line
 /// ([`crate::modbus::tcp`] says what differs); any request to a unit served, from any
 /// connection, is PLC activity for the watchdog.
@@ -577,8 +572,13 @@ impl Node {
     /// A client at `peer` connected on `socket` at `now`: whether it is admitted (not on a
     /// non-empty allow-list: close the socket at once, without reporting it closed). When
     /// every slot is taken, the connection idle the longest is closed for it
-    /// ([`Action::TcpClose`]).
-    pub fn tcp_opened(&mut self, now: Instant, socket: usize, peer: crate::net::Ipv4) -> bool {
+    /// ([`TcpAction::Close`]).
+    pub fn tcp_opened(
+        &mut self,
+        now: Instant,
+        socket: SocketHandle,
+        peer: crate::net::Ipv4,
+    ) -> bool {
         let policy = self.gateway.config().net.policy;
         self.dirty = true;
         self.tcp.server.open(now, socket, peer, &policy)
@@ -588,7 +588,7 @@ impl Node {
     /// once [`tcp_room`](Node::tcp_room) says there is room (after the request in front has
     /// been answered), and read the socket only then: TCP's window holds the client back
     /// meanwhile, as it should.
-    pub fn tcp_received(&mut self, now: Instant, socket: usize, bytes: &[u8]) -> usize {
+    pub fn tcp_received(&mut self, now: Instant, socket: SocketHandle, bytes: &[u8]) -> usize {
         let taken = self.tcp.server.received(now, socket, bytes);
         if taken > 0 {
             self.dirty = true;
@@ -598,22 +598,35 @@ impl Node {
 
     /// How many bytes [`tcp_received`](Node::tcp_received) would take on `socket` now (0: no
     /// connection there, or a whole request waits to be answered).
-    pub fn tcp_room(&self, socket: usize) -> usize {
+    pub fn tcp_room(&self, socket: SocketHandle) -> usize {
         self.tcp.server.room(socket)
     }
 
     /// The connection on `socket` has ended: the client closed it, it broke, or the caller
-    /// closed it (asked by [`Action::TcpClose`], or a reply that did not fit).
-    pub fn tcp_closed(&mut self, socket: usize) {
+    /// closed it (asked by [`TcpAction::Close`], or a reply that did not fit).
+    pub fn tcp_closed(&mut self, socket: SocketHandle) {
         self.tcp.server.closed(socket);
+    }
+
+    /// The client on `socket` has closed its side (TCP FIN): what it sent before is still
+    /// answered; [`tcp_finish`](Node::tcp_finish) says when the connection is done.
+    pub fn tcp_eof(&mut self, socket: SocketHandle) {
+        self.tcp.server.eof(socket);
+    }
+
+    /// Whether the connection on `socket` is done: past its client's FIN, with no whole request
+    /// left to answer. A done connection is no longer counted (TCPCONN); end it gracefully once
+    /// its replies have left. Ask only while none of the client's bytes wait with the caller.
+    pub fn tcp_finish(&mut self, socket: SocketHandle) -> bool {
+        self.tcp.server.finish(socket)
     }
 
     /// Whether `socket` can take a whole reply now (the caller's send buffer for it has room
     /// for [`MAX_TCP_ADU_LEN`](crate::modbus::tcp::MAX_TCP_ADU_LEN) bytes): while it cannot, the
     /// node answers none of its requests (the others' are answered meanwhile), so a client slow
     /// to read its replies is held back, not cut off; the idle time still closes one that
-    /// never reads.
-    pub fn tcp_writable(&mut self, socket: usize, writable: bool) {
+    /// never reads. Every socket is writable when its connection opens.
+    pub fn tcp_writable(&mut self, socket: SocketHandle, writable: bool) {
         self.tcp.server.set_writable(socket, writable);
         if writable {
             self.dirty = true;
@@ -621,15 +634,14 @@ impl Node {
     }
 
     /// Whether a connection is open on `socket` (the caller drops bytes for one that is not).
-    pub fn tcp_connected(&self, socket: usize) -> bool {
+    pub fn tcp_connected(&self, socket: SocketHandle) -> bool {
         self.tcp.server.is_open(socket)
     }
 
-    /// Whether a whole request on `socket` waits to be answered (one held back by
-    /// [`tcp_writable`](Node::tcp_writable), or not polled yet). A partial one does not count:
-    /// after the client's FIN it never completes.
-    pub fn tcp_pending(&self, socket: usize) -> bool {
-        self.tcp.server.has_frame(socket)
+    /// The reply of the last [`TcpAction::Reply`], MBAP header included: read it where it is,
+    /// before the next [`poll`](Node::poll).
+    pub fn tcp_reply(&self) -> &[u8] {
+        self.tcp.reply.as_bytes()
     }
 
     /// What the TCP server has counted.
@@ -648,10 +660,10 @@ impl Node {
     }
 
     /// A socket to close, or the next request answered (taking turns between connections).
-    fn poll_tcp(&mut self, now: Instant) -> Option<TcpOut> {
+    fn poll_tcp(&mut self, now: Instant) -> Option<TcpAction> {
         let policy = self.gateway.config().net.policy;
         if let Some(socket) = self.tcp.server.take_close(now, &policy) {
-            return Some(TcpOut::Close(socket));
+            return Some(TcpAction::Close(socket));
         }
         let link = self.link_counters();
         let view = crate::plc::TcpView {
@@ -669,9 +681,9 @@ impl Node {
             match handled {
                 Handled::Reply(_) => {
                     self.gateway.plc_activity(now, now);
-                    return Some(TcpOut::Reply(socket));
+                    return Some(TcpAction::Reply(socket));
                 }
-                Handled::Unserved(_) => return Some(TcpOut::Reply(socket)),
+                Handled::Unserved(_) => return Some(TcpAction::Reply(socket)),
                 // Not a request: nothing to answer; the next one, if any.
                 _ => {}
             }

@@ -6,7 +6,7 @@
 
 mod support;
 
-use protocol::modbus::tcp::{MbapError, Stream, TcpAdu};
+use protocol::modbus::tcp::{MbapError, SocketHandle, Stream, TcpAdu, SOCKETS};
 use protocol::modbus::{Exception, Request as Modbus};
 use protocol::net::Ipv4;
 use protocol::plc::map::*;
@@ -14,6 +14,11 @@ use protocol::time::{Duration, Instant};
 use support::*;
 
 const PLC: Ipv4 = Ipv4([192, 168, 1, 10]);
+
+/// Socket `socket`'s handle.
+fn h(socket: usize) -> SocketHandle {
+    SocketHandle::new(socket).expect("a socket of the node's")
+}
 
 /// The MBAP frame of `request` to `unit` with transaction id `tid`.
 fn frame(tid: u16, unit: u8, request: &Modbus<'_>) -> Vec<u8> {
@@ -54,14 +59,14 @@ fn registers(reply: &[u8], tid: u16, unit: u8) -> Result<Vec<u16>, u8> {
 impl Rig {
     /// Opens `socket` from `peer`: whether the node admitted it.
     fn connect(&mut self, socket: usize, peer: Ipv4) -> bool {
-        let admitted = self.node.tcp_opened(Instant(self.now), socket, peer);
+        let admitted = self.node.tcp_opened(Instant(self.now), h(socket), peer);
         self.run_for(100);
         admitted
     }
 
     /// Sends `bytes` on `socket` and runs 1 ms; the replies that came.
     fn send(&mut self, socket: usize, bytes: &[u8]) -> Vec<(usize, Vec<u8>)> {
-        let taken = self.node.tcp_received(Instant(self.now), socket, bytes);
+        let taken = self.node.tcp_received(Instant(self.now), h(socket), bytes);
         assert_eq!(taken, bytes.len(), "room for what a test sends");
         self.run_for(MS);
         std::mem::take(&mut self.tcp_replies)
@@ -178,7 +183,7 @@ fn pipelined_requests_are_answered_in_order_and_a_slow_client_holds_no_one_up() 
     assert!(rig.connect(1, Ipv4([192, 168, 1, 11])));
     // Socket 0 sends half a request and stalls.
     let slow = frame(1, 63, &read(G_VERSION, 1));
-    rig.node.tcp_received(Instant(rig.now), 0, &slow[..5]);
+    rig.node.tcp_received(Instant(rig.now), h(0), &slow[..5]);
     // Socket 1 pipelines three requests in one segment.
     let three: Vec<u8> = (10..13)
         .flat_map(|tid| frame(tid, 63, &read(G_UNIT_ID, 1)))
@@ -212,7 +217,7 @@ fn turns_are_taken_between_connections() {
         let two: Vec<u8> = (0..2)
             .flat_map(|_| frame(socket as u16, 63, &read(0, 1)))
             .collect();
-        rig.node.tcp_received(Instant(rig.now), socket, &two);
+        rig.node.tcp_received(Instant(rig.now), h(socket), &two);
     }
     rig.run_for(MS);
     let order: Vec<usize> = rig.tcp_replies.iter().map(|(s, _)| *s).collect();
@@ -225,7 +230,7 @@ fn a_client_not_allowed_is_refused_and_counted() {
     assert!(!rig.connect(0, Ipv4([192, 168, 1, 66])));
     assert_eq!(
         rig.node
-            .tcp_received(Instant(rig.now), 0, &frame(1, 63, &read(0, 1))),
+            .tcp_received(Instant(rig.now), h(0), &frame(1, 63, &read(0, 1))),
         16 - 4
     );
     rig.run_for(MS);
@@ -252,6 +257,38 @@ fn beyond_the_limit_a_new_client_replaces_the_one_idle_longest() {
     assert_eq!(rig.node.tcp_connections(), 2);
     assert_eq!(rig.node.tcp_counters().replaced, 1);
     assert_eq!(rig.tcp_read(2, 63, G_NET + 7, 1), Ok(vec![2]), "TCPCONN");
+}
+
+/// Ten clients connect at one instant and none sends a request: the sockets take them as they
+/// free up, and each newcomer replaces the connection idle the longest, the oldest of those idle
+/// as long; it is never closed itself, so the last four clients hold the slots.
+#[test]
+fn in_a_burst_of_connects_each_new_client_replaces_the_one_idle_longest() {
+    let mut rig = Rig::ready(1, |_| {});
+    let at = Instant(rig.now);
+    // The client on each socket (the tenth connects at the same instant as the first).
+    let mut on: Vec<Option<u8>> = vec![None; SOCKETS];
+    let mut clients = 0u8..10;
+    let mut closed = Vec::new();
+    while let Some(socket) = on.iter().position(Option::is_none) {
+        let Some(client) = clients.next() else { break };
+        assert!(rig
+            .node
+            .tcp_opened(at, h(socket), Ipv4([192, 168, 1, 100 + client])));
+        on[socket] = Some(client);
+        rig.drain();
+        for (_, socket) in rig.tcp_closes.drain(..) {
+            let gone = on[socket].take().expect("a close of an open connection");
+            assert_ne!(gone, client, "client {client} closed as it connected");
+            closed.push(gone);
+        }
+    }
+    assert_eq!(closed, (0..6).collect::<Vec<_>>(), "the oldest idle first");
+    let mut open: Vec<u8> = on.into_iter().flatten().collect();
+    open.sort_unstable();
+    assert_eq!(open, vec![6, 7, 8, 9]);
+    assert_eq!(rig.node.tcp_connections(), 4);
+    assert_eq!(rig.node.tcp_counters().replaced, 6);
 }
 
 #[test]
@@ -416,16 +453,16 @@ fn a_socket_without_room_for_a_reply_waits_and_the_others_do_not() {
     let mut rig = Rig::ready(1, |_| {});
     assert!(rig.connect(0, PLC));
     assert!(rig.connect(1, PLC));
-    rig.node.tcp_writable(0, false);
+    rig.node.tcp_writable(h(0), false);
     let two: Vec<u8> = (1..3)
         .flat_map(|tid| frame(tid, 63, &read(G_UNIT_ID, 1)))
         .collect();
-    rig.node.tcp_received(Instant(rig.now), 0, &two);
+    rig.node.tcp_received(Instant(rig.now), h(0), &two);
     let replies = rig.send(1, &frame(9, 63, &read(G_UNIT_ID, 1)));
     assert_eq!(replies.iter().map(|r| r.0).collect::<Vec<_>>(), vec![1]);
     rig.run_for(100 * MS);
     assert!(rig.tcp_replies.is_empty(), "nothing for the blocked socket");
-    rig.node.tcp_writable(0, true);
+    rig.node.tcp_writable(h(0), true);
     rig.run_for(MS);
     let tids: Vec<u16> = rig
         .tcp_replies
@@ -510,4 +547,27 @@ mod properties {
             }
         }
     }
+}
+
+/// After the client's FIN, what it sent before is still answered; only then is the connection
+/// done (and no longer counted), and a fragment it left never holds it open.
+#[test]
+fn past_the_client_s_fin_its_requests_are_answered_then_the_connection_is_done() {
+    let mut rig = Rig::ready(1, |_| {});
+    assert!(rig.connect(0, PLC));
+    rig.node.tcp_writable(h(0), false);
+    let mut bytes = frame(4, 63, &read(G_UNIT_ID, 1));
+    bytes.extend_from_slice(&frame(5, 63, &read(G_UNIT_ID, 1))[..3]);
+    rig.node.tcp_received(Instant(rig.now), h(0), &bytes);
+    rig.node.tcp_eof(h(0));
+    rig.run_for(MS);
+    assert!(!rig.node.tcp_finish(h(0)), "a request still to answer");
+    assert_eq!(rig.node.tcp_connections(), 1);
+    rig.node.tcp_writable(h(0), true);
+    rig.run_for(MS);
+    assert_eq!(std::mem::take(&mut rig.tcp_replies).len(), 1);
+    assert!(rig.node.tcp_finish(h(0)), "only a fragment left");
+    assert_eq!(rig.node.tcp_connections(), 0);
+    assert!(!rig.node.tcp_connected(h(0)));
+    assert!(!rig.node.tcp_finish(h(0)), "done once");
 }

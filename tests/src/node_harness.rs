@@ -9,8 +9,9 @@
 use crate::sim::Bus;
 use protocol::frame::COMM_CHANGE;
 use protocol::line::{LineAction, BREAK_MS};
+use protocol::modbus::tcp::SocketHandle;
 use protocol::modbus::{client, Adu, Exception, Request as Modbus, MAX_ADU_LEN};
-use protocol::node::{Action, Node};
+use protocol::node::{Action, Node, TcpAction};
 use protocol::pio::{PioInputs, PioOutputs};
 use protocol::time::Instant;
 use protocol::Request;
@@ -50,9 +51,9 @@ pub struct NodeHarness {
     /// Modbus replies not yet taken, with the time they were sent.
     replies: Vec<(u64, Vec<u8>)>,
     /// Modbus TCP replies, with their socket and time, in order.
-    pub tcp_replies: Vec<(u64, usize, Vec<u8>)>,
+    pub tcp_replies: Vec<(u64, SocketHandle, Vec<u8>)>,
     /// Sockets the node closed, with the time.
-    pub tcp_closes: Vec<(u64, usize)>,
+    pub tcp_closes: Vec<(u64, SocketHandle)>,
     /// The next input sample is due then.
     next_sample: u64,
 }
@@ -104,10 +105,11 @@ impl NodeHarness {
                 }
                 Some(Action::Reply(bytes)) => self.replies.push((self.now, bytes.to_vec())),
                 Some(Action::PlcLine(line)) => self.plc_lines.push((self.now, line)),
-                Some(Action::TcpReply { socket, bytes }) => {
-                    self.tcp_replies.push((self.now, socket, bytes.to_vec()))
+                Some(Action::Tcp(TcpAction::Reply(socket))) => {
+                    let bytes = self.node.tcp_reply().to_vec();
+                    self.tcp_replies.push((self.now, socket, bytes))
                 }
-                Some(Action::TcpClose(socket)) => {
+                Some(Action::Tcp(TcpAction::Close(socket))) => {
                     self.tcp_closes.push((self.now, socket));
                     self.node.tcp_closed(socket);
                 }

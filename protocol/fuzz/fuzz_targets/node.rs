@@ -33,7 +33,8 @@ use libfuzzer_sys::fuzz_target;
 use protocol::command::{Command, Request};
 use protocol::frame::Frame;
 use protocol::modbus::crc;
-use protocol::modbus::tcp::SOCKETS;
+use protocol::modbus::tcp::{SocketHandle, SOCKETS};
+use protocol::node::TcpAction;
 use protocol::net::Ipv4;
 use protocol::node::{Action, Node};
 use protocol::pio::{Pattern, PioInputs};
@@ -126,7 +127,7 @@ fuzz_target!(|data: &[u8]| {
             5 => {
                 let socket = n % SOCKETS;
                 let host = take(&mut rest, 1).first().copied().unwrap_or(0);
-                let open = node.tcp_opened(Instant(now), socket, Ipv4([10, 0, 0, host]));
+                let open = node.tcp_opened(Instant(now), handle(socket), Ipv4([10, 0, 0, host]));
                 tcp.open[socket] = open;
                 tcp.asked[socket] = false;
             }
@@ -135,7 +136,7 @@ fuzz_target!(|data: &[u8]| {
                 let len = usize::from(take(&mut rest, 1).first().copied().unwrap_or(0));
                 let bytes = take(&mut rest, len);
                 talked |= !bytes.is_empty();
-                let taken = node.tcp_received(Instant(now), socket, bytes);
+                let taken = node.tcp_received(Instant(now), handle(socket), bytes);
                 assert!(taken <= bytes.len());
                 if tcp.open[socket] && taken > 0 {
                     tcp.asked[socket] = true;
@@ -143,7 +144,7 @@ fuzz_target!(|data: &[u8]| {
             }
             _ => {
                 let socket = n % SOCKETS;
-                node.tcp_closed(socket);
+                node.tcp_closed(handle(socket));
                 tcp.open[socket] = false;
             }
         }
@@ -229,7 +230,8 @@ fn drain(
             // The board restarts.
             Action::Store(Store::FactoryReset | Store::Restart) => return false,
             Action::Line(_) | Action::PlcLine(_) => {}
-            Action::TcpReply { socket, bytes } => {
+            Action::Tcp(TcpAction::Reply(handle)) => {
+                let (socket, bytes) = (handle.index(), node.tcp_reply());
                 assert!(socket < SOCKETS && tcp.open[socket], "a reply to socket {socket}, not open");
                 assert!(tcp.asked[socket], "a TCP reply nobody asked for");
                 assert!(bytes.len() >= 9 && bytes.len() <= 260, "TCP reply length");
@@ -237,12 +239,18 @@ fn drain(
                 let length = usize::from(u16::from_be_bytes([bytes[4], bytes[5]]));
                 assert_eq!(length, bytes.len() - 6, "MBAP length");
             }
-            Action::TcpClose(socket) => {
+            Action::Tcp(TcpAction::Close(handle)) => {
+                let socket = handle.index();
                 assert!(socket < SOCKETS, "a close of socket {socket}");
                 tcp.open[socket] = false;
-                node.tcp_closed(socket);
+                node.tcp_closed(handle);
             }
         }
     }
     true
+}
+
+/// Socket `socket`'s handle (`socket` is below [`SOCKETS`]).
+fn handle(socket: usize) -> SocketHandle {
+    SocketHandle::new(socket).expect("a socket below SOCKETS")
 }

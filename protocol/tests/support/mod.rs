@@ -371,7 +371,8 @@ impl Rig {
         rig
     }
 
-    fn drain(&mut self) {
+    /// Polls the node at `now` until it is idle, handling what it asks for.
+    pub fn drain(&mut self) {
         let now = Instant(self.now);
         for _ in 0..10_000 {
             match self.node.poll(now) {
@@ -395,12 +396,13 @@ impl Rig {
                     self.stores.push((self.now, store));
                 }
                 #[cfg(feature = "tcp")]
-                Some(Action::TcpReply { socket, bytes }) => {
-                    self.tcp_replies.push((socket, bytes.to_vec()))
+                Some(Action::Tcp(protocol::node::TcpAction::Reply(socket))) => {
+                    let bytes = self.node.tcp_reply().to_vec();
+                    self.tcp_replies.push((socket.index(), bytes))
                 }
                 #[cfg(feature = "tcp")]
-                Some(Action::TcpClose(socket)) => {
-                    self.tcp_closes.push((self.now, socket));
+                Some(Action::Tcp(protocol::node::TcpAction::Close(socket))) => {
+                    self.tcp_closes.push((self.now, socket.index()));
                     self.node.tcp_closed(socket);
                 }
             }

@@ -8,7 +8,7 @@ use std::time::Duration as StdDuration;
 
 use protocol::frame::COMM_CHANGE;
 use protocol::line::{LineAction, BREAK_MS};
-use protocol::node::Action;
+use protocol::node::{Action, TcpAction};
 use protocol::time::Instant;
 use protocol::Request;
 use serde_json::json;
@@ -136,14 +136,14 @@ impl Host {
                     }
                     self.log.note(now, &format!("PLC line: {line:?}"));
                 }
-                Some(Action::TcpReply { socket, bytes }) => {
-                    self.log.modbus_reply(now, bytes);
+                Some(Action::Tcp(TcpAction::Reply(socket))) => {
+                    let bytes = self.node.tcp_reply().to_vec();
+                    self.log.modbus_reply(now, &bytes);
                     if let Some(tcp) = &mut self.tcp {
-                        let bytes = bytes.to_vec();
                         tcp.reply(now, socket, &bytes, &mut self.node);
                     }
                 }
-                Some(Action::TcpClose(socket)) => {
+                Some(Action::Tcp(TcpAction::Close(socket))) => {
                     self.log.note(now, &format!("TCP: socket {socket} closed"));
                     if let Some(tcp) = &mut self.tcp {
                         tcp.close(socket, &mut self.node);

@@ -10,7 +10,7 @@ use std::io::{self, Read, Write};
 use std::net::{IpAddr, Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::os::fd::{AsFd, BorrowedFd};
 
-use protocol::modbus::tcp::SOCKETS;
+use protocol::modbus::tcp::{SocketHandle, SOCKETS};
 use protocol::net::Ipv4;
 use protocol::node::Node;
 use protocol::time::Instant;
@@ -26,8 +26,8 @@ struct Connection {
     unread: Vec<u8>,
     /// Reply bytes not written yet.
     out: VecDeque<u8>,
-    /// The client has closed its side (FIN): what it sent before is still answered, then the
-    /// connection is closed.
+    /// The client has closed its side (FIN): its socket is no longer waited on (the node is
+    /// told, and says when the connection is done: [`Node::tcp_finish`]).
     eof: bool,
 }
 
@@ -78,7 +78,8 @@ impl TcpSide {
                 // A client that reset before it was accepted, and the like: not ours to fail on.
                 Err(_) => break,
             };
-            let Some(socket) = self.connections.iter().position(Option::is_none) else {
+            let free = self.connections.iter().position(Option::is_none);
+            let Some(socket) = free.and_then(SocketHandle::new) else {
                 self.overflows += 1;
                 let _ = stream.shutdown(Shutdown::Both);
                 continue;
@@ -89,7 +90,7 @@ impl TcpSide {
             }
             stream.set_nonblocking(true)?;
             stream.set_nodelay(true)?;
-            if let Some(slot) = self.connections.get_mut(socket) {
+            if let Some(slot) = self.connections.get_mut(socket.index()) {
                 *slot = Some(Connection {
                     stream,
                     unread: Vec::new(),
@@ -98,7 +99,7 @@ impl TcpSide {
                 });
             }
         }
-        for socket in 0..SOCKETS {
+        for socket in SocketHandle::all() {
             self.read(now, socket, node);
             self.flush(socket, node);
             self.finish(socket, node);
@@ -108,21 +109,24 @@ impl TcpSide {
 
     /// Closes a connection whose client has closed its side once everything it sent has been
     /// answered and written.
-    fn finish(&mut self, socket: usize, node: &mut Node) {
-        let Some(Some(connection)) = self.connections.get(socket) else {
+    fn finish(&mut self, socket: SocketHandle, node: &mut Node) {
+        let Some(Some(connection)) = self.connections.get(socket.index()) else {
             return;
         };
-        // A fragment left in the node never completes after the FIN: only whole requests count.
-        let done =
-            connection.unread.is_empty() && connection.out.is_empty() && !node.tcp_pending(socket);
-        if connection.eof && done {
+        // Nothing of the client's left here; the node says whether it answered everything (a
+        // fragment left in it never completes after the FIN: only whole requests count).
+        let done = connection.eof
+            && connection.unread.is_empty()
+            && connection.out.is_empty()
+            && node.tcp_finish(socket);
+        if done {
             self.close(socket, node);
         }
     }
 
     /// Offers the node what was read before, then reads more while it has room.
-    fn read(&mut self, now: u64, socket: usize, node: &mut Node) {
-        let Some(Some(connection)) = self.connections.get_mut(socket) else {
+    fn read(&mut self, now: u64, socket: SocketHandle, node: &mut Node) {
+        let Some(Some(connection)) = self.connections.get_mut(socket.index()) else {
             return;
         };
         let mut ended = false;
@@ -144,6 +148,7 @@ impl TcpSide {
             {
                 Ok(0) => {
                     connection.eof = true;
+                    node.tcp_eof(socket);
                     break;
                 }
                 Ok(n) => connection
@@ -164,8 +169,8 @@ impl TcpSide {
 
     /// Writes what the client takes now; a client that takes nothing while too much waits is
     /// closed.
-    fn flush(&mut self, socket: usize, node: &mut Node) {
-        let Some(Some(connection)) = self.connections.get_mut(socket) else {
+    fn flush(&mut self, socket: SocketHandle, node: &mut Node) {
+        let Some(Some(connection)) = self.connections.get_mut(socket.index()) else {
             return;
         };
         let mut broken = false;
@@ -190,8 +195,8 @@ impl TcpSide {
     }
 
     /// The node's reply for `socket`: sent now as far as the client takes it.
-    pub fn reply(&mut self, now: u64, socket: usize, bytes: &[u8], node: &mut Node) {
-        if let Some(Some(connection)) = self.connections.get_mut(socket) {
+    pub fn reply(&mut self, now: u64, socket: SocketHandle, bytes: &[u8], node: &mut Node) {
+        if let Some(Some(connection)) = self.connections.get_mut(socket.index()) {
             connection.out.extend(bytes);
         }
         self.flush(socket, node);
@@ -200,8 +205,8 @@ impl TcpSide {
     }
 
     /// Closes `socket` (the node asked, or the client left), and tells the node.
-    pub fn close(&mut self, socket: usize, node: &mut Node) {
-        if let Some(slot) = self.connections.get_mut(socket) {
+    pub fn close(&mut self, socket: SocketHandle, node: &mut Node) {
+        if let Some(slot) = self.connections.get_mut(socket.index()) {
             if let Some(connection) = slot.take() {
                 let _ = connection.stream.shutdown(Shutdown::Both);
             }

@@ -23,7 +23,7 @@ pub mod server;
 
 pub use crate::net::{Ipv4, Policy};
 pub use mbap::{MbapError, Stream, TcpAdu, MAX_TCP_ADU_LEN, MBAP_LEN};
-pub use server::{Server, TcpCounters, MAX_CONNECTIONS, SOCKETS};
+pub use server::{Server, SocketHandle, TcpCounters, MAX_CONNECTIONS, SOCKETS};
 
 /// The Modbus TCP port (TCP Guide §4.1, registered with IANA).
 pub const PORT: u16 = 502;
