@@ -79,6 +79,11 @@ pub const DSS1: u16 = 0x9005;
 pub const DSS2: u16 = 0x9006;
 /// DSSE: expanded device status.
 pub const DSSE: u16 = 0x9007;
+
+// The status bits, defined beside the code that sets them (`registers`), public here.
+pub use super::registers::{
+    DSS1_ALMH, DSS1_ALML, DSS1_HEND, DSS1_PEND, DSS1_PWR, DSS1_STP, DSS1_SV, DSSE_GHMS, DSSE_MOVE,
+};
 /// Gateway extension: command status of the last command (0 idle, 1 taken, 2 done, 3 failed).
 pub const CMST: u16 = 0x9F00;
 /// Gateway extension: why the last command failed ([`super::Reason`]).

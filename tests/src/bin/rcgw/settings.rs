@@ -914,7 +914,7 @@ pub fn busy(gw: &mut Gw, axes: &[u8]) -> Result<Option<String>, Fail> {
             )));
         }
         if let Ok(dsse) = gw.try_read(unit, DSSE, 1)? {
-            if dsse.first().is_some_and(|d| d & 1 << 5 != 0) {
+            if dsse.first().is_some_and(|d| d & DSSE_MOVE != 0) {
                 return Ok(Some(format!("axis {n} (unit {unit}) moves (DSSE MOVE)")));
             }
         }
