@@ -6,10 +6,12 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 
+use protocol::axes::AxisSet;
 use protocol::axes::AXES;
 use protocol::modbus::Exception;
 use protocol::plc::map::*;
-use protocol::plc::write::GatewayWrite;
+use protocol::plc::write::{AxisSetting, GatewayWrite};
+use protocol::plc::{admit, Conflict, Pending, DEFAULT_AXIS_BASE, DEFAULT_GATEWAY_UNIT};
 
 use crate::link::{Fail, Gw};
 
@@ -712,75 +714,82 @@ impl Change {
     }
 }
 
-/// The gateway's admit rules for UNITID, AXISBASE and an axis enabled (`gateway_unit.rs`),
-/// on the values as a write leaves them: UNITID and AXISBASE are checked against the pending
-/// unit and base and the axes running or pending; an axis enabled against the pending unit
-/// and base. APPLY makes the pending axes the running ones.
-#[derive(Clone, Debug)]
-struct Admit {
-    unit: u16,
-    base: u16,
-    /// Bit n: axis n enabled (AXISCFG, pending).
-    pending: u32,
-    /// Bit n: axis n on the bus (taken as the enabled axes read: nothing pending).
-    running: u32,
-}
+/// The settings a sequence of writes meets, as the gateway keeps them: every register of a
+/// change parsed and admitted by the gateway's own rules (`plc::admit`) on the settings the
+/// writes before it left; APPLY puts the enabled axes on the bus.
+#[derive(Clone, Copy, Debug)]
+struct Admit(Pending);
 
 impl Admit {
+    /// The gateway as read: the enabled axes on the bus (nothing pending).
     fn of(now: &Settings) -> Admit {
-        let enabled = now.enabled().iter().fold(0u32, |m, &n| m | 1 << n);
-        Admit {
-            unit: now.word(Section::Gateway, "unit_id").unwrap_or(63),
-            base: now.word(Section::Gateway, "axis_base").unwrap_or(1),
-            pending: enabled,
-            running: enabled,
-        }
-    }
-
-    /// The axis of the running or pending axes that would be unit `unit` with `base`.
-    fn axis_at(&self, unit: u16, base: u16) -> Option<u16> {
-        (0..AXES as u16).find(|&n| (self.running | self.pending) & 1 << n != 0 && base + n == unit)
+        let word = |key, default: u8| {
+            now.word(Section::Gateway, key)
+                .and_then(|w| u8::try_from(w).ok())
+                .unwrap_or(default)
+        };
+        let enabled = AxisSet(now.enabled().iter().fold(0u16, |m, &n| m | 1 << n));
+        Admit(Pending {
+            unit: word("unit_id", DEFAULT_GATEWAY_UNIT),
+            axis_base: word("axis_base", DEFAULT_AXIS_BASE),
+            enabled,
+            bus: enabled,
+        })
     }
 
     /// One change written: refused with the reason, as the gateway would.
     fn write(&mut self, c: &Change) -> Result<(), String> {
-        let value = c.regs.first().copied().unwrap_or(0);
-        match (c.section, c.key) {
-            (Section::Gateway, "unit_id") => {
-                if let Some(n) = self.axis_at(value, self.base) {
-                    return Err(format!(
-                        "UNITID {value} while axis {n} (enabled or on the bus until APPLY) is unit {value} (AXISBASE {} + {n})",
-                        self.base
-                    ));
+        for (i, &value) in c.regs.iter().enumerate() {
+            let address = c.address + i as u16;
+            let write = GatewayWrite::parse(address, value).map_err(|e| {
+                format!(
+                    "{} {} = {}: register {address:#06x} refused ({e:?})",
+                    c.section.name(),
+                    c.key,
+                    c.to
+                )
+            })?;
+            admit(&self.0, write).map_err(|conflict| self.why(write, conflict))?;
+            match write {
+                GatewayWrite::UnitId(unit) => self.0.unit = unit,
+                GatewayWrite::AxisBase(base) => self.0.axis_base = base,
+                GatewayWrite::Axis(axis, AxisSetting::Enabled(on)) => {
+                    self.0.enabled = if on {
+                        self.0.enabled.with(axis)
+                    } else {
+                        self.0.enabled.without(axis)
+                    };
                 }
-                self.unit = value;
+                _ => {}
             }
-            (Section::Gateway, "axis_base") => {
-                if let Some(n) = self.axis_at(self.unit, value) {
-                    return Err(format!(
-                        "AXISBASE {value} while UNITID is {}: axis {n} (enabled or on the bus until APPLY) would be unit {}",
-                        self.unit, self.unit
-                    ));
-                }
-                self.base = value;
-            }
-            (Section::Axis(n), "enabled") if value == 1 => {
-                if self.base + u16::from(n) == self.unit {
-                    return Err(format!(
-                        "axis {n} enabled while it would be unit {} (AXISBASE {} + {n}), the gateway's UNITID",
-                        self.unit, self.base
-                    ));
-                }
-                self.pending |= 1 << n;
-            }
-            (Section::Axis(n), "enabled") => self.pending &= !(1 << n),
-            _ => {}
         }
         Ok(())
     }
 
+    /// Why the gateway refuses `write`, in words.
+    fn why(&self, write: GatewayWrite, conflict: Conflict) -> String {
+        let Admit(Pending {
+            unit, axis_base, ..
+        }) = *self;
+        match (write, conflict) {
+            (GatewayWrite::UnitId(value), Conflict::AxisUnit(axis)) => format!(
+                "UNITID {value} while axis {n} (enabled or on the bus until APPLY) is unit {value} (AXISBASE {axis_base} + {n})",
+                n = axis.get()
+            ),
+            (GatewayWrite::AxisBase(value), Conflict::AxisUnit(axis)) => format!(
+                "AXISBASE {value} while UNITID is {unit}: axis {n} (enabled or on the bus until APPLY) would be unit {unit}",
+                n = axis.get()
+            ),
+            (GatewayWrite::Axis(..), Conflict::AxisUnit(axis)) => format!(
+                "axis {n} enabled while it would be unit {unit} (AXISBASE {axis_base} + {n}), the gateway's UNITID",
+                n = axis.get()
+            ),
+            (write, conflict) => format!("{write:?} refused: {conflict:?}"),
+        }
+    }
+
     fn apply(&mut self) {
-        self.running = self.pending;
+        self.0.bus = self.0.enabled;
     }
 }
 
@@ -1117,5 +1126,126 @@ pub fn save(gw: &mut Gw) -> Result<u32, Fail> {
             }
             _ => std::thread::sleep(Duration::from_millis(20)),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::modbus::{DataModel, RegisterTable, SlaveCounters};
+    use protocol::plc::{Gateway, GatewayConfig};
+    use protocol::time::Instant;
+
+    /// A gateway started with these settings running: `unit`, `base`, `axes` on the bus.
+    fn gateway(unit: u8, base: u8, axes: AxisSet) -> Gateway {
+        let mut config = GatewayConfig::new(axes);
+        config.unit = unit;
+        config.axis_base = base;
+        Gateway::new(config)
+    }
+
+    /// What rcgw starts a plan from: the same settings, read.
+    fn settings(unit: u8, base: u8, axes: AxisSet) -> Settings {
+        let mut values = BTreeMap::new();
+        values.insert((Section::Gateway, "unit_id"), vec![u16::from(unit)]);
+        values.insert((Section::Gateway, "axis_base"), vec![u16::from(base)]);
+        for n in 0..AXES as u8 {
+            let on = axes.0 & 1 << n != 0;
+            values.insert((Section::Axis(n), "enabled"), vec![u16::from(on)]);
+        }
+        Settings { values }
+    }
+
+    fn change(section: Section, key: &'static str, address: u16, value: u16) -> Change {
+        Change {
+            section,
+            key,
+            address,
+            from: None,
+            to: value.to_string(),
+            regs: vec![value],
+            on_apply: true,
+        }
+    }
+
+    /// rcgw plans its writes with the rules the gateway applies to them: random sequences of
+    /// UNITID, AXISBASE and axes enabled or disabled (small units and bases, so that they
+    /// collide often), with APPLYs between, are written to a gateway and fed to rcgw's model
+    /// of it, and each write must be admitted by both or refused by both. (The gateway's APPLY
+    /// is a start with the pending settings: the rules APPLY itself has, an idle bus, are not
+    /// these.) Fails if rcgw's model of what is pending and what is on the bus, or its rules,
+    /// drift from the gateway's.
+    #[test]
+    fn rcgw_and_the_gateway_admit_the_same_writes() {
+        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = |n: u64| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed % n
+        };
+        let (mut admitted, mut refused) = (0, 0);
+        for _ in 0..400 {
+            let (mut unit, mut base) = (63u8, 1u8);
+            let mut axes = AxisSet(next(1 << 16) as u16 & 0x00FF);
+            let mut gw = gateway(unit, base, axes);
+            let mut model = Admit::of(&settings(unit, base, axes));
+            for _ in 0..12 {
+                let c = match next(4) {
+                    0 => {
+                        // APPLY: the pending settings run, in the gateway as in rcgw.
+                        let mut regs = gw.registers(Instant::ZERO, SlaveCounters::default());
+                        let mut pending = |a: u16| {
+                            let mut out = [0];
+                            regs.read_registers(unit, RegisterTable::Holding, a, &mut out)
+                                .expect("read");
+                            out[0]
+                        };
+                        let (u, b) = (pending(G_UNIT_ID) as u8, pending(G_AXIS_BASE) as u8);
+                        let on = (0..AXES as u16).fold(0, |m, n| {
+                            m | pending(G_AXIS_CONFIG + G_AXIS_CONFIG_LEN * n) << n
+                        });
+                        (unit, base, axes) = (u, b, AxisSet(on));
+                        gw = gateway(unit, base, axes);
+                        model.apply();
+                        continue;
+                    }
+                    1 => {
+                        let u = [1 + next(24), 63][next(2) as usize] as u16;
+                        change(Section::Gateway, "unit_id", G_UNIT_ID, u)
+                    }
+                    2 => change(
+                        Section::Gateway,
+                        "axis_base",
+                        G_AXIS_BASE,
+                        1 + next(24) as u16,
+                    ),
+                    _ => {
+                        let n = next(16) as u8;
+                        let address = G_AXIS_CONFIG + G_AXIS_CONFIG_LEN * u16::from(n);
+                        change(Section::Axis(n), "enabled", address, next(2) as u16)
+                    }
+                };
+                let gateway = gw
+                    .registers(Instant::ZERO, SlaveCounters::default())
+                    .write_registers(unit, c.address, &c.regs);
+                let rcgw = model.write(&c);
+                assert_eq!(
+                    rcgw.is_ok(),
+                    gateway.is_ok(),
+                    "{}: rcgw {rcgw:?}, the gateway {gateway:?} (running: unit {unit}, \
+                     AXISBASE {base}, axes {:#06x})",
+                    c.line(),
+                    axes.0
+                );
+                if gateway.is_ok() {
+                    admitted += 1;
+                } else {
+                    refused += 1;
+                }
+            }
+        }
+        // Both outcomes exercised.
+        assert!(admitted > 100 && refused > 100, "{admitted} {refused}");
     }
 }
