@@ -50,25 +50,28 @@ struct Field {
     key: &'static str,
     address: u16,
     kind: Kind,
-    /// Taken on APPLY (not at once).
-    on_apply: bool,
     /// The values the gateway takes, in the file's units, for messages.
     range: &'static str,
 }
 
-const fn f(
-    key: &'static str,
-    address: u16,
-    kind: Kind,
-    on_apply: bool,
-    range: &'static str,
-) -> Field {
+const fn f(key: &'static str, address: u16, kind: Kind, range: &'static str) -> Field {
     Field {
         key,
         address,
         kind,
-        on_apply,
         range,
+    }
+}
+
+/// Whether a setting is taken on APPLY (not at once), as the register map says: its row's
+/// `on_apply`; of AXISCFG (a block in the map), `enabled` only.
+fn on_apply(section: Section, field: Field) -> bool {
+    match section {
+        Section::Axis(_) => field.address == 0,
+        _ => MAP
+            .iter()
+            .find(|e| e.unit == Unit::Gateway && e.address == field.address)
+            .is_some_and(|e| e.on_apply),
     }
 }
 
@@ -83,122 +86,82 @@ const GATEWAY: &[Field] = &[
         "unit_id",
         G_UNIT_ID,
         Kind::Int(1),
-        true,
         "1-247, not an enabled axis' unit",
     ),
-    f("axis_base", G_AXIS_BASE, Kind::Int(1), true, "1-232"),
+    f("axis_base", G_AXIS_BASE, Kind::Int(1), "1-232"),
     f(
         "plc_baud_bps",
         G_PLC_BAUD,
         Kind::Int(100),
-        true,
         "1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200 bit/s",
     ),
     f(
         "plc_parity",
         G_PLC_PARITY,
         Kind::Enum(PARITY),
-        true,
         "\"none\", \"odd\", \"even\"",
     ),
     f(
         "bus_baud_bps",
         G_BUS_BAUD,
         Kind::Int(100),
-        true,
         "9600, 14400, 19200, 28800, 38400, 57600, 76800, 115200 bit/s",
     ),
-    f("bus_rtim_ms", G_BUS_RTIM, Kind::Int(1), true, "3-255 ms"),
-    f("retries", G_RETRIES, Kind::Int(1), false, "0-3"),
-    f(
-        "watchdog_ms",
-        G_WATCHDOG,
-        Kind::Int(1),
-        false,
-        "0, 50-60000 ms",
-    ),
+    f("bus_rtim_ms", G_BUS_RTIM, Kind::Int(1), "3-255 ms"),
+    f("retries", G_RETRIES, Kind::Int(1), "0-3"),
+    f("watchdog_ms", G_WATCHDOG, Kind::Int(1), "0, 50-60000 ms"),
     f(
         "watchdog_action",
         G_WD_ACTION,
         Kind::Enum(WD_ACTION),
-        false,
         "\"stop\", \"latch\"",
     ),
-    f(
-        "pio_axis",
-        G_PIO_AXIS,
-        Kind::PioAxis,
-        false,
-        "0-15 or \"none\"",
-    ),
-    f(
-        "pio_pattern",
-        G_PIO_PATTERN,
-        Kind::Int(1),
-        false,
-        "0, 1, 4, 5",
-    ),
+    f("pio_axis", G_PIO_AXIS, Kind::PioAxis, "0-15 or \"none\""),
+    f("pio_pattern", G_PIO_PATTERN, Kind::Int(1), "0, 1, 4, 5"),
     f(
         "pio_start",
         G_PIO_START,
         Kind::Enum(PIO_START),
-        false,
         "\"level\", \"edge\"",
     ),
     f(
         "pio_jog_mm_s",
         G_PIO_JOG,
         Kind::Hundredths,
-        false,
         "0.01-655.35 mm/s",
     ),
-    f(
-        "pio_inch_mm",
-        G_PIO_INCH,
-        Kind::Hundredths,
-        false,
-        "0.01-1.00 mm",
-    ),
+    f("pio_inch_mm", G_PIO_INCH, Kind::Hundredths, "0.01-1.00 mm"),
 ];
 
 const AXIS: &[Field] = &[
-    f("enabled", 0, Kind::Bool, true, "true, false"),
-    f("lead_mm", 1, Kind::Hundredths, false, "0.01-655.35 mm"),
-    f("home", 2, Kind::Enum(HOME), false, "\"motor\", \"far\""),
-    f("pulses_per_rev", 3, Kind::Int(1), false, "1-65535"),
-    f(
-        "stroke_mm",
-        4,
-        Kind::Hundredths32,
-        false,
-        "0.00-21474836.47 mm",
-    ),
+    f("enabled", 0, Kind::Bool, "true, false"),
+    f("lead_mm", 1, Kind::Hundredths, "0.01-655.35 mm"),
+    f("home", 2, Kind::Enum(HOME), "\"motor\", \"far\""),
+    f("pulses_per_rev", 3, Kind::Int(1), "1-65535"),
+    f("stroke_mm", 4, Kind::Hundredths32, "0.00-21474836.47 mm"),
     f(
         "encoding",
         6,
         Kind::Enum(ENCODING),
-        false,
         "\"ones-complement\", \"twos-complement\"",
     ),
 ];
 
 const NETWORK: &[Field] = &[
-    f("ip_address", G_NET, Kind::Ipv4, false, "an IPv4 address"),
-    f("ip_prefix_bits", G_NET + 2, Kind::Int(1), false, "1-32"),
+    f("ip_address", G_NET, Kind::Ipv4, "an IPv4 address"),
+    f("ip_prefix_bits", G_NET + 2, Kind::Int(1), "1-32"),
     f(
         "ip_router",
         G_NET + 3,
         Kind::Ipv4,
-        false,
         "an IPv4 address, \"0.0.0.0\" for none",
     ),
-    f("tcp_max_connections", G_NET + 5, Kind::Int(1), false, "1-4"),
-    f("tcp_idle_s", G_NET + 6, Kind::Int(1), false, "0-3600 s"),
+    f("tcp_max_connections", G_NET + 5, Kind::Int(1), "1-4"),
+    f("tcp_idle_s", G_NET + 6, Kind::Int(1), "0-3600 s"),
     f(
         "tcp_allow",
         G_NET + 8,
         Kind::Ipv4List,
-        false,
         "up to 4 IPv4 addresses",
     ),
 ];
@@ -659,7 +622,7 @@ impl Settings {
                     from: from.map(|r| render(field.kind, r)),
                     to: render(field.kind, to),
                     regs: to.clone(),
-                    on_apply: field.on_apply,
+                    on_apply: on_apply(*section, field),
                 })
             })
             .collect()
