@@ -50,8 +50,47 @@ struct Field {
     key: &'static str,
     address: u16,
     kind: Kind,
-    /// The values the gateway takes, in the file's units, for messages.
+    /// The values the gateway takes, in the file's units, for messages: for a setting whose
+    /// map row has its allowed values, what follows them ([`range_text`]).
     range: &'static str,
+}
+
+/// The values a setting takes, in the file's units, for messages: a gateway or network
+/// setting's from its map row (its spans, times the file's factor, with the unit its key
+/// names), then the field's own words.
+fn range_text(section: Section, field: Field) -> String {
+    let entry = MAP
+        .iter()
+        .find(|e| e.unit == Unit::Gateway && e.address == field.address)
+        .filter(|_| !matches!(section, Section::Axis(_)))
+        .filter(|e| !e.allowed.is_empty());
+    let Some(entry) = entry else {
+        return field.range.into();
+    };
+    let value = |v: u16| match field.kind {
+        Kind::Int(factor) => (u32::from(v) * factor).to_string(),
+        Kind::Hundredths => hundredths(i64::from(v)),
+        _ => v.to_string(),
+    };
+    let spans: Vec<String> = entry
+        .allowed
+        .iter()
+        .map(|&(low, high)| match low == high {
+            true => value(low),
+            false => format!("{}-{}", value(low), value(high)),
+        })
+        .collect();
+    let unit = [
+        ("_mm_s", " mm/s"),
+        ("_mm", " mm"),
+        ("_ms", " ms"),
+        ("_bps", " bit/s"),
+        ("_s", " s"),
+    ]
+    .into_iter()
+    .find(|(suffix, _)| field.key.ends_with(suffix))
+    .map_or("", |(_, unit)| unit);
+    format!("{}{unit}{}", spans.join(", "), field.range)
 }
 
 const fn f(key: &'static str, address: u16, kind: Kind, range: &'static str) -> Field {
@@ -86,30 +125,20 @@ const GATEWAY: &[Field] = &[
         "unit_id",
         G_UNIT_ID,
         Kind::Int(1),
-        "1-247, not an enabled axis' unit",
+        ", not an enabled axis' unit",
     ),
-    f("axis_base", G_AXIS_BASE, Kind::Int(1), "1-232"),
-    f(
-        "plc_baud_bps",
-        G_PLC_BAUD,
-        Kind::Int(100),
-        "1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200 bit/s",
-    ),
+    f("axis_base", G_AXIS_BASE, Kind::Int(1), ""),
+    f("plc_baud_bps", G_PLC_BAUD, Kind::Int(100), ""),
     f(
         "plc_parity",
         G_PLC_PARITY,
         Kind::Enum(PARITY),
         "\"none\", \"odd\", \"even\"",
     ),
-    f(
-        "bus_baud_bps",
-        G_BUS_BAUD,
-        Kind::Int(100),
-        "9600, 14400, 19200, 28800, 38400, 57600, 76800, 115200 bit/s",
-    ),
-    f("bus_rtim_ms", G_BUS_RTIM, Kind::Int(1), "3-255 ms"),
-    f("retries", G_RETRIES, Kind::Int(1), "0-3"),
-    f("watchdog_ms", G_WATCHDOG, Kind::Int(1), "0, 50-60000 ms"),
+    f("bus_baud_bps", G_BUS_BAUD, Kind::Int(100), ""),
+    f("bus_rtim_ms", G_BUS_RTIM, Kind::Int(1), ""),
+    f("retries", G_RETRIES, Kind::Int(1), ""),
+    f("watchdog_ms", G_WATCHDOG, Kind::Int(1), ""),
     f(
         "watchdog_action",
         G_WD_ACTION,
@@ -117,20 +146,15 @@ const GATEWAY: &[Field] = &[
         "\"stop\", \"latch\"",
     ),
     f("pio_axis", G_PIO_AXIS, Kind::PioAxis, "0-15 or \"none\""),
-    f("pio_pattern", G_PIO_PATTERN, Kind::Int(1), "0, 1, 4, 5"),
+    f("pio_pattern", G_PIO_PATTERN, Kind::Int(1), ""),
     f(
         "pio_start",
         G_PIO_START,
         Kind::Enum(PIO_START),
         "\"level\", \"edge\"",
     ),
-    f(
-        "pio_jog_mm_s",
-        G_PIO_JOG,
-        Kind::Hundredths,
-        "0.01-655.35 mm/s",
-    ),
-    f("pio_inch_mm", G_PIO_INCH, Kind::Hundredths, "0.01-1.00 mm"),
+    f("pio_jog_mm_s", G_PIO_JOG, Kind::Hundredths, ""),
+    f("pio_inch_mm", G_PIO_INCH, Kind::Hundredths, ""),
 ];
 
 const AXIS: &[Field] = &[
@@ -149,15 +173,15 @@ const AXIS: &[Field] = &[
 
 const NETWORK: &[Field] = &[
     f("ip_address", G_NET, Kind::Ipv4, "an IPv4 address"),
-    f("ip_prefix_bits", G_NET + 2, Kind::Int(1), "1-32"),
+    f("ip_prefix_bits", G_NET + 2, Kind::Int(1), ""),
     f(
         "ip_router",
         G_NET + 3,
         Kind::Ipv4,
         "an IPv4 address, \"0.0.0.0\" for none",
     ),
-    f("tcp_max_connections", G_NET + 5, Kind::Int(1), "1-4"),
-    f("tcp_idle_s", G_NET + 6, Kind::Int(1), "0-3600 s"),
+    f("tcp_max_connections", G_NET + 5, Kind::Int(1), ""),
+    f("tcp_idle_s", G_NET + 6, Kind::Int(1), ""),
     f(
         "tcp_allow",
         G_NET + 8,
@@ -292,8 +316,8 @@ fn parse_ip(value: &toml::Value) -> Result<[u16; 2], String> {
 /// registers (the gateway's own range rules come after: `GatewayWrite::parse`). A value out of
 /// range says so with the range in the file's units, before its form (decimals, multiples) is
 /// looked at.
-fn parse(field: Field, value: &toml::Value) -> Result<Vec<u16>, String> {
-    let range = || format!("out of range (allowed: {})", field.range);
+fn parse(section: Section, field: Field, value: &toml::Value) -> Result<Vec<u16>, String> {
+    let range = || format!("out of range (allowed: {})", range_text(section, field));
     let int = || {
         value
             .as_integer()
@@ -545,7 +569,7 @@ impl Settings {
                     continue;
                 };
                 let first = section.base() + field.address;
-                match parse(field, value) {
+                match parse(section, field, value) {
                     Err(e) if e.starts_with("out of range") => errors.push(format!(
                         "{} {key} = {value}: {e} (register {first:#06x})",
                         section.name()
@@ -558,7 +582,7 @@ impl Settings {
                                 errors.push(format!(
                                     "{} {key} = {value}: out of range (allowed: {}) (register {address:#06x})",
                                     section.name(),
-                                    field.range
+                                    range_text(section, field)
                                 ));
                                 break;
                             }
@@ -1129,6 +1153,29 @@ mod tests {
             regs: vec![value],
             on_apply: true,
         }
+    }
+
+    /// Every setting's message says its values: a setting left to the map's spans has them
+    /// (one whose row lost them would say only the words after them), e.g. the line rate's in
+    /// bit/s.
+    #[test]
+    fn every_range_is_said() {
+        for section in [Section::Gateway, Section::Network, Section::Axis(0)] {
+            for &field in section.fields() {
+                let text = range_text(section, field);
+                assert!(
+                    !text.is_empty() && !text.starts_with(','),
+                    "{} {}: {text:?}",
+                    section.name(),
+                    field.key
+                );
+            }
+        }
+        let baud = field(Section::Gateway, "bus_baud_bps").unwrap();
+        assert_eq!(
+            range_text(Section::Gateway, baud),
+            "9600, 14400, 19200, 28800, 38400, 57600, 76800, 115200 bit/s"
+        );
     }
 
     /// rcgw plans its writes with the rules the gateway applies to them: random sequences of
