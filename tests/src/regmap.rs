@@ -38,6 +38,36 @@ fn address(entry: &Entry) -> String {
     }
 }
 
+/// A register value as the table writes it: 0xFFFF (a "none") in hexadecimal, else decimal.
+fn value(v: u16) -> String {
+    if v == 0xFFFF {
+        format!("0x{v:04X}")
+    } else {
+        v.to_string()
+    }
+}
+
+/// The allowed values: a setting's spans, else the row's words.
+fn range(entry: &Entry) -> String {
+    if entry.allowed.is_empty() {
+        return entry.range.into();
+    }
+    let spans: Vec<String> = entry
+        .allowed
+        .iter()
+        .map(|&(low, high)| match low == high {
+            true => value(low),
+            false => format!("{low}-{high}"),
+        })
+        .collect();
+    spans.join(", ")
+}
+
+/// A setting's default.
+fn default(entry: &Entry) -> String {
+    entry.default.map_or(String::new(), value)
+}
+
 /// The markdown table, with its markers.
 pub fn markdown() -> String {
     let mut out = String::new();
@@ -49,19 +79,22 @@ pub fn markdown() -> String {
         let _ = writeln!(out, "\n**{title}**\n");
         let _ = writeln!(
             out,
-            "| Address | Name | Table | Unit | Range | Access | Meaning | Support |"
+            "| Address | Name | Table | Unit | Range | Default | Access | Meaning | Support |"
         );
-        let _ = writeln!(out, "|---|---|---|---|---|---|---|---|");
-        for e in MAP.iter().filter(|e| e.unit == unit) {
+        let _ = writeln!(out, "|---|---|---|---|---|---|---|---|---|");
+        let mut entries: Vec<&Entry> = MAP.iter().filter(|e| e.unit == unit).collect();
+        entries.sort_by_key(|e| e.address);
+        for e in entries {
             let access = if e.writable { "R/W" } else { "R" };
             let _ = writeln!(
                 out,
-                "| {} | {} | {} | {} | {} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 address(e),
                 e.name,
                 table(e),
                 e.units,
-                e.range,
+                range(e),
+                default(e),
                 access,
                 e.meaning,
                 support(e)

@@ -24,6 +24,8 @@ pub enum CommandState {
 }
 
 /// Why a command failed: the high byte of CMER (the low byte carries the RC code, if any).
+/// The discriminant is the code ([`Reason::code`], [`Reason::from_code`]); [`Reason::text`] says
+/// it in words.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Reason {
@@ -60,6 +62,50 @@ pub enum Reason {
 }
 
 impl Reason {
+    /// Every reason, in the order of its code (0 to 13): for tools that list or decode them.
+    pub const ALL: [Reason; 14] = [
+        Reason::None,
+        Reason::Timeout,
+        Reason::OutcomeUnknown,
+        Reason::Rejected,
+        Reason::Alarm,
+        Reason::Unexpected,
+        Reason::Cancelled,
+        Reason::VerifyFailed,
+        Reason::WaitTimeout,
+        Reason::QueueFull,
+        Reason::Paused,
+        Reason::Offline,
+        Reason::Failsafe,
+        Reason::PioInput,
+    ];
+
+    /// The reason of a CMER value's high byte (`cmer >> 8`), if it is one.
+    pub fn from_code(code: u8) -> Option<Reason> {
+        Reason::ALL.get(usize::from(code)).copied()
+    }
+
+    /// What the reason means, in a few words, for a PLC programmer's or a tool's message
+    /// ("" for [`Reason::None`]).
+    pub const fn text(self) -> &'static str {
+        match self {
+            Reason::None => "",
+            Reason::Timeout => "no answer from the axis",
+            Reason::OutcomeUnknown => "outcome of an incremental move unknown",
+            Reason::Rejected => "rejected by the controller",
+            Reason::Alarm => "alarm",
+            Reason::Unexpected => "unexpected answer",
+            Reason::Cancelled => "cancelled by a stop",
+            Reason::VerifyFailed => "verify failed",
+            Reason::WaitTimeout => "motion time-out",
+            Reason::QueueFull => "queue full",
+            Reason::Paused => "refused: STP/EMG or the stop input",
+            Reason::Offline => "the axis went offline",
+            Reason::Failsafe => "refused: FAILSAFE latched",
+            Reason::PioInput => "refused: the discrete inputs select no point",
+        }
+    }
+
     /// The CMER value: this reason in the high byte, `rc` (a controller code) in the low.
     pub const fn code(self, rc: u8) -> u16 {
         (self as u16) << 8 | rc as u16
@@ -178,5 +224,26 @@ impl PlcAxis {
     /// A motion command is taken and not finished.
     pub(super) fn starting(&self) -> bool {
         self.motion != Motion::None && self.state == CommandState::Taken
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Reason;
+
+    /// `ALL` lists every reason at the index of its own code, so `from_code` decodes what
+    /// `code` encodes.
+    #[test]
+    fn every_reason_decodes_from_its_code() {
+        for (i, &reason) in Reason::ALL.iter().enumerate() {
+            assert_eq!(reason as usize, i);
+            assert_eq!(Reason::from_code(reason as u8), Some(reason));
+            assert_eq!(
+                Reason::from_code((reason.code(0x85) >> 8) as u8),
+                Some(reason)
+            );
+            assert_eq!(reason.text().is_empty(), reason == Reason::None);
+        }
+        assert_eq!(Reason::from_code(Reason::ALL.len() as u8), None);
     }
 }

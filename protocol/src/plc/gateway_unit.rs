@@ -5,13 +5,13 @@
 //! cannot be written answers 03, one that does not exist 02 (as the axis units do).
 
 use super::axis_unit::link_code;
-use super::config::{axis_of, complement_code};
+use super::config::complement_code;
 use super::gateway::Gateway;
 use super::map::*;
 use super::persist::Store;
 use super::refused::Refused;
 use super::registers::{join, split};
-use super::write::{axis_cfg, nth, per_axis, AxisSetting, GatewayWrite};
+use super::write::{admit, axis_cfg, nth, per_axis, AxisSetting, GatewayWrite, Pending};
 use crate::axes::AxisSet;
 use crate::engine::LinkError;
 use crate::modbus::{Exception, SlaveCounters};
@@ -176,27 +176,26 @@ impl Gateway {
 
     /// The rules of a parsed write that depend on the gateway's state, checked before any
     /// register of the write is carried out: APPLY only while nothing moves, runs or waits;
-    /// FAILSAFE's acknowledgement only once its cause is gone (the stop input inactive); a unit
-    /// id that is not an axis' (enabled, or to be on APPLY); an axis enabled whose unit is
-    /// not the gateway's; a synchronized-start mask of axes on the bus.
+    /// FAILSAFE's acknowledgement only once its cause is gone (the stop input inactive); a
+    /// PIOPAT the board has the ports for; and the rules across settings, [`admit`](super::write::admit)'s.
     fn admit(&self, write: GatewayWrite) -> Result<(), Refused> {
         let admitted = match write {
             GatewayWrite::Apply => self.bus_idle(),
             // As a safety relay's reset: only once the cause is gone (`failsafe`).
             GatewayWrite::AckFailsafe => self.failsafe.may_acknowledge(),
-            GatewayWrite::UnitId(unit) => {
-                let axes = AxisSet(self.config.bus.axes.0 | self.persist.axes.0);
-                axis_of(unit, self.persist.axis_base, axes).is_none()
-            }
-            GatewayWrite::AxisBase(base) => {
-                let axes = AxisSet(self.config.bus.axes.0 | self.persist.axes.0);
-                axis_of(self.persist.unit, base, axes).is_none()
-            }
-            GatewayWrite::Axis(axis, AxisSetting::Enabled(true)) => {
-                axis.get().checked_add(self.persist.axis_base) != Some(self.persist.unit)
-            }
-            GatewayWrite::SyncMask(mask) => mask.0 & !self.config.bus.axes.0 == 0,
             GatewayWrite::PioPattern(pattern) => self.config.pio_ports.run(pattern),
+            GatewayWrite::UnitId(_)
+            | GatewayWrite::AxisBase(_)
+            | GatewayWrite::Axis(_, AxisSetting::Enabled(true))
+            | GatewayWrite::SyncMask(_) => {
+                let pending = Pending {
+                    unit: self.persist.unit,
+                    axis_base: self.persist.axis_base,
+                    enabled: self.persist.axes,
+                    bus: self.config.bus.axes,
+                };
+                admit(&pending, write).is_ok()
+            }
             _ => true,
         };
         if admitted {

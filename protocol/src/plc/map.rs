@@ -1,6 +1,9 @@
 //! The Modbus register map, as data: every address the gateway answers, with its unit, range,
-//! access and meaning. The register table in docs/plc.md is generated from [`MAP`], so the document and
-//! the code cannot drift apart.
+//! access and meaning, and for a setting its allowed values as data, its default and whether
+//! it is taken on APPLY. The register table in docs/plc.md is generated from [`MAP`], so the
+//! document and the code cannot drift apart; `rcgw` takes from it which settings wait for
+//! APPLY; tests hold the write parser (`write`) and a new gateway's settings to each
+//! setting's values and default.
 //!
 //! Each axis is its own Modbus unit, id = axis + 1 (as IAI's SIO-through mode does), laid out
 //! like IAI's PCON Modbus registers where the RC protocol can supply them. The gateway itself
@@ -53,8 +56,16 @@ pub struct Entry {
     pub name: &'static str,
     /// Unit of measure.
     pub units: &'static str,
-    /// Allowed values.
+    /// Allowed values, in words (for a setting with [`allowed`](Self::allowed) values, "": its
+    /// spans say it).
     pub range: &'static str,
+    /// A setting's allowed register values as inclusive spans (`(96, 96)` one value,
+    /// `(3, 255)` a range); empty where [`range`](Self::range) says it in words.
+    pub allowed: &'static [(u16, u16)],
+    /// A setting's value unless set (factory default).
+    pub default: Option<u16>,
+    /// A setting taken on APPLY (or at the next start), not at once.
+    pub on_apply: bool,
     /// Whether it can be written.
     pub writable: bool,
     /// What it means.
@@ -79,6 +90,11 @@ pub const DSS1: u16 = 0x9005;
 pub const DSS2: u16 = 0x9006;
 /// DSSE: expanded device status.
 pub const DSSE: u16 = 0x9007;
+
+// The status bits, defined beside the code that sets them (`registers`), public here.
+pub use super::registers::{
+    DSS1_ALMH, DSS1_ALML, DSS1_HEND, DSS1_PEND, DSS1_PWR, DSS1_STP, DSS1_SV, DSSE_GHMS, DSSE_MOVE,
+};
 /// Gateway extension: command status of the last command (0 idle, 1 taken, 2 done, 3 failed).
 pub const CMST: u16 = 0x9F00;
 /// Gateway extension: why the last command failed ([`super::Reason`]).
@@ -230,6 +246,7 @@ use Support::{Full, Gateway, Partial};
 /// Axes, for the per-axis blocks' sizes.
 const AXES: u16 = crate::axes::AXES as u16;
 use Table::{Coil, Holding, Status};
+use Taken::{AtOnce, OnApply};
 
 // One row of the table: positional like the document's columns, so the table reads as a table.
 #[allow(clippy::too_many_arguments)]
@@ -256,6 +273,35 @@ const fn e(
         writable,
         meaning,
         support,
+        allowed: &[],
+        default: None,
+        on_apply: false,
+    }
+}
+
+/// When a setting takes effect: at once, or on APPLY (or at the next start).
+#[derive(Clone, Copy)]
+enum Taken {
+    AtOnce,
+    OnApply,
+}
+
+impl Entry {
+    /// A setting's row: its allowed values as spans, its default, when it is taken.
+    const fn setting(self, allowed: &'static [(u16, u16)], default: u16, taken: Taken) -> Entry {
+        Entry {
+            allowed,
+            default: Some(default),
+            on_apply: matches!(taken, Taken::OnApply),
+            ..self
+        }
+    }
+
+    /// Whether `value` is one of [`allowed`](Self::allowed)'s (false when there are none).
+    pub fn allows(&self, value: u16) -> bool {
+        self.allowed
+            .iter()
+            .any(|&(low, high)| (low..=high).contains(&value))
     }
 }
 
@@ -356,21 +402,35 @@ pub const MAP: &[Entry] = &[
     e(Unit::Gateway, Status, G_UPTIME, 2, "UPTIME", "s", "uint32", false, "Time since start", Gateway),
     e(Unit::Gateway, Holding, G_FAILSAFE, 1, "FAILSAFE", "bits", "write 0", true, "Latched fail-safe: b0 PLC watchdog, b1 stop input; write 0 to acknowledge (03 while the stop input is open)", Gateway),
     e(Unit::Gateway, Status, G_FAILSAFE_COUNT, 1, "FSCOUNT", "count", "", false, "Fail-safe trips", Gateway),
-    e(Unit::Gateway, Holding, G_WATCHDOG, 1, "WATCHDOG", "ms", "0, 50-60000", true, "PLC silence that stops every moving axis (0 = off)", Gateway),
-    e(Unit::Gateway, Holding, G_BUS_BAUD, 1, "BUSBAUD", "100 bit/s", "96 144 192 288 384 576 768 1152", true, "RS485 line rate, taken on APPLY or at the next start", Gateway),
-    e(Unit::Gateway, Holding, G_BUS_RTIM, 1, "BUSRTIM", "ms", "3-255", true, "Controllers' minimum response delay, taken on APPLY or at the next start", Gateway),
-    e(Unit::Gateway, Holding, G_RETRIES, 1, "RETRIES", "", "0-3", true, "Resends after a time-out (complete edition §5 Nrt), in force at once", Gateway),
+    e(Unit::Gateway, Holding, G_WATCHDOG, 1, "WATCHDOG", "ms", "", true, "PLC silence that stops every moving axis (0 = off)", Gateway)
+        .setting(&[(0, 0), (50, 60_000)], 1000, AtOnce),
+    e(Unit::Gateway, Holding, G_BUS_BAUD, 1, "BUSBAUD", "100 bit/s", "", true, "RS485 line rate, taken on APPLY or at the next start", Gateway)
+        .setting(&[(96, 96), (144, 144), (192, 192), (288, 288), (384, 384), (576, 576), (768, 768), (1152, 1152)], 1152, OnApply),
+    e(Unit::Gateway, Holding, G_BUS_RTIM, 1, "BUSRTIM", "ms", "", true, "Controllers' minimum response delay, taken on APPLY or at the next start", Gateway)
+        .setting(&[(3, 255)], 3, OnApply),
+    e(Unit::Gateway, Holding, G_RETRIES, 1, "RETRIES", "", "", true, "Resends after a time-out (complete edition §5 Nrt), in force at once", Gateway)
+        .setting(&[(0, 3)], 2, AtOnce),
     e(Unit::Gateway, Holding, G_APPLY, 1, "APPLY", "", "1", true, "Write 1: the pending settings take effect: PLCBAUD/PLCPARITY/UNITID after the reply, then a break and communication establishment with BUSBAUD/BUSRTIM and the enabled axes (all axes stop answering for about 1 s per axis); refused (03) unless nothing moves, runs or waits", Gateway),
-    e(Unit::Gateway, Holding, G_WD_ACTION, 1, "WDACTION", "", "0-1", true, "Watchdog action: 0 stop every axis, 1 latch only", Gateway),
-    e(Unit::Gateway, Holding, G_PIO_AXIS, 1, "PIOAXIS", "axis", "0-15, 0xFFFF", true, "The axis the discrete I/O drives (0xFFFF: none)", Gateway),
-    e(Unit::Gateway, Holding, G_PIO_PATTERN, 1, "PIOPAT", "", "0 1 4 5", true, "The discrete I/O's pattern, IAI's number: 0 positioning (PC1-PC8, CSTR), 1 teaching (0 plus MODE, JISL, JOG+, JOG-, PWRT; MODES, WEND), 4 solenoid valve 1 (ST0-ST6, PE0-PE6), 5 solenoid valve 2 (ST0-ST2, LS0-LS2); in force at once (every input must then go OFF and ON again); refused (03) if the board lacks one of its ports", Gateway),
-    e(Unit::Gateway, Holding, G_PIO_START, 1, "PIOSTART", "", "0-1", true, "Patterns 4 and 5: 0 level (releasing STn stops the move), 1 edge (STn's rising edge starts it); PCON parameter No. 27", Gateway),
-    e(Unit::Gateway, Holding, G_PIO_JOG, 1, "PIOJOG", "0.01 mm/s", "1-65535", true, "Pattern 1: jog speed (JOG+/JOG- held; and the speed a PWRT gives a point that held nothing); PCON parameter No. 26, default 100 mm/s", Gateway),
-    e(Unit::Gateway, Holding, G_PIO_INCH, 1, "PIOINCH", "0.01 mm", "1-100", true, "Pattern 1: inching step (JISL ON, one per JOG edge); PCON parameter No. 48, default 0.10 mm", Gateway),
-    e(Unit::Gateway, Holding, G_PLC_BAUD, 1, "PLCBAUD", "100 bit/s", "12 24 48 96 192 384 576 1152", true, "PLC line rate, taken on APPLY or at the next start", Gateway),
-    e(Unit::Gateway, Holding, G_PLC_PARITY, 1, "PLCPARITY", "", "0-2", true, "PLC line parity: 0 none, 1 odd, 2 even (8 data bits, 1 stop bit), taken on APPLY or at the next start", Gateway),
-    e(Unit::Gateway, Holding, G_UNIT_ID, 1, "UNITID", "unit", "1-247", true, "The gateway's own unit id (not an enabled axis' unit), taken on APPLY or at the next start", Gateway),
-    e(Unit::Gateway, Holding, G_AXIS_BASE, 1, "AXISBASE", "unit", "1-232", true, "The unit id of axis 0: axis n is unit AXISBASE + n (default 1; several gateways on one PLC line take ranges of their own); not to include UNITID; taken on APPLY or at the next start", Gateway),
+    e(Unit::Gateway, Holding, G_WD_ACTION, 1, "WDACTION", "", "", true, "Watchdog action: 0 stop every axis, 1 latch only", Gateway)
+        .setting(&[(0, 1)], 0, AtOnce),
+    e(Unit::Gateway, Holding, G_PIO_AXIS, 1, "PIOAXIS", "axis", "", true, "The axis the discrete I/O drives (0xFFFF: none)", Gateway)
+        .setting(&[(0, 15), (0xFFFF, 0xFFFF)], 0xFFFF, AtOnce),
+    e(Unit::Gateway, Holding, G_PIO_PATTERN, 1, "PIOPAT", "", "", true, "The discrete I/O's pattern, IAI's number: 0 positioning (PC1-PC8, CSTR), 1 teaching (0 plus MODE, JISL, JOG+, JOG-, PWRT; MODES, WEND), 4 solenoid valve 1 (ST0-ST6, PE0-PE6), 5 solenoid valve 2 (ST0-ST2, LS0-LS2); in force at once (every input must then go OFF and ON again); refused (03) if the board lacks one of its ports", Gateway)
+        .setting(&[(0, 0), (1, 1), (4, 4), (5, 5)], 0, AtOnce),
+    e(Unit::Gateway, Holding, G_PIO_START, 1, "PIOSTART", "", "", true, "Patterns 4 and 5: 0 level (releasing STn stops the move), 1 edge (STn's rising edge starts it); PCON parameter No. 27", Gateway)
+        .setting(&[(0, 1)], 0, AtOnce),
+    e(Unit::Gateway, Holding, G_PIO_JOG, 1, "PIOJOG", "0.01 mm/s", "", true, "Pattern 1: jog speed (JOG+/JOG- held; and the speed a PWRT gives a point that held nothing); PCON parameter No. 26, default 100 mm/s", Gateway)
+        .setting(&[(1, 65_535)], 10_000, AtOnce),
+    e(Unit::Gateway, Holding, G_PIO_INCH, 1, "PIOINCH", "0.01 mm", "", true, "Pattern 1: inching step (JISL ON, one per JOG edge); PCON parameter No. 48, default 0.10 mm", Gateway)
+        .setting(&[(1, 100)], 10, AtOnce),
+    e(Unit::Gateway, Holding, G_PLC_BAUD, 1, "PLCBAUD", "100 bit/s", "", true, "PLC line rate, taken on APPLY or at the next start", Gateway)
+        .setting(&[(12, 12), (24, 24), (48, 48), (96, 96), (192, 192), (384, 384), (576, 576), (1152, 1152)], 1152, OnApply),
+    e(Unit::Gateway, Holding, G_PLC_PARITY, 1, "PLCPARITY", "", "", true, "PLC line parity: 0 none, 1 odd, 2 even (8 data bits, 1 stop bit), taken on APPLY or at the next start", Gateway)
+        .setting(&[(0, 2)], 0, OnApply),
+    e(Unit::Gateway, Holding, G_UNIT_ID, 1, "UNITID", "unit", "", true, "The gateway's own unit id (not an enabled axis' unit), taken on APPLY or at the next start", Gateway)
+        .setting(&[(1, 247)], 63, OnApply),
+    e(Unit::Gateway, Holding, G_AXIS_BASE, 1, "AXISBASE", "unit", "", true, "The unit id of axis 0: axis n is unit AXISBASE + n (default 1; several gateways on one PLC line take ranges of their own); not to include UNITID; taken on APPLY or at the next start", Gateway)
+        .setting(&[(1, 232)], 1, OnApply),
     e(Unit::Gateway, Holding, G_SAVE, 1, "SAVE", "", "1", true, "Write 1: store every setting (with the pending ones) in flash; SAVESTAT says when it is done", Gateway),
     e(Unit::Gateway, Status, G_SAVE_STATUS, 1, "SAVESTAT", "", "0-3", false, "The last save: 0 none, 1 saving, 2 saved, 3 failed", Gateway),
     e(Unit::Gateway, Status, G_SAVE_COUNT, 2, "SAVECOUNT", "count", "uint32", false, "Saves so far (flash wear: about 10,000 erases per page, spread over the settings pages)", Gateway),
@@ -391,13 +451,16 @@ pub const MAP: &[Entry] = &[
     #[cfg(feature = "tcp")]
     e(Unit::Gateway, Holding, G_NET, 2, "IPADDR", "IPv4", "a.b, c.d", true, "Ethernet board: its address, high byte first (default 192.168.1.100); taken at the next start (SAVE, RESTART)", Gateway),
     #[cfg(feature = "tcp")]
-    e(Unit::Gateway, Holding, G_NET + 2, 1, "IPPREFIX", "bits", "1-32", true, "Ethernet board: subnet prefix length (default 24 = 255.255.255.0); taken at the next start", Gateway),
+    e(Unit::Gateway, Holding, G_NET + 2, 1, "IPPREFIX", "bits", "", true, "Ethernet board: subnet prefix length (default 24 = 255.255.255.0); taken at the next start", Gateway)
+        .setting(&[(1, 32)], 24, AtOnce),
     #[cfg(feature = "tcp")]
     e(Unit::Gateway, Holding, G_NET + 3, 2, "IPROUTER", "IPv4", "a.b, c.d", true, "Ethernet board: default router, 0.0.0.0 none (the default); taken at the next start", Gateway),
     #[cfg(feature = "tcp")]
-    e(Unit::Gateway, Holding, G_NET + 5, 1, "TCPMAX", "count", "1-4", true, "Modbus TCP connections at once (default 4); a new client beyond it replaces the connection idle the longest; in force at once", Gateway),
+    e(Unit::Gateway, Holding, G_NET + 5, 1, "TCPMAX", "count", "", true, "Modbus TCP connections at once (default 4); a new client beyond it replaces the connection idle the longest; in force at once", Gateway)
+        .setting(&[(1, 4)], 4, AtOnce),
     #[cfg(feature = "tcp")]
-    e(Unit::Gateway, Holding, G_NET + 6, 1, "TCPIDLE", "s", "0-3600", true, "A Modbus TCP connection with no request for this long is closed (default 60; 0 never); in force at once", Gateway),
+    e(Unit::Gateway, Holding, G_NET + 6, 1, "TCPIDLE", "s", "", true, "A Modbus TCP connection with no request for this long is closed (default 60; 0 never); in force at once", Gateway)
+        .setting(&[(0, 3600)], 60, AtOnce),
     #[cfg(feature = "tcp")]
     e(Unit::Gateway, Status, G_NET + 7, 1, "TCPCONN", "count", "0-4", false, "Modbus TCP connections open now", Gateway),
     #[cfg(feature = "tcp")]
@@ -409,6 +472,64 @@ pub const MAP: &[Entry] = &[
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::axes::AxisSet;
+    use crate::modbus::{DataModel, RegisterTable, SlaveCounters};
+    use crate::plc::write::GatewayWrite;
+    use crate::plc::{Gateway, GatewayConfig};
+    use crate::time::Instant;
+
+    fn settings() -> impl Iterator<Item = &'static Entry> {
+        MAP.iter().filter(|e| e.default.is_some())
+    }
+
+    /// Every setting's default is one of its own allowed values, and its row says its range
+    /// only as data.
+    #[test]
+    fn every_default_is_within_its_own_range() {
+        assert!(settings().count() >= 14);
+        for e in settings() {
+            let default = e.default.unwrap();
+            assert!(e.allows(default), "{}: default {default}", e.name);
+            assert!(
+                e.writable && e.range.is_empty() && e.count == 1,
+                "{}",
+                e.name
+            );
+        }
+    }
+
+    /// The defaults are what a gateway with nothing set reads.
+    #[test]
+    fn every_default_is_what_a_new_gateway_reads() {
+        let mut gateway = Gateway::new(GatewayConfig::new(AxisSet(0)));
+        let mut registers = gateway.registers(Instant::ZERO, SlaveCounters::default());
+        for e in settings() {
+            let mut out = [0];
+            let unit = crate::plc::DEFAULT_GATEWAY_UNIT;
+            registers
+                .read_registers(unit, RegisterTable::Holding, e.address, &mut out)
+                .unwrap();
+            assert_eq!(Some(out[0]), e.default, "{}", e.name);
+        }
+    }
+
+    /// The write parser takes exactly the values a setting's row allows (PIOPAT's pattern 1
+    /// only in a build with it, feature `teaching`).
+    #[test]
+    fn the_parser_takes_exactly_the_allowed_values() {
+        for e in settings() {
+            for value in 0..=u16::MAX {
+                let allowed = e.allows(value)
+                    && !(e.address == G_PIO_PATTERN && value == 1 && !cfg!(feature = "teaching"));
+                assert_eq!(
+                    GatewayWrite::parse(e.address, value).is_ok(),
+                    allowed,
+                    "{} = {value}",
+                    e.name
+                );
+            }
+        }
+    }
 
     /// The compact run-time table says of every address what the map itself says.
     #[test]

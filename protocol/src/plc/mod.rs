@@ -49,8 +49,9 @@ pub mod write;
 pub use boot::{Boot, ConfigSource, ResetCause};
 pub use command::{CommandState, Reason};
 pub use config::{
-    AxisConfig, GatewayConfig, Parity, PlcLine, WatchdogAction, DEFAULT_GATEWAY_UNIT,
-    DEFAULT_PIO_INCH, DEFAULT_PIO_JOG, DEFAULT_WATCHDOG_MS, IDENTITY, MAX_PIO_INCH, PIO_ACCEL,
+    AxisConfig, GatewayConfig, Parity, PlcLine, WatchdogAction, DEFAULT_AXIS_BASE,
+    DEFAULT_GATEWAY_UNIT, DEFAULT_PIO_INCH, DEFAULT_PIO_JOG, DEFAULT_WATCHDOG_MS, IDENTITY,
+    MAX_PIO_INCH, PIO_ACCEL,
 };
 pub use failsafe::{CAUSE_STOP_INPUT, CAUSE_WATCHDOG};
 pub use gateway::Gateway;
@@ -60,3 +61,4 @@ pub use model::{diagnostic, Registers};
 pub use persist::Store;
 pub use points::CACHED_ROWS;
 pub use refused::Refused;
+pub use write::{admit, Conflict, Pending};

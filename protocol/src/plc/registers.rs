@@ -18,17 +18,33 @@ mod port {
     pub const CSTR: u16 = 1 << 13;
 }
 
-/// DSS1 / DSSE bit positions (PCON).
+// DSS1 / DSSE bit positions (PCON), public as the map's (`map::DSS1_SV`, ...).
+
+/// DSS1 bit (PCON): PWR, the controller is powered (its status says so).
+pub const DSS1_PWR: u16 = 1 << 13;
+/// DSS1 bit (PCON): SV, the servo is on.
+pub const DSS1_SV: u16 = 1 << 12;
+/// DSS1 bit (PCON): ALMH, the axis is in alarm (ALMC holds the code).
+pub const DSS1_ALMH: u16 = 1 << 10;
+/// DSS1 bit (PCON): ALML, the controller rejected the last command.
+pub const DSS1_ALML: u16 = 1 << 9;
+/// DSS1 bit (PCON): STP, paused (STP or EMG held, or the controller's HOLD input).
+pub const DSS1_STP: u16 = 1 << 5;
+/// DSS1 bit (PCON): HEND, homing complete (the axis is homed).
+pub const DSS1_HEND: u16 = 1 << 4;
+/// DSS1 bit (PCON): PEND, positioning complete (in position, no command starting).
+pub const DSS1_PEND: u16 = 1 << 3;
+/// DSSE bit (PCON): MOVE, the axis moves.
+pub const DSSE_MOVE: u16 = 1 << 5;
+/// DSSE bit (PCON): GHMS, a homing command runs and the axis is not homed yet.
+pub const DSSE_GHMS: u16 = 1 << 11;
+
+/// The bits by their short names, for [`status_block`].
 mod dss {
-    pub const PWR: u16 = 1 << 13;
-    pub const SV: u16 = 1 << 12;
-    pub const ALMH: u16 = 1 << 10;
-    pub const ALML: u16 = 1 << 9;
-    pub const STP: u16 = 1 << 5;
-    pub const HEND: u16 = 1 << 4;
-    pub const PEND: u16 = 1 << 3;
-    pub const MOVE: u16 = 1 << 5;
-    pub const GHMS: u16 = 1 << 11;
+    pub use super::{
+        DSS1_ALMH as ALMH, DSS1_ALML as ALML, DSS1_HEND as HEND, DSS1_PEND as PEND,
+        DSS1_PWR as PWR, DSS1_STP as STP, DSS1_SV as SV, DSSE_GHMS as GHMS, DSSE_MOVE as MOVE,
+    };
 }
 
 fn bit(set: bool, mask: u16) -> u16 {

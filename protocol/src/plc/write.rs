@@ -2,8 +2,9 @@
 //! its values into a typed write, with each register's range and conversion written here once.
 //! The gateway then carries out a checked write without checking it again
 //! (`axis_unit`, `gateway_unit`); the few rules that
-//! depend on the gateway's state (an APPLY only while the bus is idle, a unit id not an axis',
-//! a mask of axes on the bus) are its own `admit` step.
+//! depend on the gateway's state are an `admit` step: those across settings (a unit id not an
+//! axis', a mask of axes on the bus) pure, in [`admit`], for the gateway and for tools; those
+//! of the moment (an APPLY only while the bus is idle) the gateway's own.
 //!
 //! Parsing is pure: it looks at the address and the values only, so a multi-register write can
 //! be parsed for its check and again, register by register, as it is carried out, without
@@ -12,7 +13,8 @@
 use core::num::NonZeroU16;
 
 use super::config::{
-    axis_base_ok, complement_of, home_of, pio_inch_ok, unit_ok, watchdog_ok, Parity, WatchdogAction,
+    axis_base_ok, axis_of, complement_of, home_of, pio_inch_ok, unit_ok, watchdog_ok, Parity,
+    WatchdogAction,
 };
 use super::map::{self, *};
 use super::refused::Refused;
@@ -390,6 +392,54 @@ impl GatewayWrite {
             }),
         };
         write.ok_or(Refused::OutOfRange)
+    }
+}
+
+/// The settings a gateway-unit write is admitted against ([`admit`]): the ones pending (as the
+/// registers read them, taken on APPLY) and the axes on the bus now.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Pending {
+    /// UNITID as written (the gateway's unit from the next APPLY or start).
+    pub unit: u8,
+    /// AXISBASE as written.
+    pub axis_base: u8,
+    /// The axes enabled in AXISCFG (on the bus from the next APPLY or start).
+    pub enabled: AxisSet,
+    /// The axes on the bus now.
+    pub bus: AxisSet,
+}
+
+/// Why [`admit`] refuses a write (exception 03 on the wire).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Conflict {
+    /// This axis (on the bus, or enabled) would have the gateway's own unit id.
+    AxisUnit(Axis),
+    /// SYNCMASK names an axis that is not on the bus.
+    NotOnBus,
+}
+
+/// The rules across registers of a parsed gateway-unit write, on the settings as they are
+/// before it: a UNITID that is no axis' unit and an AXISBASE that gives no axis the gateway's
+/// unit (axes on the bus or enabled), an axis enabled whose unit is not the gateway's, a
+/// synchronized-start mask of axes on the bus. Pure, and the one copy of these rules: the
+/// gateway admits each register of a write with it, and a tool can plan a sequence of writes
+/// with it (`rcgw`). Writes these rules do not concern are admitted.
+pub fn admit(pending: &Pending, write: GatewayWrite) -> Result<(), Conflict> {
+    let axes = AxisSet(pending.bus.0 | pending.enabled.0);
+    let clash = |unit: u8, base: u8| match axis_of(unit, base, axes) {
+        Some(axis) => Err(Conflict::AxisUnit(axis)),
+        None => Ok(()),
+    };
+    match write {
+        GatewayWrite::UnitId(unit) => clash(unit, pending.axis_base),
+        GatewayWrite::AxisBase(base) => clash(pending.unit, base),
+        GatewayWrite::Axis(axis, AxisSetting::Enabled(true))
+            if axis.get().checked_add(pending.axis_base) == Some(pending.unit) =>
+        {
+            Err(Conflict::AxisUnit(axis))
+        }
+        GatewayWrite::SyncMask(mask) if mask.0 & !pending.bus.0 != 0 => Err(Conflict::NotOnBus),
+        _ => Ok(()),
     }
 }
 

@@ -39,6 +39,7 @@ use clap::{ArgGroup, Parser, Subcommand};
 use protocol::axes::AXES;
 use protocol::modbus::{Diagnostic, Exception};
 use protocol::plc::map::*;
+use protocol::plc::Reason;
 use protocol::AlarmCode;
 use serde_json::{json, Value};
 
@@ -284,23 +285,6 @@ fn run(cli: &Cli) -> Result<(), Fail> {
 
 // ------------------------------------------------------------------ status
 
-const REASONS: &[&str] = &[
-    "",
-    "no answer from the axis",
-    "outcome of an incremental move unknown",
-    "rejected by the controller",
-    "alarm",
-    "unexpected answer",
-    "cancelled by a stop",
-    "verify failed",
-    "motion time-out",
-    "queue full",
-    "refused: STP/EMG or the stop input",
-    "the axis went offline",
-    "refused: FAILSAFE latched",
-    "refused: the discrete inputs select no point",
-];
-
 fn link_name(link: u16) -> &'static str {
     ["unknown", "online", "offline", "offline, owed a stop"]
         .get(usize::from(link))
@@ -314,8 +298,7 @@ fn command_text(cmst: u16, cmer: u16, cmct: u16) -> String {
         1 => format!("#{cmct} running"),
         2 => format!("#{cmct} done"),
         3 => {
-            let reason = usize::from(cmer >> 8);
-            let text = REASONS.get(reason).copied().unwrap_or("unknown reason");
+            let text = Reason::from_code((cmer >> 8) as u8).map_or("unknown reason", Reason::text);
             let code = cmer & 0xFF;
             if code != 0 {
                 format!(
@@ -355,10 +338,10 @@ fn axis_status(gw: &mut Gw, axis: u8) -> Result<Value, Fail> {
         Ok(r) => {
             let pnow = (u32::from(r[0]) << 16 | u32::from(r[1])) as i32;
             let (almc, dss1, dsse) = (r[2], r[5], r[7]);
-            v["servo"] = json!(dss1 & (1 << 12) != 0);
-            v["homed"] = json!(dss1 & (1 << 4) != 0);
-            v["in_position"] = json!(dss1 & (1 << 3) != 0);
-            v["moving"] = json!(dsse & (1 << 5) != 0);
+            v["servo"] = json!(dss1 & DSS1_SV != 0);
+            v["homed"] = json!(dss1 & DSS1_HEND != 0);
+            v["in_position"] = json!(dss1 & DSS1_PEND != 0);
+            v["moving"] = json!(dsse & DSSE_MOVE != 0);
             v["position_mm"] = json!(f64::from(pnow) / 100.0);
             v["alarm"] = if almc != 0 {
                 json!({"code": format!("{almc:02X}"), "text": AlarmCode(almc as u8).text()})

@@ -6,10 +6,12 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 
+use protocol::axes::AxisSet;
 use protocol::axes::AXES;
 use protocol::modbus::Exception;
 use protocol::plc::map::*;
-use protocol::plc::write::GatewayWrite;
+use protocol::plc::write::{AxisSetting, GatewayWrite};
+use protocol::plc::{admit, Conflict, Pending, DEFAULT_AXIS_BASE, DEFAULT_GATEWAY_UNIT};
 
 use crate::link::{Fail, Gw};
 
@@ -48,25 +50,67 @@ struct Field {
     key: &'static str,
     address: u16,
     kind: Kind,
-    /// Taken on APPLY (not at once).
-    on_apply: bool,
-    /// The values the gateway takes, in the file's units, for messages.
+    /// The values the gateway takes, in the file's units, for messages: for a setting whose
+    /// map row has its allowed values, what follows them ([`range_text`]).
     range: &'static str,
 }
 
-const fn f(
-    key: &'static str,
-    address: u16,
-    kind: Kind,
-    on_apply: bool,
-    range: &'static str,
-) -> Field {
+/// The values a setting takes, in the file's units, for messages: a gateway or network
+/// setting's from its map row (its spans, times the file's factor, with the unit its key
+/// names), then the field's own words.
+fn range_text(section: Section, field: Field) -> String {
+    let entry = MAP
+        .iter()
+        .find(|e| e.unit == Unit::Gateway && e.address == field.address)
+        .filter(|_| !matches!(section, Section::Axis(_)))
+        .filter(|e| !e.allowed.is_empty());
+    let Some(entry) = entry else {
+        return field.range.into();
+    };
+    let value = |v: u16| match field.kind {
+        Kind::Int(factor) => (u32::from(v) * factor).to_string(),
+        Kind::Hundredths => hundredths(i64::from(v)),
+        _ => v.to_string(),
+    };
+    let spans: Vec<String> = entry
+        .allowed
+        .iter()
+        .map(|&(low, high)| match low == high {
+            true => value(low),
+            false => format!("{}-{}", value(low), value(high)),
+        })
+        .collect();
+    let unit = [
+        ("_mm_s", " mm/s"),
+        ("_mm", " mm"),
+        ("_ms", " ms"),
+        ("_bps", " bit/s"),
+        ("_s", " s"),
+    ]
+    .into_iter()
+    .find(|(suffix, _)| field.key.ends_with(suffix))
+    .map_or("", |(_, unit)| unit);
+    format!("{}{unit}{}", spans.join(", "), field.range)
+}
+
+const fn f(key: &'static str, address: u16, kind: Kind, range: &'static str) -> Field {
     Field {
         key,
         address,
         kind,
-        on_apply,
         range,
+    }
+}
+
+/// Whether a setting is taken on APPLY (not at once), as the register map says: its row's
+/// `on_apply`; of AXISCFG (a block in the map), `enabled` only.
+fn on_apply(section: Section, field: Field) -> bool {
+    match section {
+        Section::Axis(_) => field.address == 0,
+        _ => MAP
+            .iter()
+            .find(|e| e.unit == Unit::Gateway && e.address == field.address)
+            .is_some_and(|e| e.on_apply),
     }
 }
 
@@ -81,122 +125,67 @@ const GATEWAY: &[Field] = &[
         "unit_id",
         G_UNIT_ID,
         Kind::Int(1),
-        true,
-        "1-247, not an enabled axis' unit",
+        ", not an enabled axis' unit",
     ),
-    f("axis_base", G_AXIS_BASE, Kind::Int(1), true, "1-232"),
-    f(
-        "plc_baud_bps",
-        G_PLC_BAUD,
-        Kind::Int(100),
-        true,
-        "1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200 bit/s",
-    ),
+    f("axis_base", G_AXIS_BASE, Kind::Int(1), ""),
+    f("plc_baud_bps", G_PLC_BAUD, Kind::Int(100), ""),
     f(
         "plc_parity",
         G_PLC_PARITY,
         Kind::Enum(PARITY),
-        true,
         "\"none\", \"odd\", \"even\"",
     ),
-    f(
-        "bus_baud_bps",
-        G_BUS_BAUD,
-        Kind::Int(100),
-        true,
-        "9600, 14400, 19200, 28800, 38400, 57600, 76800, 115200 bit/s",
-    ),
-    f("bus_rtim_ms", G_BUS_RTIM, Kind::Int(1), true, "3-255 ms"),
-    f("retries", G_RETRIES, Kind::Int(1), false, "0-3"),
-    f(
-        "watchdog_ms",
-        G_WATCHDOG,
-        Kind::Int(1),
-        false,
-        "0, 50-60000 ms",
-    ),
+    f("bus_baud_bps", G_BUS_BAUD, Kind::Int(100), ""),
+    f("bus_rtim_ms", G_BUS_RTIM, Kind::Int(1), ""),
+    f("retries", G_RETRIES, Kind::Int(1), ""),
+    f("watchdog_ms", G_WATCHDOG, Kind::Int(1), ""),
     f(
         "watchdog_action",
         G_WD_ACTION,
         Kind::Enum(WD_ACTION),
-        false,
         "\"stop\", \"latch\"",
     ),
-    f(
-        "pio_axis",
-        G_PIO_AXIS,
-        Kind::PioAxis,
-        false,
-        "0-15 or \"none\"",
-    ),
-    f(
-        "pio_pattern",
-        G_PIO_PATTERN,
-        Kind::Int(1),
-        false,
-        "0, 1, 4, 5",
-    ),
+    f("pio_axis", G_PIO_AXIS, Kind::PioAxis, "0-15 or \"none\""),
+    f("pio_pattern", G_PIO_PATTERN, Kind::Int(1), ""),
     f(
         "pio_start",
         G_PIO_START,
         Kind::Enum(PIO_START),
-        false,
         "\"level\", \"edge\"",
     ),
-    f(
-        "pio_jog_mm_s",
-        G_PIO_JOG,
-        Kind::Hundredths,
-        false,
-        "0.01-655.35 mm/s",
-    ),
-    f(
-        "pio_inch_mm",
-        G_PIO_INCH,
-        Kind::Hundredths,
-        false,
-        "0.01-1.00 mm",
-    ),
+    f("pio_jog_mm_s", G_PIO_JOG, Kind::Hundredths, ""),
+    f("pio_inch_mm", G_PIO_INCH, Kind::Hundredths, ""),
 ];
 
 const AXIS: &[Field] = &[
-    f("enabled", 0, Kind::Bool, true, "true, false"),
-    f("lead_mm", 1, Kind::Hundredths, false, "0.01-655.35 mm"),
-    f("home", 2, Kind::Enum(HOME), false, "\"motor\", \"far\""),
-    f("pulses_per_rev", 3, Kind::Int(1), false, "1-65535"),
-    f(
-        "stroke_mm",
-        4,
-        Kind::Hundredths32,
-        false,
-        "0.00-21474836.47 mm",
-    ),
+    f("enabled", 0, Kind::Bool, "true, false"),
+    f("lead_mm", 1, Kind::Hundredths, "0.01-655.35 mm"),
+    f("home", 2, Kind::Enum(HOME), "\"motor\", \"far\""),
+    f("pulses_per_rev", 3, Kind::Int(1), "1-65535"),
+    f("stroke_mm", 4, Kind::Hundredths32, "0.00-21474836.47 mm"),
     f(
         "encoding",
         6,
         Kind::Enum(ENCODING),
-        false,
         "\"ones-complement\", \"twos-complement\"",
     ),
 ];
 
 const NETWORK: &[Field] = &[
-    f("ip_address", G_NET, Kind::Ipv4, false, "an IPv4 address"),
-    f("ip_prefix_bits", G_NET + 2, Kind::Int(1), false, "1-32"),
+    f("ip_address", G_NET, Kind::Ipv4, "an IPv4 address"),
+    f("ip_prefix_bits", G_NET + 2, Kind::Int(1), ""),
     f(
         "ip_router",
         G_NET + 3,
         Kind::Ipv4,
-        false,
         "an IPv4 address, \"0.0.0.0\" for none",
     ),
-    f("tcp_max_connections", G_NET + 5, Kind::Int(1), false, "1-4"),
-    f("tcp_idle_s", G_NET + 6, Kind::Int(1), false, "0-3600 s"),
+    f("tcp_max_connections", G_NET + 5, Kind::Int(1), ""),
+    f("tcp_idle_s", G_NET + 6, Kind::Int(1), ""),
     f(
         "tcp_allow",
         G_NET + 8,
         Kind::Ipv4List,
-        false,
         "up to 4 IPv4 addresses",
     ),
 ];
@@ -327,8 +316,8 @@ fn parse_ip(value: &toml::Value) -> Result<[u16; 2], String> {
 /// registers (the gateway's own range rules come after: `GatewayWrite::parse`). A value out of
 /// range says so with the range in the file's units, before its form (decimals, multiples) is
 /// looked at.
-fn parse(field: Field, value: &toml::Value) -> Result<Vec<u16>, String> {
-    let range = || format!("out of range (allowed: {})", field.range);
+fn parse(section: Section, field: Field, value: &toml::Value) -> Result<Vec<u16>, String> {
+    let range = || format!("out of range (allowed: {})", range_text(section, field));
     let int = || {
         value
             .as_integer()
@@ -580,7 +569,7 @@ impl Settings {
                     continue;
                 };
                 let first = section.base() + field.address;
-                match parse(field, value) {
+                match parse(section, field, value) {
                     Err(e) if e.starts_with("out of range") => errors.push(format!(
                         "{} {key} = {value}: {e} (register {first:#06x})",
                         section.name()
@@ -593,7 +582,7 @@ impl Settings {
                                 errors.push(format!(
                                     "{} {key} = {value}: out of range (allowed: {}) (register {address:#06x})",
                                     section.name(),
-                                    field.range
+                                    range_text(section, field)
                                 ));
                                 break;
                             }
@@ -657,7 +646,7 @@ impl Settings {
                     from: from.map(|r| render(field.kind, r)),
                     to: render(field.kind, to),
                     regs: to.clone(),
-                    on_apply: field.on_apply,
+                    on_apply: on_apply(*section, field),
                 })
             })
             .collect()
@@ -712,75 +701,82 @@ impl Change {
     }
 }
 
-/// The gateway's admit rules for UNITID, AXISBASE and an axis enabled (`gateway_unit.rs`),
-/// on the values as a write leaves them: UNITID and AXISBASE are checked against the pending
-/// unit and base and the axes running or pending; an axis enabled against the pending unit
-/// and base. APPLY makes the pending axes the running ones.
-#[derive(Clone, Debug)]
-struct Admit {
-    unit: u16,
-    base: u16,
-    /// Bit n: axis n enabled (AXISCFG, pending).
-    pending: u32,
-    /// Bit n: axis n on the bus (taken as the enabled axes read: nothing pending).
-    running: u32,
-}
+/// The settings a sequence of writes meets, as the gateway keeps them: every register of a
+/// change parsed and admitted by the gateway's own rules (`plc::admit`) on the settings the
+/// writes before it left; APPLY puts the enabled axes on the bus.
+#[derive(Clone, Copy, Debug)]
+struct Admit(Pending);
 
 impl Admit {
+    /// The gateway as read: the enabled axes on the bus (nothing pending).
     fn of(now: &Settings) -> Admit {
-        let enabled = now.enabled().iter().fold(0u32, |m, &n| m | 1 << n);
-        Admit {
-            unit: now.word(Section::Gateway, "unit_id").unwrap_or(63),
-            base: now.word(Section::Gateway, "axis_base").unwrap_or(1),
-            pending: enabled,
-            running: enabled,
-        }
-    }
-
-    /// The axis of the running or pending axes that would be unit `unit` with `base`.
-    fn axis_at(&self, unit: u16, base: u16) -> Option<u16> {
-        (0..AXES as u16).find(|&n| (self.running | self.pending) & 1 << n != 0 && base + n == unit)
+        let word = |key, default: u8| {
+            now.word(Section::Gateway, key)
+                .and_then(|w| u8::try_from(w).ok())
+                .unwrap_or(default)
+        };
+        let enabled = AxisSet(now.enabled().iter().fold(0u16, |m, &n| m | 1 << n));
+        Admit(Pending {
+            unit: word("unit_id", DEFAULT_GATEWAY_UNIT),
+            axis_base: word("axis_base", DEFAULT_AXIS_BASE),
+            enabled,
+            bus: enabled,
+        })
     }
 
     /// One change written: refused with the reason, as the gateway would.
     fn write(&mut self, c: &Change) -> Result<(), String> {
-        let value = c.regs.first().copied().unwrap_or(0);
-        match (c.section, c.key) {
-            (Section::Gateway, "unit_id") => {
-                if let Some(n) = self.axis_at(value, self.base) {
-                    return Err(format!(
-                        "UNITID {value} while axis {n} (enabled or on the bus until APPLY) is unit {value} (AXISBASE {} + {n})",
-                        self.base
-                    ));
+        for (i, &value) in c.regs.iter().enumerate() {
+            let address = c.address + i as u16;
+            let write = GatewayWrite::parse(address, value).map_err(|e| {
+                format!(
+                    "{} {} = {}: register {address:#06x} refused ({e:?})",
+                    c.section.name(),
+                    c.key,
+                    c.to
+                )
+            })?;
+            admit(&self.0, write).map_err(|conflict| self.why(write, conflict))?;
+            match write {
+                GatewayWrite::UnitId(unit) => self.0.unit = unit,
+                GatewayWrite::AxisBase(base) => self.0.axis_base = base,
+                GatewayWrite::Axis(axis, AxisSetting::Enabled(on)) => {
+                    self.0.enabled = if on {
+                        self.0.enabled.with(axis)
+                    } else {
+                        self.0.enabled.without(axis)
+                    };
                 }
-                self.unit = value;
+                _ => {}
             }
-            (Section::Gateway, "axis_base") => {
-                if let Some(n) = self.axis_at(self.unit, value) {
-                    return Err(format!(
-                        "AXISBASE {value} while UNITID is {}: axis {n} (enabled or on the bus until APPLY) would be unit {}",
-                        self.unit, self.unit
-                    ));
-                }
-                self.base = value;
-            }
-            (Section::Axis(n), "enabled") if value == 1 => {
-                if self.base + u16::from(n) == self.unit {
-                    return Err(format!(
-                        "axis {n} enabled while it would be unit {} (AXISBASE {} + {n}), the gateway's UNITID",
-                        self.unit, self.base
-                    ));
-                }
-                self.pending |= 1 << n;
-            }
-            (Section::Axis(n), "enabled") => self.pending &= !(1 << n),
-            _ => {}
         }
         Ok(())
     }
 
+    /// Why the gateway refuses `write`, in words.
+    fn why(&self, write: GatewayWrite, conflict: Conflict) -> String {
+        let Admit(Pending {
+            unit, axis_base, ..
+        }) = *self;
+        match (write, conflict) {
+            (GatewayWrite::UnitId(value), Conflict::AxisUnit(axis)) => format!(
+                "UNITID {value} while axis {n} (enabled or on the bus until APPLY) is unit {value} (AXISBASE {axis_base} + {n})",
+                n = axis.get()
+            ),
+            (GatewayWrite::AxisBase(value), Conflict::AxisUnit(axis)) => format!(
+                "AXISBASE {value} while UNITID is {unit}: axis {n} (enabled or on the bus until APPLY) would be unit {unit}",
+                n = axis.get()
+            ),
+            (GatewayWrite::Axis(..), Conflict::AxisUnit(axis)) => format!(
+                "axis {n} enabled while it would be unit {unit} (AXISBASE {axis_base} + {n}), the gateway's UNITID",
+                n = axis.get()
+            ),
+            (write, conflict) => format!("{write:?} refused: {conflict:?}"),
+        }
+    }
+
     fn apply(&mut self) {
-        self.running = self.pending;
+        self.0.bus = self.0.enabled;
     }
 }
 
@@ -914,7 +910,7 @@ pub fn busy(gw: &mut Gw, axes: &[u8]) -> Result<Option<String>, Fail> {
             )));
         }
         if let Ok(dsse) = gw.try_read(unit, DSSE, 1)? {
-            if dsse.first().is_some_and(|d| d & 1 << 5 != 0) {
+            if dsse.first().is_some_and(|d| d & DSSE_MOVE != 0) {
                 return Ok(Some(format!("axis {n} (unit {unit}) moves (DSSE MOVE)")));
             }
         }
@@ -1117,5 +1113,149 @@ pub fn save(gw: &mut Gw) -> Result<u32, Fail> {
             }
             _ => std::thread::sleep(Duration::from_millis(20)),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::modbus::{DataModel, RegisterTable, SlaveCounters};
+    use protocol::plc::{Gateway, GatewayConfig};
+    use protocol::time::Instant;
+
+    /// A gateway started with these settings running: `unit`, `base`, `axes` on the bus.
+    fn gateway(unit: u8, base: u8, axes: AxisSet) -> Gateway {
+        let mut config = GatewayConfig::new(axes);
+        config.unit = unit;
+        config.axis_base = base;
+        Gateway::new(config)
+    }
+
+    /// What rcgw starts a plan from: the same settings, read.
+    fn settings(unit: u8, base: u8, axes: AxisSet) -> Settings {
+        let mut values = BTreeMap::new();
+        values.insert((Section::Gateway, "unit_id"), vec![u16::from(unit)]);
+        values.insert((Section::Gateway, "axis_base"), vec![u16::from(base)]);
+        for n in 0..AXES as u8 {
+            let on = axes.0 & 1 << n != 0;
+            values.insert((Section::Axis(n), "enabled"), vec![u16::from(on)]);
+        }
+        Settings { values }
+    }
+
+    fn change(section: Section, key: &'static str, address: u16, value: u16) -> Change {
+        Change {
+            section,
+            key,
+            address,
+            from: None,
+            to: value.to_string(),
+            regs: vec![value],
+            on_apply: true,
+        }
+    }
+
+    /// Every setting's message says its values: a setting left to the map's spans has them
+    /// (one whose row lost them would say only the words after them), e.g. the line rate's in
+    /// bit/s.
+    #[test]
+    fn every_range_is_said() {
+        for section in [Section::Gateway, Section::Network, Section::Axis(0)] {
+            for &field in section.fields() {
+                let text = range_text(section, field);
+                assert!(
+                    !text.is_empty() && !text.starts_with(','),
+                    "{} {}: {text:?}",
+                    section.name(),
+                    field.key
+                );
+            }
+        }
+        let baud = field(Section::Gateway, "bus_baud_bps").unwrap();
+        assert_eq!(
+            range_text(Section::Gateway, baud),
+            "9600, 14400, 19200, 28800, 38400, 57600, 76800, 115200 bit/s"
+        );
+    }
+
+    /// rcgw plans its writes with the rules the gateway applies to them: random sequences of
+    /// UNITID, AXISBASE and axes enabled or disabled (small units and bases, so that they
+    /// collide often), with APPLYs between, are written to a gateway and fed to rcgw's model
+    /// of it, and each write must be admitted by both or refused by both. (The gateway's APPLY
+    /// is a start with the pending settings: the rules APPLY itself has, an idle bus, are not
+    /// these.) Fails if rcgw's model of what is pending and what is on the bus, or its rules,
+    /// drift from the gateway's.
+    #[test]
+    fn rcgw_and_the_gateway_admit_the_same_writes() {
+        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = |n: u64| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed % n
+        };
+        let (mut admitted, mut refused) = (0, 0);
+        for _ in 0..400 {
+            let (mut unit, mut base) = (63u8, 1u8);
+            let mut axes = AxisSet(next(1 << 16) as u16 & 0x00FF);
+            let mut gw = gateway(unit, base, axes);
+            let mut model = Admit::of(&settings(unit, base, axes));
+            for _ in 0..12 {
+                let c = match next(4) {
+                    0 => {
+                        // APPLY: the pending settings run, in the gateway as in rcgw.
+                        let mut regs = gw.registers(Instant::ZERO, SlaveCounters::default());
+                        let mut pending = |a: u16| {
+                            let mut out = [0];
+                            regs.read_registers(unit, RegisterTable::Holding, a, &mut out)
+                                .expect("read");
+                            out[0]
+                        };
+                        let (u, b) = (pending(G_UNIT_ID) as u8, pending(G_AXIS_BASE) as u8);
+                        let on = (0..AXES as u16).fold(0, |m, n| {
+                            m | pending(G_AXIS_CONFIG + G_AXIS_CONFIG_LEN * n) << n
+                        });
+                        (unit, base, axes) = (u, b, AxisSet(on));
+                        gw = gateway(unit, base, axes);
+                        model.apply();
+                        continue;
+                    }
+                    1 => {
+                        let u = [1 + next(24), 63][next(2) as usize] as u16;
+                        change(Section::Gateway, "unit_id", G_UNIT_ID, u)
+                    }
+                    2 => change(
+                        Section::Gateway,
+                        "axis_base",
+                        G_AXIS_BASE,
+                        1 + next(24) as u16,
+                    ),
+                    _ => {
+                        let n = next(16) as u8;
+                        let address = G_AXIS_CONFIG + G_AXIS_CONFIG_LEN * u16::from(n);
+                        change(Section::Axis(n), "enabled", address, next(2) as u16)
+                    }
+                };
+                let gateway = gw
+                    .registers(Instant::ZERO, SlaveCounters::default())
+                    .write_registers(unit, c.address, &c.regs);
+                let rcgw = model.write(&c);
+                assert_eq!(
+                    rcgw.is_ok(),
+                    gateway.is_ok(),
+                    "{}: rcgw {rcgw:?}, the gateway {gateway:?} (running: unit {unit}, \
+                     AXISBASE {base}, axes {:#06x})",
+                    c.line(),
+                    axes.0
+                );
+                if gateway.is_ok() {
+                    admitted += 1;
+                } else {
+                    refused += 1;
+                }
+            }
+        }
+        // Both outcomes exercised.
+        assert!(admitted > 100 && refused > 100, "{admitted} {refused}");
     }
 }
