@@ -136,6 +136,14 @@ use crate::{Axis, PositionNo, Pulses};
 #[cfg(feature = "tcp")]
 use crate::modbus::tcp::SocketHandle;
 
+mod discrete;
+#[cfg(feature = "tcp")]
+mod tcp;
+#[cfg(feature = "tcp")]
+pub use tcp::TcpAction;
+#[cfg(feature = "tcp")]
+use tcp::TcpPort;
+
 /// The most the whole node may take on a microcontroller: 12 KiB for 16 axes (an STM32F103C8
 /// has 20 KiB of RAM in all); 16 KiB with the Modbus TCP side (feature `tcp`: five connection
 /// buffers, a slave and a reply of its own; only on boards with Ethernet, which have far more
@@ -168,32 +176,6 @@ pub enum Action<'a> {
     /// Do this on a Modbus TCP socket (feature `tcp`).
     #[cfg(feature = "tcp")]
     Tcp(TcpAction),
-}
-
-/// What the caller does on a Modbus TCP socket (feature `tcp`). It holds no borrow of the node,
-/// so the caller can hand the node on while it carries it out.
-#[cfg(feature = "tcp")]
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum TcpAction {
-    /// Send the reply [`Node::tcp_reply`] holds (MBAP header included) on this socket, the one
-    /// the request came on. Never wait for the client to take it: if the socket's send buffer
-    /// has no room for it, the client is not reading, so close the socket (and report it with
-    /// [`Node::tcp_closed`]).
-    Reply(SocketHandle),
-    /// Close this socket: a refused, replaced or idle client, or a stream that lost its
-    /// framing. Report it with [`Node::tcp_closed`] once done.
-    Close(SocketHandle),
-}
-
-/// The Modbus TCP side of the node: the connections, a slave of its own (its counters and
-/// state are not the serial line's), and the reply being sent.
-#[cfg(feature = "tcp")]
-#[derive(Debug)]
-struct TcpPort {
-    server: crate::modbus::tcp::Server,
-    slave: Slave,
-    reply: ReplyBuffer,
 }
 
 /// The state of the indicator LEDs (besides a run LED the firmware blinks itself).
@@ -237,11 +219,11 @@ impl Node {
     /// check is off, since byte stamps taken when a task reads the UART are not accurate to the
     /// 750 µs it needs (the CRC still rejects a garbled frame).
     ///
-    /// Built where its caller's result goes, without a node-sized temporary: not inlined, so
-    /// that the caller hands its destination over as the return slot, and so are
-    /// [`Gateway::new`] and [`Engine::new`](crate::engine::Engine::new) below it (measured on
-    /// the MCU: inlined, the constructors' parts were temporaries, 6 to 11 KB of stack). Const
-    /// as well, for a node in a `static` where flash is no object.
+    /// Built where its caller's result goes, without a node-sized temporary. Const as well, for
+    /// a node in a `static` where flash is no object.
+    // Not inlined, so that the caller hands its destination over as the return slot, and so
+    // are `Gateway::new` and `Engine::new` below it (measured on the MCU: inlined, the
+    // constructors' parts were temporaries, 6 to 11 KB of stack).
     #[inline(never)]
     pub const fn new(config: GatewayConfig) -> Node {
         Node {
@@ -278,106 +260,6 @@ impl Node {
         }
     }
 
-    /// The PIO input pins at `now` (bit n = PCON pattern 0 port INn; *STP high = may run).
-    pub fn sample_inputs(&mut self, now: Instant, inputs: PioInputs) {
-        let Some(axis) = self.gateway.config().pio_axis else {
-            self.outputs = PioOutputs::SAFE;
-            return;
-        };
-        let config = self.gateway.config();
-        let (pattern, start) = (config.pio_pattern, config.pio_start);
-        if (pattern, start) != (self.pio.config().pattern, self.pio.config().start) {
-            // Another pattern: the inputs mean other things, so they start over (each must be
-            // seen OFF and ON again before its edge counts, *STP ON before anything moves). A
-            // move, jog or hold of the old one is stopped: its release would no longer stop it.
-            if self.pio.in_motion() {
-                // As the PIO's own stops: a refusal (a full queue) is the gateway's to count.
-                let _ = self.gateway.command(axis, JobKind::Stop);
-            }
-            self.pio = Pio::new(pio::Config {
-                pattern,
-                start,
-                ..*self.pio.config()
-            });
-        }
-        match pattern {
-            Pattern::Solenoid3 => {
-                let reeds = self.reeds(axis);
-                self.pio.set_reeds(reeds);
-            }
-            Pattern::Teaching if pio::TEACHING => {
-                self.pio.set_jog(self.jog(axis));
-                if let Some(stored) = self.gateway.take_taught() {
-                    self.pio.taught(stored);
-                }
-            }
-            _ => {}
-        }
-        let state = *self.gateway.engine().axis(axis);
-        let link_ok = !self.gateway.engine().establishing();
-        let home = self.gateway.config().axes[axis].scale.home;
-        let (outputs, job) = self.pio.sample(now, inputs, &state, link_ok, home);
-        self.outputs = outputs;
-        if let Some(inputs) = self.pio.take_refused() {
-            self.gateway.pio_refused(axis, inputs);
-        }
-        if let Some(point) = self.pio.take_teach().filter(|_| pio::TEACHING) {
-            // Refused: WEND stays OFF (another PWRT running: CMST 3, reason 9; an axis that
-            // does not answer: nothing recorded, as for any command then).
-            if self.gateway.teach(axis, point).is_err() {
-                self.pio.taught(false);
-            }
-            self.dirty = true;
-        }
-        if self.pio.take_acknowledge() {
-            self.gateway.acknowledge_by_wire();
-            self.dirty = true;
-        }
-        if let Some(kind) = job {
-            // A refusal is shown in CMST (or, for an axis that went offline between the sample
-            // and now, not taken at all), and on the outputs: the PIO stops waiting for it.
-            if self.gateway.command(axis, kind).is_err() {
-                self.pio.refused(&kind);
-            }
-            self.dirty = true;
-        }
-    }
-
-    /// Pattern 5's points 0-2 as the controller holds them (fetched while not cached): a
-    /// point with no speed is empty, and has no reed switch.
-    fn reeds(&mut self, axis: Axis) -> [Option<Band>; 3] {
-        let mut reeds = [None; 3];
-        for (n, reed) in (0..).zip(reeds.iter_mut()) {
-            let row = PositionNo::new(n).and_then(|p| self.gateway.point_row(axis, p));
-            *reed = row
-                .filter(|row| row.get(PointField::Velocity) != 0)
-                .map(|row| Band {
-                    position: Pulses::from_wire(row.get(PointField::Position)),
-                    band: row.get(PointField::Band),
-                });
-        }
-        reeds
-    }
-
-    /// Pattern 1's jog of `axis` in its units: to 0 mm and to the stroke, one PIOINCH step, at
-    /// PIOJOG and [`PIO_ACCEL`]; `None` if the axis' scale cannot express them.
-    fn jog(&self, axis: Axis) -> Option<Jog> {
-        let config = self.gateway.config();
-        let axis = &config.axes[axis];
-        let scale = &axis.scale;
-        let wire = |at: i32| scale.position_to_wire(Length(at)).ok();
-        let step = |distance: i32| scale.distance_to_wire(Length(distance)).ok();
-        let inch = i32::from(config.pio_inch);
-        Some(Jog {
-            plus_end: wire(axis.stroke.0)?,
-            minus_end: wire(0)?,
-            plus_step: step(inch)?,
-            minus_step: step(-inch)?,
-            velocity: scale.velocity(Speed(u32::from(config.pio_jog))).ok()?,
-            acceleration: scale.acceleration(Accel(u32::from(PIO_ACCEL))).ok()?,
-        })
-    }
-
     /// The stop input at `now`: `active` when it is OFF (a safety input).
     pub fn set_stop_input(&mut self, now: Instant, active: bool) {
         self.gateway.set_stop_input(now, active);
@@ -386,9 +268,8 @@ impl Node {
 
     /// What to do at `now`, if anything: a Modbus reply first (the PLC waits for it), then the
     /// bus. Call until `None`, carrying out each action before the next call.
-    ///
-    /// Not inlined: in the firmware's loop, inlined, it took 152 B more of the F103's flash
-    /// (`scripts/size-report.sh`).
+    // Not inlined: in the firmware's loop, inlined, it took 152 B more of the F103's flash
+    // (`scripts/size-report.sh`).
     #[inline(never)]
     pub fn poll(&mut self, now: Instant) -> Option<Action<'_>> {
         // Nothing new and nothing due: the common case on the firmware's wakes between the bytes
@@ -557,136 +438,5 @@ impl Node {
     /// The PIO logic (its recognised inputs).
     pub fn pio(&self) -> &Pio {
         &self.pio
-    }
-}
-
-/// The Modbus TCP side (feature `tcp`): the caller owns [`SOCKETS`](crate::modbus::tcp::SOCKETS)
-/// sockets listening on one port (502), each named by a [`SocketHandle`], and reports what
-/// happens on them; the node answers through [`TcpAction::Reply`] and closes through
-/// [`TcpAction::Close`]. Each connection's state is the node's alone (its TCP server's). The
-/// same register map, units and exceptions as the serial line
-/// ([`crate::modbus::tcp`] says what differs); any request to a unit served, from any
-/// connection, is PLC activity for the watchdog.
-#[cfg(feature = "tcp")]
-impl Node {
-    /// A client at `peer` connected on `socket` at `now`: whether it is admitted (not on a
-    /// non-empty allow-list: close the socket at once, without reporting it closed). When
-    /// every slot is taken, the connection idle the longest is closed for it
-    /// ([`TcpAction::Close`]).
-    pub fn tcp_opened(
-        &mut self,
-        now: Instant,
-        socket: SocketHandle,
-        peer: crate::net::Ipv4,
-    ) -> bool {
-        let policy = self.gateway.config().net.policy;
-        self.dirty = true;
-        self.tcp.server.open(now, socket, peer, &policy)
-    }
-
-    /// Bytes from the client on `socket` at `now`: how many were taken. Offer the rest again
-    /// once [`tcp_room`](Node::tcp_room) says there is room (after the request in front has
-    /// been answered), and read the socket only then: TCP's window holds the client back
-    /// meanwhile, as it should.
-    pub fn tcp_received(&mut self, now: Instant, socket: SocketHandle, bytes: &[u8]) -> usize {
-        let taken = self.tcp.server.received(now, socket, bytes);
-        if taken > 0 {
-            self.dirty = true;
-        }
-        taken
-    }
-
-    /// How many bytes [`tcp_received`](Node::tcp_received) would take on `socket` now (0: no
-    /// connection there, or a whole request waits to be answered).
-    pub fn tcp_room(&self, socket: SocketHandle) -> usize {
-        self.tcp.server.room(socket)
-    }
-
-    /// The connection on `socket` has ended: the client closed it, it broke, or the caller
-    /// closed it (asked by [`TcpAction::Close`], or a reply that did not fit).
-    pub fn tcp_closed(&mut self, socket: SocketHandle) {
-        self.tcp.server.closed(socket);
-    }
-
-    /// The client on `socket` has closed its side (TCP FIN): what it sent before is still
-    /// answered; [`tcp_finish`](Node::tcp_finish) says when the connection is done.
-    pub fn tcp_eof(&mut self, socket: SocketHandle) {
-        self.tcp.server.eof(socket);
-    }
-
-    /// Whether the connection on `socket` is done: past its client's FIN, with no whole request
-    /// left to answer. A done connection is no longer counted (TCPCONN); end it gracefully once
-    /// its replies have left. Ask only while none of the client's bytes wait with the caller.
-    pub fn tcp_finish(&mut self, socket: SocketHandle) -> bool {
-        self.tcp.server.finish(socket)
-    }
-
-    /// Whether `socket` can take a whole reply now (the caller's send buffer for it has room
-    /// for [`MAX_TCP_ADU_LEN`](crate::modbus::tcp::MAX_TCP_ADU_LEN) bytes): while it cannot, the
-    /// node answers none of its requests (the others' are answered meanwhile), so a client slow
-    /// to read its replies is held back, not cut off; the idle time still closes one that
-    /// never reads. Every socket is writable when its connection opens.
-    pub fn tcp_writable(&mut self, socket: SocketHandle, writable: bool) {
-        self.tcp.server.set_writable(socket, writable);
-        if writable {
-            self.dirty = true;
-        }
-    }
-
-    /// Whether a connection is open on `socket` (the caller drops bytes for one that is not).
-    pub fn tcp_connected(&self, socket: SocketHandle) -> bool {
-        self.tcp.server.is_open(socket)
-    }
-
-    /// The reply of the last [`TcpAction::Reply`], MBAP header included: read it where it is,
-    /// before the next [`poll`](Node::poll).
-    pub fn tcp_reply(&self) -> &[u8] {
-        self.tcp.reply.as_bytes()
-    }
-
-    /// What the TCP server has counted.
-    pub fn tcp_counters(&self) -> crate::modbus::tcp::TcpCounters {
-        self.tcp.server.counters()
-    }
-
-    /// What the Modbus slave of the TCP side has counted.
-    pub fn tcp_slave_counters(&self) -> SlaveCounters {
-        self.tcp.slave.counters()
-    }
-
-    /// The connections open now.
-    pub fn tcp_connections(&self) -> u8 {
-        self.tcp.server.connections()
-    }
-
-    /// A socket to close, or the next request answered (taking turns between connections).
-    fn poll_tcp(&mut self, now: Instant) -> Option<TcpAction> {
-        let policy = self.gateway.config().net.policy;
-        if let Some(socket) = self.tcp.server.take_close(now, &policy) {
-            return Some(TcpAction::Close(socket));
-        }
-        let link = self.link_counters();
-        let view = crate::plc::TcpView {
-            counters: self.tcp.server.counters(),
-            connections: self.tcp.server.connections(),
-        };
-        let direct_unit = self.gateway.config().unit;
-        loop {
-            let (socket, adu) = self.tcp.server.next_frame()?;
-            let mut model = self.gateway.registers(now, link).with_tcp(view);
-            let handled =
-                self.tcp
-                    .slave
-                    .handle_tcp(&adu, direct_unit, &mut model, &mut self.tcp.reply);
-            match handled {
-                Handled::Reply(_) => {
-                    self.gateway.plc_activity(now, now);
-                    return Some(TcpAction::Reply(socket));
-                }
-                Handled::Unserved(_) => return Some(TcpAction::Reply(socket)),
-                // Not a request: nothing to answer; the next one, if any.
-                _ => {}
-            }
-        }
     }
 }
