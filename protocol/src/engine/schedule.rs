@@ -16,19 +16,21 @@
 //!    is one transaction per axis that answers, at the transaction time measured on this bus:
 //!    a pseudo-terminal answers faster than the wire, a slow converter slower), the longest
 //!    waiting first; but not more than [`IDLE_RUN`] in a row before one of the rest.
-//! 5. **Other position reads**: movers (each as often as its part of the share allows, once a
+//! 5. **Offline axes** are probed when their probe is due, with a doubling back-off from
+//!    [`FIRST_PROBE`] up to [`Config::probe_interval`], so that an axis lost to a burst of noise
+//!    is back quickly and a dead one costs little; the probe of an axis owed a stop is that
+//!    stop. Before the movers: with one axis online its cycle is one transaction, it is always
+//!    at its limit (rule 7), and the others were never probed while it moved. Now and then a
+//!    probe is a rejoin try at the power-up settings instead ([`rejoin`](super::rejoin)): one
+//!    such try costs up to 300 ms of bus time (9.6 kbit/s, RTIM 255 ms), so it is started only
+//!    while no axis moves or runs a job (unless [`Config::rejoin_while_moving`]).
+//! 6. **Other position reads**: movers (each as often as its part of the share allows, once a
 //!    cycle at least), axes that just stopped (unless their move job reads it), and axes that
 //!    stopped until two reads agree (they stop in their position band, short of where they
 //!    rest: [`approach`](super::approach)); at most [`Config::position_reads_per_cycle`] per
 //!    cycle.
-//! 6. **Movers a cycle after their last poll** (and axes with a job), the longest waiting
+//! 7. **Movers a cycle after their last poll** (and axes with a job), the longest waiting
 //!    first: never less than a round robin would give them.
-//! 7. **Offline axes** are probed when their probe is due, with a doubling back-off from
-//!    [`FIRST_PROBE`] up to [`Config::probe_interval`], so that an axis lost to a burst of noise
-//!    is back quickly and a dead one costs little. Now and then a probe is a rejoin try at the
-//!    power-up settings instead ([`rejoin`](super::rejoin)): one such try costs up to 300 ms of
-//!    bus time (9.6 kbit/s, RTIM 255 ms), so it is started only while no axis moves or runs a job
-//!    (unless [`Config::rejoin_while_moving`]).
 //! 8. **Status (`n`), earliest deadline first**, among the others: an idle axis, and a mover
 //!    whose arrival is estimated but not near, is due [`IDLE_PERIOD_CYCLES`] cycles after its
 //!    last poll; a mover whose estimate is a read away twice a cycle; one whose arrival cannot
@@ -314,6 +316,12 @@ impl Engine {
         // Not forever: on a bus slower than its nominal transaction time every idle axis is
         // always due, and nothing below would ever go.
         self.schedule.idle_run = 0;
+        // Before the movers: with few axes online the cycle is a transaction or two, a mover is
+        // always at its limit, and an offline axis (one owed a stop among them) was never
+        // probed while another moved.
+        if let Some(probe) = self.next_probe(&pass) {
+            return Some(probe);
+        }
         if let Some((axis, false)) = read {
             if let Some(credit) = self.schedule.position_credit.checked_sub(1) {
                 self.schedule.position_credit = credit;
@@ -322,9 +330,6 @@ impl Engine {
         }
         if let Some(axis) = self.mover_at_limit(&pass) {
             return Some(self.status_poll(now, axis));
-        }
-        if let Some(probe) = self.next_probe(&pass) {
-            return Some(probe);
         }
         let cursor = self.schedule.cursor;
         // Arriving axes had their turn above; this is the other one.

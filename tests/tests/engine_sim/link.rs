@@ -176,6 +176,11 @@ fn each_fault_kind_is_survived_and_counted() {
                 assert_eq!(timeouts, 0, "{name}: noise between frames costs nothing");
             }
         }
+        // Survived: an axis the faults took off the bus (three bad answers in a row, about one
+        // poll sequence in fifty at 1 % per byte) comes back once they stop, within a probe
+        // interval (500 ms) and a rejoin try.
+        h.bus.set_faults(Faults::default());
+        h.run_until(h.now + S);
         for a in 0..4 {
             assert_eq!(
                 h.engine.axis(axis(a)).link,

@@ -315,6 +315,35 @@ mod property {
         };
     }
 
+    /// Found by the property below (its shrunk case): axis 1 on a long slow move, axis 0's wire
+    /// cut, a stop for axis 0. With one axis online the cycle is one transaction, the mover was
+    /// always at its limit and the offline axis never probed: its owed stop never went, even
+    /// after its wire was back.
+    #[test]
+    fn an_owed_stop_reaches_its_axis_once_it_hears_while_another_moves() {
+        let mut h = homed(2);
+        let mut cut = [false; 2];
+        for op in &[Op::Direct(1, 68, 1), Op::Direct(0, 0, 1), Op::Cut(0, true)] {
+            apply(&mut h, &mut cut, op);
+        }
+        let drg1 = read(&mut h, unit(0), DRG1, 1).unwrap()[0];
+        let plain = drg1 & !(DRG1_STP | DRG1_EMG | DRG1_CSTR | DRG1_HOME | DRG1_ALRS);
+        assert_eq!(write(&mut h, unit(0), DRG1, &[plain | DRG1_STP]), Ok(()));
+        h.run_for(3 * S);
+        assert!(
+            h.node.gateway().engine().stop_owed(axis(0)),
+            "owed while cut"
+        );
+        assert!(moving(&h, 1), "the other axis still moves");
+        h.bus.set_cut(axis(0), false);
+        h.run_for(5 * S);
+        assert!(
+            !h.node.gateway().engine().stop_owed(axis(0)),
+            "taken once it hears"
+        );
+        assert!(!moving(&h, 0), "at rest");
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
         #[test]
