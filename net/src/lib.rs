@@ -51,7 +51,7 @@ use protocol::net::Ipv4;
 use protocol::node::{Node, TcpAction};
 use protocol::time::Instant;
 
-pub use protocol::modbus::tcp::{SocketHandle, PORT, SOCKETS};
+pub use protocol::modbus::tcp::{SocketHandle, MODBUS_TCP_PORT, SOCKETS};
 
 type Cs = CriticalSectionRawMutex;
 
@@ -354,7 +354,7 @@ pub async fn serve(
     loop {
         let mut socket = TcpSocket::new(stack, rx, tx);
         socket.set_nagle_enabled(false);
-        if socket.accept(PORT).await.is_ok() {
+        if socket.accept(MODBUS_TCP_PORT).await.is_ok() {
             s.close.reset();
             s.answered.reset();
             port.events

@@ -26,7 +26,7 @@ pub use mbap::{MbapError, Stream, TcpAdu, MAX_TCP_ADU_LEN, MBAP_LEN};
 pub use server::{Server, SocketHandle, TcpCounters, MAX_CONNECTIONS, SOCKETS};
 
 /// The Modbus TCP port (TCP Guide §4.1, registered with IANA).
-pub const PORT: u16 = 502;
+pub const MODBUS_TCP_PORT: u16 = 502;
 
 /// The unit id of the device at the IP address itself (TCP Guide §4.4.2); 0 is taken the
 /// same way.
