@@ -5,6 +5,7 @@
 use std::io::{BufRead, BufReader, Write};
 use std::path::PathBuf;
 use std::process::{Child, Command, Output, Stdio};
+use std::sync::{Mutex, MutexGuard};
 
 use protocol::{Axis, Command as RcCommand, Request};
 
@@ -12,10 +13,17 @@ use protocol::{Axis, Command as RcCommand, Request};
 struct Sim {
     child: Child,
     pty: String,
+    /// One simulator at a time: each test runs two real-time processes over a pseudo-terminal,
+    /// and a dozen of them at once on a 2-core host starved the answers past every time-out
+    /// (CI: "axis 0: no reply").
+    _alone: MutexGuard<'static, ()>,
 }
+
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 impl Sim {
     fn start(args: &[&str]) -> Sim {
+        let alone = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
         let mut child = Command::new(env!("CARGO_BIN_EXE_rc-sim"))
             .arg("--pty")
             .args(args)
@@ -33,7 +41,11 @@ impl Sim {
             .expect("PTY line")
             .trim()
             .to_string();
-        Sim { child, pty }
+        Sim {
+            child,
+            pty,
+            _alone: alone,
+        }
     }
 
     /// `rc-commission --port <pty> <args>`.
