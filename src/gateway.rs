@@ -153,101 +153,108 @@ pub async fn run(
             Either::First(event) => event,
             Either::Second(()) => Either4::Fourth(()),
         };
+        // The task was waiting on both lines until now: what either holds came just now.
+        clock = now();
         match event {
-            Either4::First(n) => node.bus_received(now(), bytes(&bus_buf, n)),
-            Either4::Second(n) => node.plc_received(now(), bytes(&plc_buf, n)),
-            Either4::Third(()) => samples(node, &mut stop),
+            Either4::First(n) => node.bus_received(clock, bytes(&bus_buf, n)),
+            Either4::Second(n) => node.plc_received(clock, bytes(&plc_buf, n)),
+            Either4::Third(()) => samples(node, &mut stop, clock),
             Either4::Fourth(()) => {}
         }
         // The emulator harness' panic and stall (nothing on the board).
         emu::serve_gateway_requests();
-        // Whatever else has arrived meanwhile goes in before anything goes out.
+        // The node's actions one at a time, the lines read before each: what has arrived goes
+        // in before anything goes out, and a PLC request whose bytes came in while the task sent
+        // on the bus is taken whole, not cut where the task stopped reading
+        // (`Node::plc_received_between`); nor does the node see its end at a silence that was
+        // the send.
         loop {
-            let n = board.bus.read_ready(&mut bus_buf);
-            if n > 0 {
-                node.bus_received(now(), bytes(&bus_buf, n));
+            loop {
+                let n = board.bus.read_ready(&mut bus_buf);
+                let m = board.plc.read_ready(&mut plc_buf);
+                if n == 0 && m == 0 {
+                    break;
+                }
+                let at = now();
+                if n > 0 {
+                    node.bus_received(at, bytes(&bus_buf, n));
+                }
+                if m > 0 {
+                    node.plc_received_between(clock, at, bytes(&plc_buf, m));
+                }
             }
-            let m = board.plc.read_ready(&mut plc_buf);
-            if m > 0 {
-                node.plc_received(now(), bytes(&plc_buf, m));
-            }
-            if n == 0 && m == 0 {
+            // The lines' buffers were empty at this time (`clock` in the reads above).
+            clock = now();
+            // With Ethernet, what the sockets hold goes in too; while they gave the node
+            // something, it is polled again (a request that got no reply leaves room that no
+            // reply refills).
+            #[cfg(feature = "net")]
+            let gave = PORT.pump(node, clock);
+            let Some(action) = node.poll(clock) else {
+                #[cfg(feature = "net")]
+                if gave {
+                    continue;
+                }
                 break;
-            }
-        }
-        clock = now();
-        #[cfg(feature = "net")]
-        PORT.pump(node, clock);
-        // One pass without Ethernet; with it, another while a socket's pipe still holds bytes
-        // the node can take (a request that got no reply leaves room that no reply refills).
-        #[cfg_attr(not(feature = "net"), allow(clippy::never_loop))]
-        loop {
-            while let Some(action) = node.poll(clock) {
-                let Board {
-                    bus, plc, watchdog, ..
-                } = &mut *board;
-                match action {
-                    // COMM_CHANGE goes out as a frame does: one send (and one await) for both.
-                    Action::Bus(_) | Action::Line(LineAction::CommChange) => {
-                        let bytes = match action {
-                            Action::Bus(frame) => frame,
-                            _ => protocol::frame::COMM_CHANGE,
-                        };
-                        plc.settle_then(pin!(bus.send(&bytes))).await;
-                    }
-                    // Left to the UART: see the module documentation.
-                    Action::Reply(reply) => plc.start_send(reply).await,
-                    Action::Line(LineAction::SetBaud(baud)) => {
-                        plc.settle_then(pin!(bus.set_baud(baud.bits_per_second())))
-                            .await
-                    }
-                    Action::Line(LineAction::BreakStart) => {
-                        plc.settle_then(pin!(bus.break_start())).await
-                    }
-                    Action::Line(LineAction::BreakEnd) => bus.break_end(),
-                    // After the reply to the write that asked for it has left.
+            };
+            let Board {
+                bus, plc, watchdog, ..
+            } = &mut *board;
+            match action {
+                // COMM_CHANGE goes out as a frame does: one send (and one await) for both.
+                Action::Bus(_) | Action::Line(LineAction::CommChange) => {
+                    let bytes = match action {
+                        Action::Bus(frame) => frame,
+                        _ => protocol::frame::COMM_CHANGE,
+                    };
+                    plc.settle_then(pin!(bus.send(&bytes))).await;
+                }
+                // Left to the UART: see the module documentation.
+                Action::Reply(reply) => plc.start_send(reply).await,
+                Action::Line(LineAction::SetBaud(baud)) => {
+                    plc.settle_then(pin!(bus.set_baud(baud.bits_per_second())))
+                        .await
+                }
+                Action::Line(LineAction::BreakStart) => {
+                    plc.settle_then(pin!(bus.break_start())).await
+                }
+                Action::Line(LineAction::BreakEnd) => bus.break_end(),
+                // After the reply to the write that asked for it has left.
+                #[cfg(not(feature = "net"))]
+                Action::PlcLine(line) => plc.set_line(line.baud, line.parity).await,
+                // Asked over TCP, the reply on the PLC line may be any, up to 2.3 s long.
+                #[cfg(feature = "net")]
+                Action::PlcLine(line) => {
+                    fed(watchdog, pin!(plc.set_line(line.baud, line.parity))).await
+                }
+                Action::Store(store) => {
+                    // The reply to the write that asked for it leaves first: on the F103 an
+                    // erase stops the CPU, and with it the interrupt that feeds the UART, for
+                    // 20-40 ms; a restart would cut it.
                     #[cfg(not(feature = "net"))]
-                    Action::PlcLine(line) => plc.set_line(line.baud, line.parity).await,
-                    // Asked over TCP, the reply on the PLC line may be any, up to 2.3 s long.
+                    plc.settle().await;
                     #[cfg(feature = "net")]
-                    Action::PlcLine(line) => {
-                        fed(watchdog, pin!(plc.set_line(line.baud, line.parity))).await
-                    }
-                    Action::Store(store) => {
-                        // The reply to the write that asked for it leaves first: on the F103 an
-                        // erase stops the CPU, and with it the interrupt that feeds the UART, for
-                        // 20-40 ms; a restart would cut it.
-                        #[cfg(not(feature = "net"))]
-                        plc.settle().await;
-                        #[cfg(feature = "net")]
-                        fed(watchdog, pin!(plc.settle())).await;
-                        // A whole watchdog period for the erase, not what the wait for the reply
-                        // left of it (the F429 feeds it again before each 16 KiB sector, 0.5 s
-                        // at most: `board::f429::SettingsSectors`).
-                        watchdog.pet();
-                        match store {
-                            Store::Save => {
-                                let saved = settings.save(&node.settings_record());
-                                node.stored(saved);
+                    fed(watchdog, pin!(plc.settle())).await;
+                    // A whole watchdog period for the erase, not what the wait for the reply
+                    // left of it (the F429 feeds it again before each 16 KiB sector, 0.5 s
+                    // at most: `board::f429::SettingsSectors`).
+                    watchdog.pet();
+                    match store {
+                        Store::Save => {
+                            let saved = settings.save(&node.settings_record());
+                            node.stored(saved);
+                        }
+                        Store::FactoryReset | Store::Restart => {
+                            if matches!(store, Store::FactoryReset) {
+                                settings.factory_reset();
                             }
-                            Store::FactoryReset | Store::Restart => {
-                                if matches!(store, Store::FactoryReset) {
-                                    settings.factory_reset();
-                                }
-                                cortex_m::peripheral::SCB::sys_reset();
-                            }
+                            cortex_m::peripheral::SCB::sys_reset();
                         }
                     }
-                    #[cfg(feature = "net")]
-                    Action::Tcp(tcp) => PORT.act(tcp, node, clock),
                 }
-                clock = now();
+                #[cfg(feature = "net")]
+                Action::Tcp(tcp) => PORT.act(tcp, node, clock),
             }
-            #[cfg(feature = "net")]
-            if PORT.pump(node, clock) {
-                continue;
-            }
-            break;
         }
 
         // The I/O task shows them when it next wakes (1 ms with a PIO axis, else up to 20 ms:
@@ -267,9 +274,9 @@ pub async fn run(
 /// on every sample (a level counts once its samples span the debounce time); what a level starts
 /// is stamped with the run's last sample: not earlier than every sample would have, and not
 /// later than this task could act on it anyway.
-fn samples(node: &mut Node, stop: &mut bool) {
+fn samples(node: &mut Node, stop: &mut bool, now: Instant) {
     while let Some(run) = io::take() {
-        let (first, last) = run.at(now().0);
+        let (first, last) = run.at(now.0);
         let (first, last) = (Instant(first), Instant(last));
         if run.sample.stop != *stop {
             *stop = run.sample.stop;

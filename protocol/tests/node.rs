@@ -476,6 +476,41 @@ fn a_frame_gap_longer_than_t3_5_keeps_a_request_read_in_two_bursts_whole() {
     }
 }
 
+/// The firmware reads a request's first bytes, then sends a bus frame (16.7 ms at 9.6 kbit/s,
+/// not polling the node meanwhile), then reads the rest, which waited in the UART. Handed over
+/// with when the task last found the line empty (`plc_received_between`), the request is whole
+/// and answered; stamped with the time of the read alone, it was cut in two (no reply, a CRC
+/// error: rcgw's "no reply" against the firmware in QEMU).
+#[test]
+fn a_request_whose_rest_waited_through_a_bus_send_is_answered() {
+    for waited in [true, false] {
+        let mut rig = Rig::ready(1, |_| {});
+        let request = Modbus::ReadHoldingRegisters {
+            address: LINK,
+            quantity: 1,
+        };
+        let mut adu = [0u8; 256];
+        let len = request.emit(1, &mut adu).unwrap();
+        let (replies, crc_errors) = (
+            rig.node.plc_counters().replies,
+            rig.node.plc_counters().crc_errors,
+        );
+        let looked = Instant(rig.now);
+        rig.node.plc_received(looked, &adu[..3]);
+        rig.now += 16_700;
+        let read = Instant(rig.now);
+        let since = if waited { looked } else { read };
+        rig.node.plc_received_between(since, read, &adu[3..len]);
+        rig.run_for(50 * MS);
+        let counters = rig.node.plc_counters();
+        assert_eq!(
+            (counters.replies > replies, counters.crc_errors > crc_errors),
+            (waited, !waited),
+            "waited {waited}"
+        );
+    }
+}
+
 /// PIOPAT: a pattern whose ports the board lacks is refused (03) and PIOPAT stays; one it has
 /// is in force at once, and a strobe the PIO refuses shows in CMST (3, reason 13, the inputs).
 #[test]

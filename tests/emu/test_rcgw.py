@@ -109,5 +109,15 @@ def test_apply_backup_factory_reset_restore_backup_is_identical(elf, tmp_path):
         b2 = tmp_path / "b2.toml"
         rcgw(pty, "backup", str(b2))
         assert b2.read_text() == first
+    except BaseException:
+        # What a failure needs to be understood (pytest shows it with the failure): the
+        # firmware's log, the bus as rc-sim saw it, and the gateway's own counters (a CRC error
+        # on the PLC line is a request it did not take whole).
+        print("firmware log:\n" + "\n".join(emu.log()[-150:]))
+        print("rc-sim:\n" + "\n".join(emu.sim_log()[-80:]))
+        if emu.plc_port is not None and "pty" in locals():
+            diag = subprocess.run([str(RCGW), "--rtu", pty, "diag"], capture_output=True, text=True, timeout=60)
+            print("rcgw diag:\n" + diag.stdout + diag.stderr)
+        raise
     finally:
         emu.stop()

@@ -88,7 +88,10 @@ fuzz_target!(|data: &[u8]| {
                 let bytes = take(&mut rest, n);
                 asked |= !bytes.is_empty();
                 talked |= !bytes.is_empty();
-                node.plc_received(Instant(now), bytes);
+                // Read late, as the firmware reads what waited through a bus send: the bytes
+                // came after some earlier time (up to 35 ms before, from the op).
+                let since = Instant(now.saturating_sub(u64::from(op) * 137));
+                node.plc_received_between(since, Instant(now), bytes);
             }
             2 => {
                 let b = take(&mut rest, 2);

@@ -8,6 +8,14 @@
 //! calls [`Receiver::poll`] at [`Receiver::next_deadline`] (or any later time) to collect the
 //! frame once the line has been quiet for t3.5.
 //!
+//! A caller that reads a UART's buffer from a task cannot always stamp a byte with the time it
+//! came: bytes that arrived while the task did something else (sent a bus frame, 16.7 ms at
+//! 9.6 kbit/s) wait in the buffer and are read together afterwards. Stamped with the time they
+//! are read, they look like a frame of their own after a silence that was never on the line, and
+//! a request read half before and half after is cut in two (a CRC error and no reply, although
+//! the PLC sent it whole). [`Receiver::push_between`] takes such a byte with the span it arrived
+//! in: a silence ends a frame only as far as it is certain.
+//!
 //! Inside a frame, a silence longer than **t1.5** but shorter than t3.5 makes the frame
 //! incomplete (Serial Line §2.5.1.1, "control and waiting" state): every byte up to the next
 //! t3.5 silence is discarded and the burst is reported as [`FrameError::BadGap`]. This check
@@ -31,9 +39,14 @@ pub const BITS_PER_CHAR: u64 = 11;
 const FIXED_TIMERS_ABOVE: u32 = 19_200;
 
 /// `chars` tenths of a character time at `baud_bps`, rounded up to a microsecond.
-const fn tenths_of_char(tenths: u64, baud_bps: u32) -> Duration {
-    let bps = if baud_bps == 0 { 1 } else { baud_bps as u64 };
-    Duration((tenths * BITS_PER_CHAR * 1_000_000).div_ceil(bps * 10))
+// In 32 bits, as `chars_time`: 35 x 11 x 10^6 < 2^32 (and 10 x 4.29 Gbit/s is no rate).
+const fn tenths_of_char(tenths: u32, baud_bps: u32) -> Duration {
+    let bps = if baud_bps == 0 {
+        1
+    } else {
+        baud_bps.saturating_mul(10)
+    };
+    Duration::from_micros((tenths * BITS_PER_CHAR as u32 * 1_000_000).div_ceil(bps) as u64)
 }
 
 /// How long `len` characters take on the line at `baud_bps` (11 bits each), rounded up to a
@@ -154,6 +167,14 @@ impl Receiver {
         self
     }
 
+    /// A new end-of-frame silence (the line's rate has changed): the burst in progress, heard
+    /// at the old rate, is dropped; the counters go on. (In place: a receiver is a 256-byte
+    /// buffer, which a new one would copy.)
+    pub fn set_frame_end(&mut self, t3_5: Duration) {
+        self.t3_5 = t3_5;
+        self.reset();
+    }
+
     /// The end-of-frame silence in use.
     pub const fn t3_5(&self) -> Duration {
         self.t3_5
@@ -166,8 +187,18 @@ impl Receiver {
 
     /// A byte received at `now`.
     pub fn push(&mut self, now: Instant, byte: u8) {
+        self.push_between(now, now, &[byte]);
+    }
+
+    /// Bytes that arrived after `since` and by `now` (`since`: when the caller last found the
+    /// line without them; see the [module documentation](self)), one after the other. The
+    /// silence before them counts from `since`, the frame's end from `now`.
+    pub fn push_between(&mut self, since: Instant, now: Instant, bytes: &[u8]) {
+        if bytes.is_empty() {
+            return;
+        }
         if self.burst != Burst::Idle {
-            let gap = now.since(self.last_byte);
+            let gap = since.since(self.last_byte);
             if gap >= self.t3_5 {
                 // The previous burst ended and the caller did not poll it: it is lost.
                 let _ = self.finish();
@@ -182,13 +213,15 @@ impl Receiver {
             self.len = 0;
         }
         self.last_byte = now;
-        if self.burst == Burst::Receiving {
-            if let Some(slot) = self.buf.get_mut(self.len) {
-                *slot = byte;
-                self.len += 1;
-            } else {
-                self.burst = Burst::TooLong;
-                self.len = 0;
+        for &byte in bytes {
+            if self.burst == Burst::Receiving {
+                if let Some(slot) = self.buf.get_mut(self.len) {
+                    *slot = byte;
+                    self.len += 1;
+                } else {
+                    self.burst = Burst::TooLong;
+                    self.len = 0;
+                }
             }
         }
     }

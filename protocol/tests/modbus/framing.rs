@@ -79,6 +79,62 @@ fn a_frame_not_polled_in_time_is_an_overrun() {
     );
 }
 
+/// A task reads a frame's first bytes, sends on another line for longer than t3.5, then reads
+/// the rest, which waited in the UART meanwhile: stamped with when the task last found the line
+/// empty, they continue the frame; stamped with the time of the read alone they would start a
+/// frame of their own (both halves lost: an overrun and a CRC error).
+#[test]
+fn bytes_that_waited_through_a_send_continue_their_frame() {
+    let t35 = t3_5(115_200);
+    let frame = hex("11 03 00 6B 00 03 76 87");
+    let send = Duration::from_micros(16_700); // a 16-byte bus frame at 9.6 kbit/s
+    for (waited, whole) in [(true, true), (false, false)] {
+        let mut receiver = Receiver::new(115_200).without_gap_check();
+        let looked = Instant(1_000);
+        receiver.push_between(looked, looked, &frame[..3]);
+        let read = looked + send;
+        let since = if waited { looked } else { read };
+        receiver.push_between(since, read, &frame[3..]);
+        assert!(
+            receiver
+                .poll(read + Duration::from_micros(t35.as_micros() - 1))
+                .is_none(),
+            "the end counts from the read"
+        );
+        let result = receiver
+            .poll(read + t35)
+            .unwrap()
+            .map(|adu| adu.as_bytes().to_vec());
+        assert_eq!(result.is_ok(), whole, "waited {waited}: {result:?}");
+        let counters = receiver.counters();
+        assert_eq!(
+            (counters.frames, counters.overruns),
+            if whole { (1, 0) } else { (0, 1) },
+            "waited {waited}"
+        );
+    }
+}
+
+/// The span only widens what is uncertain: bytes whose `since` is t3.5 or more after the last
+/// byte follow a silence that was on the line, and end the frame before them.
+#[test]
+fn a_silence_seen_before_bytes_that_waited_still_ends_the_frame() {
+    let t35 = t3_5(115_200);
+    let first = hex("11 03 00 6B 00 03 76 87");
+    let second = hex("11 06 00 01 00 03 9A 9B");
+    let mut receiver = Receiver::new(115_200).without_gap_check();
+    receiver.push_between(Instant(0), Instant(0), &first);
+    let looked = Instant(0) + t35;
+    receiver.push_between(looked, looked + Duration::from_millis(20), &second);
+    let end = looked + Duration::from_millis(20) + t35;
+    assert_eq!(receiver.poll(end).unwrap().unwrap().as_bytes(), &second[..]);
+    assert_eq!(
+        (receiver.counters().frames, receiver.counters().overruns),
+        (2, 1),
+        "the first frame ended (not polled in time: an overrun)"
+    );
+}
+
 #[test]
 fn frames_closer_than_t1_5_merge_and_fail_the_crc() {
     let mut receiver = Receiver::new(19_200);
