@@ -13,7 +13,7 @@
 //! | bytes in the socket's receive pipe, and [`Event::Data`] | the replies, in the socket's send pipe |
 //! | [`Event::Sent`]: the send pipe has emptied | |
 //! | [`Event::Eof`]: the client has closed its side | `answered`: every request of it answered, end the connection after the replies |
-//! | [`Event::Closed`]: the connection has ended, and the task no longer touches the pipes | `released`: the pipes are empty, accept the next client |
+//! | [`Event::Closed`]: the connection has ended, and the task no longer touches the pipes | `released`: the pipes are empty, hand over the next client |
 //!
 //! A gateway loop makes two calls, the same on every build: [`Port::pump`] before the node's
 //! actions and again after them (it hands the node every queued event and the bytes it has room
@@ -39,6 +39,7 @@
 #![deny(missing_docs)]
 
 use core::sync::atomic::{AtomicBool, Ordering};
+use embassy_futures::join::join;
 use embassy_futures::select::{select, select3, Either, Either3};
 use embassy_net::tcp::TcpSocket;
 use embassy_net::{IpAddress, Stack};
@@ -81,7 +82,8 @@ pub enum Event {
     /// Bytes from the client wait in the socket's receive pipe.
     Data(SocketHandle),
     /// The socket's connection has ended (the client closed it, it broke, or the gateway
-    /// closed it), and its task waits to be released.
+    /// closed it): its task listens again, and waits to be released before it reports the next
+    /// client.
     Closed(SocketHandle),
     /// The socket's send pipe has emptied: it has room for replies again.
     Sent(SocketHandle),
@@ -331,9 +333,10 @@ fn peer_of(socket: &TcpSocket<'_>) -> Ipv4 {
     }
 }
 
-/// Socket `index`: accepts a client on [`PORT`], moves its bytes to and from the gateway task
-/// through `port` until the connection ends, reports the end, waits to be released, and
-/// accepts the next client, for good. `rx` and `tx` are the socket's own TCP buffers.
+/// Socket `index`: accepts a client on [`MODBUS_TCP_PORT`], moves its bytes to and from the
+/// gateway task through `port` until the connection ends, reports the end, and listens again at
+/// once; it reports the next client once the gateway has released the socket, for good. `rx`
+/// and `tx` are the socket's own TCP buffers.
 ///
 /// TCP's own time-outs are off: the node closes an idle connection (its TCPIDLE setting), and
 /// keep-alives would only hide a half-open one from it.
@@ -351,10 +354,23 @@ pub async fn serve(
     };
     let mut buf = [0u8; 256];
     let mut out = [0u8; 256];
+    // A connection's end has been reported (every time but the first): the gateway releases
+    // the pipes before the next client is reported.
+    let mut releasing = false;
     loop {
         let mut socket = TcpSocket::new(stack, rx, tx);
         socket.set_nagle_enabled(false);
-        if socket.accept(MODBUS_TCP_PORT).await.is_ok() {
+        // The socket listens again at once, while the gateway releases the last connection:
+        // a client that connects meanwhile waits in TCP's handshake and buffers, not for a
+        // reset (smoltcp answers a SYN that no socket listens for with one). Its Opened, and
+        // the first read of its bytes, come only after the release.
+        let release = async {
+            if releasing {
+                s.released.wait().await;
+            }
+        };
+        let (accepted, ()) = join(socket.accept(MODBUS_TCP_PORT), release).await;
+        if accepted.is_ok() {
             s.close.reset();
             s.answered.reset();
             port.events
@@ -375,7 +391,7 @@ pub async fn serve(
         drop(socket);
         s.released.reset();
         port.events.send(Event::Closed(index)).await;
-        s.released.wait().await;
+        releasing = true;
     }
 }
 
