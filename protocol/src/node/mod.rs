@@ -101,7 +101,7 @@
 //!             Action::Line(LineAction::CommChange) => {
 //!                 board.bus_write_and_flush(&protocol::frame::COMM_CHANGE)
 //!             }
-//!             Action::PlcLine(line) => board.set_plc_line(line.baud),
+//!             Action::PlcLine(line) => board.set_plc_line(line.baud.bits_per_second()),
 //!             Action::Store(Store::Save) => {
 //!                 let saved = board.write_settings(&node.settings_record());
 //!                 node.stored(saved);
@@ -130,7 +130,7 @@ use crate::modbus::{
 use crate::pio::{self, Band, Jog, Pattern, Pio, PioInputs, PioOutputs};
 use crate::plc::{Gateway, GatewayConfig, PlcLine, Store, PIO_ACCEL};
 use crate::time::{earliest, Duration, Instant};
-use crate::units::{Accel, Length, Speed};
+use crate::units::{Accel, Length};
 use crate::{Axis, PositionNo, Pulses};
 
 #[cfg(feature = "tcp")]
@@ -228,7 +228,7 @@ impl Node {
     pub const fn new(config: GatewayConfig) -> Node {
         Node {
             gateway: Gateway::new(config),
-            receiver: plc_receiver(config.plc.baud, config.plc_frame_gap),
+            receiver: plc_receiver(config.plc.baud.bits_per_second(), config.plc_frame_gap),
             slave: Slave::new(),
             reply: ReplyBuffer::new(),
             pio: Pio::new(pio::Config::DEFAULT),
@@ -301,7 +301,10 @@ impl Node {
             self.dirty = true;
             if let Handled::Reply(_) = handled {
                 let reply = self.reply.as_bytes();
-                let on_wire = chars_time(reply.len(), self.gateway.config().plc.baud);
+                let on_wire = chars_time(
+                    reply.len(),
+                    self.gateway.config().plc.baud.bits_per_second(),
+                );
                 self.gateway.plc_activity(now, now + on_wire);
                 return Some(Action::Reply(reply));
             }
@@ -312,7 +315,10 @@ impl Node {
             return Some(Action::Tcp(action));
         }
         if let Some(line) = self.gateway.take_plc_line() {
-            self.receiver = plc_receiver(line.baud, self.gateway.config().plc_frame_gap);
+            self.receiver = plc_receiver(
+                line.baud.bits_per_second(),
+                self.gateway.config().plc_frame_gap,
+            );
             return Some(Action::PlcLine(line));
         }
         if let Some(store) = self.gateway.take_store() {

@@ -435,7 +435,7 @@ impl Gateway {
     }
 
     fn job_done(&mut self, id: JobId, axis: Axis, result: Result<JobOutput, JobError>) {
-        let jog_speed = self.config.pio_jog;
+        let jog_speed = self.config.pio_jog.hundredths();
         let teach = if TEACHING {
             let config = &self.config.axes[axis];
             self.teach

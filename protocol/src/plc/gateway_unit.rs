@@ -15,7 +15,6 @@ use super::write::{admit, axis_cfg, nth, per_axis, AxisSetting, GatewayWrite, Pe
 use crate::axes::AxisSet;
 use crate::engine::LinkError;
 use crate::modbus::{Exception, SlaveCounters};
-use crate::time::Duration;
 use crate::Axis;
 
 /// DIAG word offsets past the seven u32 counters.
@@ -53,10 +52,10 @@ impl Gateway {
             G_WATCHDOG => u16::try_from(self.config.watchdog.as_millis()).unwrap_or(u16::MAX),
             G_BUS_BAUD => u16::try_from(self.persist.baud.bits_per_second() / 100).unwrap_or(0),
             G_BUS_RTIM => u16::from(self.persist.rtim.get()),
-            G_PLC_BAUD => u16::try_from(self.persist.plc.baud / 100).unwrap_or(0),
+            G_PLC_BAUD => self.persist.plc.baud.register(),
             G_PLC_PARITY => self.persist.plc.parity as u16,
-            G_UNIT_ID => u16::from(self.persist.unit),
-            G_AXIS_BASE => u16::from(self.persist.axis_base),
+            G_UNIT_ID => u16::from(self.persist.unit.get()),
+            G_AXIS_BASE => u16::from(self.persist.axis_base.get()),
             G_SAVE | G_FACTORY | G_RESTART => 0,
             G_SAVE_STATUS => self.persist.status as u16,
             G_SAVE_COUNT | 0x0016 => {
@@ -71,8 +70,8 @@ impl Gateway {
             G_PIO_AXIS => self.config.pio_axis.map_or(0xFFFF, |a| u16::from(a.get())),
             G_PIO_PATTERN => self.config.pio_pattern.code(),
             G_PIO_START => self.config.pio_start as u16,
-            G_PIO_JOG => self.config.pio_jog,
-            G_PIO_INCH => self.config.pio_inch,
+            G_PIO_JOG => self.config.pio_jog.hundredths(),
+            G_PIO_INCH => self.config.pio_inch.hundredths(),
             G_SYNC_MASK => self.sync.mask().0,
             G_SYNC_STATUS => self.sync.status() as u16,
             a => {
@@ -212,14 +211,12 @@ impl Gateway {
         match write {
             GatewayWrite::Nothing | GatewayWrite::ChannelRequest | GatewayWrite::SyncStart => {}
             GatewayWrite::AckFailsafe => self.failsafe.acknowledge(true),
-            GatewayWrite::Watchdog(ms) => {
-                self.config.watchdog = Duration::from_millis(u64::from(ms))
-            }
+            GatewayWrite::Watchdog(time) => self.config.watchdog = time.duration(),
             GatewayWrite::WatchdogAction(action) => self.config.watchdog_action = action,
             GatewayWrite::BusBaud(baud) => self.persist.baud = baud,
             GatewayWrite::BusRtim(rtim) => self.persist.rtim = rtim,
             GatewayWrite::Retries(retries) => self.engine.set_retries(retries),
-            GatewayWrite::PlcBaud(hundreds) => self.persist.plc.baud = u32::from(hundreds) * 100,
+            GatewayWrite::PlcBaud(baud) => self.persist.plc.baud = baud,
             GatewayWrite::PlcParity(parity) => self.persist.plc.parity = parity,
             GatewayWrite::UnitId(unit) => self.persist.unit = unit,
             GatewayWrite::AxisBase(base) => self.persist.axis_base = base,

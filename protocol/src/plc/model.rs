@@ -177,7 +177,7 @@ impl DataModel for Registers<'_> {
 
     fn serves(&self, unit: u8) -> bool {
         let config = &self.gateway.config;
-        unit == config.unit || config.axis_of_unit(unit).is_some()
+        unit == config.unit.get() || config.axis_of_unit(unit).is_some()
     }
 
     fn read_bits(

@@ -6,7 +6,7 @@
 //! request the firmware carries out ([`Node`](crate::node::Node) hands it over as an action)
 //! and reports back, as IAI's controllers write their parameters to flash only on request.
 
-use super::config::{GatewayConfig, PlcLine};
+use super::config::{AxisBase, GatewayConfig, PlcLine, UnitId};
 use super::settings::{Settings, RECORD_LEN};
 use crate::axes::AxisSet;
 use crate::line::Baud;
@@ -48,9 +48,9 @@ pub(super) struct Persist {
     /// PLCBAUD, PLCPARITY.
     pub(super) plc: PlcLine,
     /// UNITID.
-    pub(super) unit: u8,
+    pub(super) unit: UnitId,
     /// AXISBASE.
-    pub(super) axis_base: u8,
+    pub(super) axis_base: AxisBase,
     /// AXISCFG's "enabled" bits.
     pub(super) axes: AxisSet,
     pub(super) status: SaveStatus,

@@ -154,7 +154,7 @@ fn stopped_by(face: Face, mover: u8) -> Vec<u8> {
 
 /// Apply the stop at `h.now`; its face's own delay (µs) before the gateway can know of it.
 fn apply(h: &mut NodeHarness, face: Face, mover: u8) -> Result<u64, String> {
-    let modbus = t3_5(PlcLine::DEFAULT.baud).0;
+    let modbus = t3_5(PlcLine::DEFAULT.baud.bits_per_second()).0;
     Ok(match face {
         Face::StopInput => {
             h.node.set_stop_input(Instant(h.now), true);
