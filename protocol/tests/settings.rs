@@ -357,7 +357,7 @@ fn factory_reset_and_restart_need_their_keys() {
 #[test]
 fn a_start_reports_where_its_settings_came_from_and_why() {
     let rig = |boot: Boot| {
-        let mut rig = Rig::ready(1, |c| c.boot = boot);
+        let mut rig = Rig::ready_after(boot, 1, |_| {});
         rig.read(63, G_SAVE_COUNT, 6).unwrap()
     };
     let damaged = Boot {

@@ -51,7 +51,7 @@
 //! use protocol::node::{Action, Node};
 //! use protocol::line::LineAction;
 //! use protocol::pio::PioInputs;
-//! use protocol::plc::{GatewayConfig, Store};
+//! use protocol::plc::{Boot, GatewayConfig, Store, IDENTITY};
 //! use protocol::time::Instant;
 //! use protocol::AxisSet;
 //!
@@ -79,7 +79,7 @@
 //! // In the firmware the node (about 11 KB) is built once, in place, and lives as long as it.
 //! let mut config = GatewayConfig::new(AxisSet::first(2));
 //! config.bus.establish = false;
-//! let mut node = Node::new(config);
+//! let mut node = Node::new(config, &IDENTITY, Boot::DEFAULT);
 //! let mut board = Board::default();
 //! let mut buf = [0u8; 64];
 //! for _ in 0..50 {
@@ -125,10 +125,10 @@ use crate::frame::FRAME_LEN;
 use crate::line::{Baud, LineAction};
 use crate::memory::PointField;
 use crate::modbus::{
-    chars_time, Handled, Receiver, ReceiverCounters, ReplyBuffer, Slave, SlaveCounters,
+    chars_time, Handled, Identity, Receiver, ReceiverCounters, ReplyBuffer, Slave, SlaveCounters,
 };
 use crate::pio::{self, Band, Jog, Pattern, Pio, PioInputs, PioOutputs};
-use crate::plc::{Gateway, GatewayConfig, PlcLine, Store, PIO_ACCEL};
+use crate::plc::{Boot, Gateway, GatewayConfig, PlcLine, Store, PIO_ACCEL};
 use crate::time::{earliest, Duration, Instant};
 use crate::units::{Accel, Length};
 use crate::{Axis, PositionNo, Pulses};
@@ -215,7 +215,9 @@ const fn plc_receiver(baud: u32, gap: Option<Duration>) -> Receiver {
 }
 
 impl Node {
-    /// A node for `config`. The Modbus receiver's t3.5 follows `config.plc.baud`; its t1.5 gap
+    /// A node for `config`, the gateway being `identity` (FC2B/0E, FC11, VERSION) and started
+    /// as `boot` says (CFGSOURCE, CFGERRORS, RESETCAUSE, SAVECOUNT): the firmware's facts, which
+    /// are no settings. The Modbus receiver's t3.5 follows `config.plc.baud`; its t1.5 gap
     /// check is off, since byte stamps taken when a task reads the UART are not accurate to the
     /// 750 µs it needs (the CRC still rejects a garbled frame).
     ///
@@ -225,9 +227,9 @@ impl Node {
     // are `Gateway::new` and `Engine::new` below it (measured on the MCU: inlined, the
     // constructors' parts were temporaries, 6 to 11 KB of stack).
     #[inline(never)]
-    pub const fn new(config: GatewayConfig) -> Node {
+    pub const fn new(config: GatewayConfig, identity: &'static Identity, boot: Boot) -> Node {
         Node {
-            gateway: Gateway::new(config),
+            gateway: Gateway::new(config, identity, boot),
             receiver: plc_receiver(config.plc.baud.bits_per_second(), config.plc_frame_gap),
             slave: Slave::new(),
             reply: ReplyBuffer::new(),

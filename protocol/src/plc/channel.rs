@@ -288,7 +288,11 @@ mod tests {
     /// they do not exist: 02, nothing stored.
     #[test]
     fn the_channel_registers_exist_only_with_the_channel() {
-        let mut gateway = Gateway::new(GatewayConfig::new(AxisSet::first(1)));
+        let mut gateway = Gateway::new(
+            GatewayConfig::new(AxisSet::first(1)),
+            &crate::plc::IDENTITY,
+            crate::plc::Boot::DEFAULT,
+        );
         let mut registers = gateway.registers(Instant::ZERO, SlaveCounters::default());
         let mut out = [0u16; 1];
         let read = registers.read_registers(63, RegisterTable::Holding, G_RESPONSE, &mut out);

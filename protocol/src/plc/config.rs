@@ -1,6 +1,5 @@
 //! What the gateway is set up with.
 
-use super::boot::Boot;
 use crate::axes::{AxisMap, AxisSet};
 use crate::engine::Config;
 use crate::modbus::Identity;
@@ -391,9 +390,15 @@ impl InchStep {
     }
 }
 
-/// Everything the gateway is set up with.
+/// Everything the gateway is set up with: what the PLC can set (and SAVE) and what the board
+/// decides. Not what the firmware learns at a start, which [`Node::new`](crate::node::Node::new)
+/// takes apart: who the gateway is ([`Identity`]) and how it started ([`Boot`](super::Boot)).
+///
+/// Start from [`GatewayConfig::new`] (or [`GatewayConfig::DEFAULT`]) and set fields: more may
+/// come.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub struct GatewayConfig {
     /// The gateway's own Modbus unit id.
     pub unit: UnitId,
@@ -430,13 +435,15 @@ pub struct GatewayConfig {
     /// The Ethernet board's address and the Modbus TCP server's policy (stored on every
     /// board; used where there is Ethernet).
     pub net: NetConfig,
-    /// Who the gateway is (FC2B/0E, FC11), and its firmware version (VERSION).
-    pub identity: Identity,
-    /// What the firmware knows about this start (settings source, saves, reset cause).
-    pub boot: Boot,
 }
 
 impl GatewayConfig {
+    /// The defaults, with no axis on the bus: unit 63, axis 0 at unit 1, the PLC line at
+    /// 115.2 kbit/s without parity, the bus as [`Config::DEFAULT`], the watchdog at 1 s
+    /// stopping every axis, no PIO axis (pattern 0, level start, every port), the jog's
+    /// factory values, the network's defaults.
+    pub const DEFAULT: GatewayConfig = GatewayConfig::new(AxisSet::EMPTY);
+
     /// A gateway for `axes` with defaults everywhere else.
     pub const fn new(axes: AxisSet) -> GatewayConfig {
         GatewayConfig {
@@ -458,13 +465,17 @@ impl GatewayConfig {
             pio_jog: JogSpeed::DEFAULT,
             pio_inch: InchStep::DEFAULT,
             net: NetConfig::DEFAULT,
-            identity: IDENTITY,
-            boot: Boot::DEFAULT,
         }
     }
 
     /// The axis addressed by a Modbus unit id, if the PLC may address it.
     pub fn axis_of_unit(&self, unit: u8) -> Option<Axis> {
         self.axis_base.axis_of(unit, self.bus.axes)
+    }
+}
+
+impl Default for GatewayConfig {
+    fn default() -> GatewayConfig {
+        GatewayConfig::DEFAULT
     }
 }

@@ -36,7 +36,7 @@ impl Gateway {
     pub(super) fn gateway_read(&self, address: u16, link: &SlaveCounters) -> Result<u16, Refused> {
         Ok(match address {
             G_VERSION | 0x0001 => {
-                let (major, minor, patch) = self.config.identity.version();
+                let (major, minor, patch) = self.identity.version();
                 if address == G_VERSION {
                     u16::from(major) << 8 | u16::from(minor)
                 } else {
@@ -59,11 +59,11 @@ impl Gateway {
             G_SAVE | G_FACTORY | G_RESTART => 0,
             G_SAVE_STATUS => self.persist.status as u16,
             G_SAVE_COUNT | 0x0016 => {
-                counter_register(&[self.persist.saves], address - G_SAVE_COUNT)
+                counter_register(&[self.persist.boot.save_count], address - G_SAVE_COUNT)
             }
-            G_CONFIG_SOURCE => self.config.boot.source as u16,
-            G_CONFIG_ERRORS => self.config.boot.load_errors,
-            G_RESET_CAUSE => self.config.boot.reset as u16,
+            G_CONFIG_SOURCE => self.persist.boot.source as u16,
+            G_CONFIG_ERRORS => self.persist.boot.load_errors,
+            G_RESET_CAUSE => self.persist.boot.reset as u16,
             G_RETRIES => u16::from(self.engine.config().retries),
             G_APPLY | G_SYNC_START => 0,
             G_WD_ACTION => self.config.watchdog_action as u16,

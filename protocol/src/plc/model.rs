@@ -158,7 +158,7 @@ impl DataModel for Registers<'_> {
     }
 
     fn identity(&self, _unit: u8) -> Option<Identity> {
-        Some(self.gateway.config.identity)
+        Some(*self.gateway.identity)
     }
 
     /// The gateway unit runs unless the fail-safe is latched; an axis unit while its axis

@@ -116,7 +116,14 @@ fn gateway() -> Result<NodeHarness, String> {
     config.watchdog = Duration::ZERO;
     config.plc = PlcLine::DEFAULT;
     config.pio_axis = Some(axis(MOVERS[0])?);
-    let mut h = NodeHarness::new(Node::new(config), bus);
+    let mut h = NodeHarness::new(
+        Node::new(
+            config,
+            &protocol::plc::IDENTITY,
+            protocol::plc::Boot::DEFAULT,
+        ),
+        bus,
+    );
     h.inputs = Some(PioInputs::from_bits(
         PioInputs::STP_N.bits() | PioInputs::SON.bits(),
     ));

@@ -1129,7 +1129,11 @@ mod tests {
         let mut config = GatewayConfig::new(axes);
         config.unit = UnitId::new(unit).unwrap();
         config.axis_base = AxisBase::new(base).unwrap();
-        Gateway::new(config)
+        Gateway::new(
+            config,
+            &protocol::plc::IDENTITY,
+            protocol::plc::Boot::DEFAULT,
+        )
     }
 
     /// What rcgw starts a plan from: the same settings, read.
