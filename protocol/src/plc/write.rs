@@ -291,9 +291,9 @@ pub enum GatewayWrite {
     PioPattern(Pattern),
     /// AXISBASE (taken on APPLY).
     AxisBase(AxisBase),
-    /// A register of the network block, at its offset (feature `tcp`).
+    /// A register of the network block (feature `tcp`).
     #[cfg(feature = "tcp")]
-    Net(u16, u16),
+    Net(crate::net::NetSetting),
     /// PIOSTART.
     PioStart(StartMode),
     /// PIOJOG.
@@ -304,8 +304,9 @@ pub enum GatewayWrite {
     SyncMask(AxisSet),
     /// SYNCSTART = 1 (started after the write's other registers, with its mask).
     SyncStart,
-    /// A register of the command channel's request block (taken as a block).
-    ChannelRequest,
+    /// A register of the command channel's request block: its offset in the block and its
+    /// value (the block is taken whole, once the write's registers are in it).
+    ChannelRequest(u16, u16),
     /// An AXISCFG field.
     Axis(Axis, AxisSetting),
 }
@@ -367,16 +368,11 @@ impl GatewayWrite {
                     // A build without the command channel (the F103's): not there.
                     return Err(Refused::NoSuchAddress);
                 }
-                Some(GatewayWrite::ChannelRequest)
+                Some(GatewayWrite::ChannelRequest(a - G_REQUEST, value))
             }
             #[cfg(feature = "tcp")]
             a if a.checked_sub(G_NET).is_some_and(|i| i < G_NET_LEN) => {
-                let offset = a - G_NET;
-                // Checked on a copy; applied after every register of the write is checked.
-                let mut probe = crate::net::NetConfig::DEFAULT;
-                probe
-                    .set_register(offset, value)
-                    .then_some(GatewayWrite::Net(offset, value))
+                crate::net::NetSetting::parse(a - G_NET, value).map(GatewayWrite::Net)
             }
             a => per_axis(a, G_AXIS_CONFIG, G_AXIS_CONFIG_LEN).and_then(|(axis, field)| {
                 AxisSetting::parse(field, value).map(|s| GatewayWrite::Axis(axis, s))
