@@ -121,7 +121,10 @@ pub async fn run(
     // The UARTs start at the node's settings.
     board.bus.set_baud(node.bus_baud().bits_per_second()).await;
     let plc = node.plc_line();
-    board.plc.set_line(plc.baud, plc.parity).await;
+    board
+        .plc
+        .set_line(plc.baud.bits_per_second(), plc.parity)
+        .await;
     // The harness waits for this line: both UARTs receive at their settings from now on.
     info!("ready");
     let mut stop = boot.stop;
@@ -221,11 +224,17 @@ pub async fn run(
                 Action::Line(LineAction::BreakEnd) => bus.break_end(),
                 // After the reply to the write that asked for it has left.
                 #[cfg(not(feature = "net"))]
-                Action::PlcLine(line) => plc.set_line(line.baud, line.parity).await,
+                Action::PlcLine(line) => {
+                    plc.set_line(line.baud.bits_per_second(), line.parity).await
+                }
                 // Asked over TCP, the reply on the PLC line may be any, up to 2.3 s long.
                 #[cfg(feature = "net")]
                 Action::PlcLine(line) => {
-                    fed(watchdog, pin!(plc.set_line(line.baud, line.parity))).await
+                    fed(
+                        watchdog,
+                        pin!(plc.set_line(line.baud.bits_per_second(), line.parity)),
+                    )
+                    .await
                 }
                 Action::Store(store) => {
                     // The reply to the write that asked for it leaves first: on the F103 an

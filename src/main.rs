@@ -110,6 +110,7 @@ fn start() -> Started {
     // (nothing on the board).
     emu::loosen_timing(&mut config);
     let mut parts = bring_up(config.plc);
+    let mut booted = protocol::plc::Boot::DEFAULT;
     if let Some(Parts {
         board,
         settings,
@@ -124,6 +125,7 @@ fn start() -> Started {
             outputs: pins.outputs.ports(),
         };
         settings.load(boot.inputs, &mut config);
+        booted = settings.boot;
         // A load that erased (a factory reset, a torn page) had its last pet before its last
         // erase: the gateway task's first heartbeat counts from here, not from there.
         board.watchdog.pet();
@@ -134,7 +136,7 @@ fn start() -> Started {
     }
     Started {
         parts,
-        node: node::Node::new(config),
+        node: node::Node::new(config, &node::IDENTITY, booted),
     }
 }
 

@@ -7,11 +7,18 @@
 pub use protocol::node::{Action, Node};
 pub use protocol::time::Instant;
 
-use protocol::plc::{GatewayConfig, IDENTITY};
+use protocol::modbus::Identity;
+use protocol::plc::GatewayConfig;
 use protocol::{Axis, AxisSet};
 
 /// The board's name in the device identification (FC2B/0E object 05).
 const MODEL_NAME: &str = crate::board::MODEL_NAME;
+
+/// Who this gateway is: the project's identity with the board's name.
+pub static IDENTITY: Identity = Identity {
+    model_name: MODEL_NAME,
+    ..protocol::plc::IDENTITY
+};
 
 /// The settings of a gateway nobody has set up yet: axis 0 on the bus with the §6-1
 /// establishment at 115.2 kbit/s, RTIM 3 ms; the discrete I/O on axis 0; the PLC line at
@@ -20,9 +27,5 @@ const MODEL_NAME: &str = crate::board::MODEL_NAME;
 pub const fn default_config() -> GatewayConfig {
     let mut config = GatewayConfig::new(AxisSet::first(1));
     config.pio_axis = Axis::new(0);
-    config.identity = protocol::modbus::Identity {
-        model_name: MODEL_NAME,
-        ..IDENTITY
-    };
     config
 }

@@ -11,7 +11,7 @@
 
 use protocol::pio::PioInputs;
 use protocol::plc::settings::RECORD_LEN;
-use protocol::plc::GatewayConfig;
+use protocol::plc::{Boot, GatewayConfig};
 
 use crate::board::SettingsFlash;
 
@@ -23,6 +23,9 @@ pub const FACTORY_RESET_INPUTS: PioInputs =
 pub struct Settings {
     #[cfg(feature = "hw")]
     store: Option<settings_store::Store<SettingsFlash>>,
+    /// What the start found: where the settings came from, the saves so far, why the board
+    /// started ([`Settings::load`]).
+    pub boot: Boot,
 }
 
 impl Settings {
@@ -33,18 +36,23 @@ impl Settings {
         if store.is_none() {
             warn!("settings: no store, the defaults apply");
         }
-        Settings { store }
+        Settings {
+            store,
+            boot: Boot::DEFAULT,
+        }
     }
 
     /// No store (the emulator).
     #[cfg(feature = "emulator")]
     pub fn new(_flash: Option<SettingsFlash>) -> Settings {
-        Settings {}
+        Settings {
+            boot: Boot::DEFAULT,
+        }
     }
 
     /// The configuration to start with, into `config` (which holds the defaults): the stored
-    /// settings over them, or nothing (after a factory reset if `inputs` ask for one), and
-    /// what the start found.
+    /// settings over them, or nothing (after a factory reset if `inputs` ask for one); and
+    /// what the start found, into [`Settings::boot`].
     ///
     /// The store's operations block (the chip's flash is blocking): each is run to completion on
     /// the spot, in a function of its own, so that the store's code is in the firmware once
@@ -62,14 +70,16 @@ impl Settings {
         }
         #[cfg(feature = "emulator")]
         let _ = factory;
-        config.boot.reset = crate::board::reset_cause();
+        let boot = &mut self.boot;
+        boot.reset = crate::board::reset_cause();
         info!(
             "settings: source {}, {} saves, reset cause {}",
-            config.boot.source as u8, config.boot.save_count, config.boot.reset as u8
+            boot.source as u8, boot.save_count, boot.reset as u8
         );
     }
 
-    /// What the store holds, into `config`: the settings loaded are applied here, not returned.
+    /// What the store holds, into `config` and [`Settings::boot`]: the settings loaded are
+    /// applied here, not returned.
     // Not inlined, like each store operation here: each one's frames (its nested calls, what it
     // returns) are then on the stack only while it runs, not all of them at once under
     // `Settings::load` (the deepest stack at start-up is this one: `scripts/stack_depth.py`).
@@ -83,7 +93,7 @@ impl Settings {
         if let Some(settings) = loaded.settings {
             settings.apply_to(config);
         }
-        config.boot = loaded.boot;
+        self.boot = loaded.boot;
     }
 
     /// SAVE: store `record`; the saves so far, or `Err` (SAVESTAT 3) if there is no store, it

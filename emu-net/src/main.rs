@@ -36,7 +36,7 @@ use embassy_net::{Config, Ipv4Address, Ipv4Cidr, Stack, StackResources, StaticCo
 use embassy_time::Timer;
 use protocol::net::Ipv4;
 use protocol::node::{Action, Node};
-use protocol::plc::{GatewayConfig, Store};
+use protocol::plc::{Boot, GatewayConfig, Store, IDENTITY};
 use protocol::time::Instant;
 use protocol::AxisSet;
 use rc_net::{Port, SocketHandle, SOCKETS};
@@ -129,7 +129,7 @@ fn start(spawner: Spawner) {
         RESOURCES.init(StackResources::new()),
         seed,
     );
-    let node = NODE.init(Node::new(config));
+    let node = NODE.init(Node::new(config, &IDENTITY, Boot::DEFAULT));
     match net_task(runner) {
         Ok(token) => spawner.spawn(token),
         Err(_) => log!("net task not started"),

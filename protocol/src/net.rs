@@ -175,27 +175,60 @@ impl NetConfig {
     /// changes). Any address is taken here; the board falls back to the default address at
     /// its start if the stored one is not a host's ([`Ipv4::is_host`]).
     pub fn set_register(&mut self, offset: u16, value: u16) -> bool {
-        use registers::*;
-        match offset {
-            PREFIX if prefix_ok(value) => self.prefix = value as u8,
-            MAX_CONNECTIONS if max_connections_ok(value) => {
-                self.policy.max_connections = value as u8
-            }
-            IDLE if idle_ok(value) => self.policy.idle_s = value,
-            PREFIX | MAX_CONNECTIONS | IDLE | CONNECTIONS => return false,
-            _ => {
+        NetSetting::parse(offset, value)
+            .map(|setting| self.set(setting))
+            .is_some()
+    }
+
+    /// Sets `setting`.
+    pub fn set(&mut self, setting: NetSetting) {
+        match setting {
+            NetSetting::Prefix(prefix) => self.prefix = prefix,
+            NetSetting::MaxConnections(n) => self.policy.max_connections = n,
+            NetSetting::Idle(s) => self.policy.idle_s = s,
+            NetSetting::AddressWord(offset, value) => {
                 let Some((address, at)) = self.address_mut(offset) else {
-                    return false;
+                    return;
                 };
                 let mut words = address.to_registers();
-                let Some(word) = words.get_mut(at) else {
-                    return false;
-                };
-                *word = value;
+                if let Some(word) = words.get_mut(at) {
+                    *word = value;
+                }
                 let [high, low] = words;
                 *address = Ipv4::from_registers(high, low);
             }
         }
-        true
+    }
+}
+
+/// One register of the network block (IPADDR to TCPALLOW), checked: what a write of it sets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum NetSetting {
+    /// IPPREFIX: 1 to 32.
+    Prefix(u8),
+    /// TCPMAX: 1 to [`MAX_CONNECTIONS`].
+    MaxConnections(u8),
+    /// TCPIDLE, s: 0 (never) to [`MAX_IDLE_S`].
+    Idle(u16),
+    /// One word of an address (IPADDR, IPROUTER, a TCPALLOW slot), by the register's offset:
+    /// any value (the board falls back to its default address at its start if the stored one
+    /// is not a host's).
+    AddressWord(u16, u16),
+}
+
+impl NetSetting {
+    /// `value` at `offset` of the network block, if that register is a setting and takes it.
+    pub fn parse(offset: u16, value: u16) -> Option<NetSetting> {
+        use registers::*;
+        match offset {
+            PREFIX => prefix_ok(value).then_some(NetSetting::Prefix(value as u8)),
+            MAX_CONNECTIONS => {
+                max_connections_ok(value).then_some(NetSetting::MaxConnections(value as u8))
+            }
+            IDLE => idle_ok(value).then_some(NetSetting::Idle(value)),
+            IP..=1 | ROUTER..=4 | ALLOW..=15 => Some(NetSetting::AddressWord(offset, value)),
+            _ => None,
+        }
     }
 }

@@ -12,7 +12,10 @@ use protocol::plc::map::*;
 use protocol::plc::settings::{
     Settings, SettingsError, FORMAT_1, FORMAT_2, RECORD_LEN, RECORD_LEN_1, RECORD_LEN_2,
 };
-use protocol::plc::{Boot, ConfigSource, GatewayConfig, Parity, ResetCause, Store};
+use protocol::plc::{
+    AxisBase, Boot, ConfigSource, GatewayConfig, InchStep, JogSpeed, Parity, PlcBaud, ResetCause,
+    Store, UnitId,
+};
 use protocol::units::Lead;
 use protocol::AxisSet;
 use support::*;
@@ -24,10 +27,10 @@ fn config() -> GatewayConfig {
     c.pio_axis = Some(axis(1));
     c.pio_pattern = Pattern::Solenoid3;
     c.pio_start = StartMode::Edge;
-    c.pio_jog = 25_00;
-    c.pio_inch = 5;
-    c.axis_base = 17;
-    c.unit = 63;
+    c.pio_jog = JogSpeed::from_hundredths(25_00).unwrap();
+    c.pio_inch = InchStep::from_hundredths(5).unwrap();
+    c.axis_base = AxisBase::new(17).unwrap();
+    c.unit = UnitId::new(63).unwrap();
     c.net.ip = protocol::net::Ipv4([10, 1, 2, 3]);
     c.net.prefix = 16;
     c.net.router = protocol::net::Ipv4([10, 1, 0, 1]);
@@ -42,7 +45,7 @@ fn config() -> GatewayConfig {
 #[test]
 fn a_format_2_record_is_read() {
     let mut old = config();
-    old.axis_base = 1;
+    old.axis_base = AxisBase::DEFAULT;
     old.net = protocol::net::NetConfig::DEFAULT;
     let record = Settings::of(&old).encode();
     let mut v2 = record[..RECORD_LEN_2].to_vec();
@@ -60,12 +63,12 @@ fn a_format_2_record_is_read() {
 #[test]
 fn a_format_1_record_is_read() {
     let mut old = config();
-    old.axis_base = 1;
+    old.axis_base = AxisBase::DEFAULT;
     old.net = protocol::net::NetConfig::DEFAULT;
     old.pio_pattern = Pattern::Positioning;
     old.pio_start = StartMode::Level;
-    old.pio_jog = protocol::plc::DEFAULT_PIO_JOG;
-    old.pio_inch = protocol::plc::DEFAULT_PIO_INCH;
+    old.pio_jog = JogSpeed::from_hundredths(protocol::plc::DEFAULT_PIO_JOG).unwrap();
+    old.pio_inch = InchStep::from_hundredths(protocol::plc::DEFAULT_PIO_INCH).unwrap();
     let record = Settings::of(&old).encode();
     let mut v1 = record[..RECORD_LEN_1].to_vec();
     v1[0] = FORMAT_1;
@@ -195,11 +198,11 @@ fn settings() -> impl Strategy<Value = Settings> {
     )
         .prop_map(|(axes, retries, wd, rtim, plc_baud, per_axis)| {
             let mut c = GatewayConfig::new(AxisSet(axes & 0x7FFF));
-            c.unit = 63;
+            c.unit = UnitId::new(63).unwrap();
             c.bus.retries = retries;
             c.watchdog = protocol::time::Duration::from_millis(wd.into());
             c.bus.rtim = protocol::Rtim::new(rtim).unwrap();
-            c.plc.baud = plc_baud;
+            c.plc.baud = PlcBaud::new(plc_baud).unwrap();
             c.plc.parity = Parity::Even;
             for (axis, (lead, ppr, home, twos, stroke)) in protocol::Axis::all().zip(per_axis) {
                 let a = &mut c.axes[axis];
@@ -253,7 +256,11 @@ fn save_stores_the_settings_with_the_pending_ones() {
     };
     let saved = Settings::decode(&record).unwrap();
     assert_eq!(
-        (saved.plc.baud, saved.plc.parity, saved.unit),
+        (
+            saved.plc.baud.bits_per_second(),
+            saved.plc.parity,
+            saved.unit.get()
+        ),
         (19_200, Parity::Even, 100)
     );
     assert_eq!(saved.watchdog, protocol::time::Duration::from_millis(500));
@@ -308,7 +315,7 @@ fn apply_switches_the_plc_line_after_its_reply_and_the_unit_at_once() {
     rig.write(63, G_UNIT_ID, &[50]).unwrap();
     rig.write(63, G_APPLY, &[1]).unwrap();
     assert_eq!(rig.plc_lines.len(), 1);
-    assert_eq!(rig.plc_lines[0].1.baud, 38_400);
+    assert_eq!(rig.plc_lines[0].1.baud.bits_per_second(), 38_400);
     // Unit 63 is gone, 50 answers; the bus is being established again.
     assert_eq!(
         rig.modbus(
@@ -350,7 +357,7 @@ fn factory_reset_and_restart_need_their_keys() {
 #[test]
 fn a_start_reports_where_its_settings_came_from_and_why() {
     let rig = |boot: Boot| {
-        let mut rig = Rig::ready(1, |c| c.boot = boot);
+        let mut rig = Rig::ready_after(boot, 1, |_| {});
         rig.read(63, G_SAVE_COUNT, 6).unwrap()
     };
     let damaged = Boot {

@@ -176,7 +176,7 @@ pub fn board(
         PLC_TX.take(),
         PLC_RX.take(),
         Irqs,
-        line_config(plc_line.baud, plc_line.parity),
+        line_config(plc_line.baud.bits_per_second(), plc_line.parity),
     )?;
 
     let board = Board {
@@ -190,7 +190,7 @@ pub fn board(
         plc: Rs485::new(
             plc,
             UartRegs(embassy_stm32::pac::USART1),
-            (plc_line.baud, plc_line.parity),
+            (plc_line.baud.bits_per_second(), plc_line.parity),
             None,
             Some(plc_de),
         ),

@@ -379,13 +379,13 @@ pub fn board(
         Irqs,
         PLC_TX.take(),
         PLC_RX.take(),
-        line_config(plc_line.baud, plc_line.parity),
+        line_config(plc_line.baud.bits_per_second(), plc_line.parity),
     )?;
 
     let plc = Rs485::new(
         plc,
         UartRegs(embassy_stm32::pac::USART2),
-        (plc_line.baud, plc_line.parity),
+        (plc_line.baud.bits_per_second(), plc_line.parity),
         None,
         None,
     );

@@ -53,7 +53,14 @@ fn rig_with(change: impl FnOnce(&mut GatewayConfig)) -> Rig {
     };
     change(&mut config);
     Rig {
-        h: NodeHarness::new(Node::new(config), bus),
+        h: NodeHarness::new(
+            Node::new(
+                config,
+                &protocol::plc::IDENTITY,
+                protocol::plc::Boot::DEFAULT,
+            ),
+            bus,
+        ),
         // *STP is negative logic: ON means "run".
         inputs: PioInputs::STP_N,
         outputs: PioOutputs::SAFE,

@@ -67,7 +67,7 @@ fuzz_target!(|data: &[u8]| {
         config.net.policy.max_connections = 2;
         config.net.policy.idle_s = 1;
     }
-    let mut node = Node::new(config);
+    let mut node = Node::new(config, &protocol::plc::IDENTITY, protocol::plc::Boot::DEFAULT);
     // Per socket: a connection is open; it sent bytes since its last reply.
     let mut tcp = Tcp::default();
     let mut now = 0u64;

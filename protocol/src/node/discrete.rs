@@ -93,13 +93,13 @@ impl Node {
         let scale = &axis.scale;
         let wire = |at: i32| scale.position_to_wire(Length(at)).ok();
         let step = |distance: i32| scale.distance_to_wire(Length(distance)).ok();
-        let inch = i32::from(config.pio_inch);
+        let inch = config.pio_inch.length().0;
         Some(Jog {
             plus_end: wire(axis.stroke.0)?,
             minus_end: wire(0)?,
             plus_step: step(inch)?,
             minus_step: step(-inch)?,
-            velocity: scale.velocity(Speed(u32::from(config.pio_jog))).ok()?,
+            velocity: scale.velocity(config.pio_jog.speed()).ok()?,
             acceleration: scale.acceleration(Accel(u32::from(PIO_ACCEL))).ok()?,
         })
     }

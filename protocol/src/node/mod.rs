@@ -51,7 +51,7 @@
 //! use protocol::node::{Action, Node};
 //! use protocol::line::LineAction;
 //! use protocol::pio::PioInputs;
-//! use protocol::plc::{GatewayConfig, Store};
+//! use protocol::plc::{Boot, GatewayConfig, Store, IDENTITY};
 //! use protocol::time::Instant;
 //! use protocol::AxisSet;
 //!
@@ -79,7 +79,7 @@
 //! // In the firmware the node (about 11 KB) is built once, in place, and lives as long as it.
 //! let mut config = GatewayConfig::new(AxisSet::first(2));
 //! config.bus.establish = false;
-//! let mut node = Node::new(config);
+//! let mut node = Node::new(config, &IDENTITY, Boot::DEFAULT);
 //! let mut board = Board::default();
 //! let mut buf = [0u8; 64];
 //! for _ in 0..50 {
@@ -101,7 +101,7 @@
 //!             Action::Line(LineAction::CommChange) => {
 //!                 board.bus_write_and_flush(&protocol::frame::COMM_CHANGE)
 //!             }
-//!             Action::PlcLine(line) => board.set_plc_line(line.baud),
+//!             Action::PlcLine(line) => board.set_plc_line(line.baud.bits_per_second()),
 //!             Action::Store(Store::Save) => {
 //!                 let saved = board.write_settings(&node.settings_record());
 //!                 node.stored(saved);
@@ -125,12 +125,13 @@ use crate::frame::FRAME_LEN;
 use crate::line::{Baud, LineAction};
 use crate::memory::PointField;
 use crate::modbus::{
-    chars_time, t3_5, Handled, Receiver, ReceiverCounters, ReplyBuffer, Slave, SlaveCounters,
+    chars_time, t3_5, Handled, Identity, Receiver, ReceiverCounters, ReplyBuffer, Slave,
+    SlaveCounters,
 };
 use crate::pio::{self, Band, Jog, Pattern, Pio, PioInputs, PioOutputs};
-use crate::plc::{Gateway, GatewayConfig, PlcLine, Store, PIO_ACCEL};
+use crate::plc::{Boot, Gateway, GatewayConfig, PlcLine, Store, PIO_ACCEL};
 use crate::time::{earliest, Duration, Instant};
-use crate::units::{Accel, Length, Speed};
+use crate::units::{Accel, Length};
 use crate::{Axis, PositionNo, Pulses};
 
 #[cfg(feature = "tcp")]
@@ -219,7 +220,9 @@ const fn plc_frame_end(baud: u32, gap: Option<Duration>) -> Duration {
 }
 
 impl Node {
-    /// A node for `config`. The Modbus receiver's t3.5 follows `config.plc.baud`; its t1.5 gap
+    /// A node for `config`, the gateway being `identity` (FC2B/0E, FC11, VERSION) and started
+    /// as `boot` says (CFGSOURCE, CFGERRORS, RESETCAUSE, SAVECOUNT): the firmware's facts, which
+    /// are no settings. The Modbus receiver's t3.5 follows `config.plc.baud`; its t1.5 gap
     /// check is off, since byte stamps taken when a task reads the UART are not accurate to the
     /// 750 µs it needs (the CRC still rejects a garbled frame).
     ///
@@ -229,12 +232,12 @@ impl Node {
     // are `Gateway::new` and `Engine::new` below it (measured on the MCU: inlined, the
     // constructors' parts were temporaries, 6 to 11 KB of stack).
     #[inline(never)]
-    pub const fn new(config: GatewayConfig) -> Node {
+    pub const fn new(config: GatewayConfig, identity: &'static Identity, boot: Boot) -> Node {
         Node {
-            gateway: Gateway::new(config),
+            gateway: Gateway::new(config, identity, boot),
             receiver: Receiver::with_timing(
                 None,
-                plc_frame_end(config.plc.baud, config.plc_frame_gap),
+                plc_frame_end(config.plc.baud.bits_per_second(), config.plc_frame_gap),
             ),
             slave: Slave::new(),
             reply: ReplyBuffer::new(),
@@ -313,7 +316,10 @@ impl Node {
             self.dirty = true;
             if let Handled::Reply(_) = handled {
                 let reply = self.reply.as_bytes();
-                let on_wire = chars_time(reply.len(), self.gateway.config().plc.baud);
+                let on_wire = chars_time(
+                    reply.len(),
+                    self.gateway.config().plc.baud.bits_per_second(),
+                );
                 self.gateway.plc_activity(now, now + on_wire);
                 return Some(Action::Reply(reply));
             }
@@ -324,7 +330,10 @@ impl Node {
             return Some(Action::Tcp(action));
         }
         if let Some(line) = self.gateway.take_plc_line() {
-            let end = plc_frame_end(line.baud, self.gateway.config().plc_frame_gap);
+            let end = plc_frame_end(
+                line.baud.bits_per_second(),
+                self.gateway.config().plc_frame_gap,
+            );
             self.receiver.set_frame_end(end);
             return Some(Action::PlcLine(line));
         }

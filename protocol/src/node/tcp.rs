@@ -139,7 +139,7 @@ impl Node {
             counters: self.tcp.server.counters(),
             connections: self.tcp.server.connections(),
         };
-        let direct_unit = self.gateway.config().unit;
+        let direct_unit = self.gateway.config().unit.get();
         loop {
             let (socket, adu) = self.tcp.server.next_frame()?;
             let mut model = self.gateway.registers(now, link).with_tcp(view);

@@ -103,26 +103,13 @@ impl Channel {
         at(G_REQUEST, &self.request).or_else(|| at(G_RESPONSE, &self.response))
     }
 
-    /// The request block as a write of `values` at `address` would leave it, if the write
-    /// touches it.
-    pub(super) fn after_write(&self, address: u16, values: &[u16]) -> Option<Request> {
-        if !CHANNEL {
-            return None;
-        }
-        let mut request = self.request;
-        let mut touched = false;
-        for (i, &value) in values.iter().enumerate() {
-            let slot = u16::try_from(i)
-                .ok()
-                .and_then(|i| address.checked_add(i))
-                .and_then(|a| a.checked_sub(G_REQUEST))
-                .and_then(|o| request.get_mut(usize::from(o)));
-            if let Some(slot) = slot {
-                *slot = value;
-                touched = true;
-            }
-        }
-        touched.then_some(request)
+    /// The request block as it stands (a write changes a copy of it, which [`check`] and
+    /// [`store`] take).
+    ///
+    /// [`check`]: Channel::check
+    /// [`store`]: Channel::store
+    pub(super) fn request(&self) -> Request {
+        self.request
     }
 
     /// Check a new request block before anything is stored: the axis and point it would
@@ -288,7 +275,11 @@ mod tests {
     /// they do not exist: 02, nothing stored.
     #[test]
     fn the_channel_registers_exist_only_with_the_channel() {
-        let mut gateway = Gateway::new(GatewayConfig::new(AxisSet::first(1)));
+        let mut gateway = Gateway::new(
+            GatewayConfig::new(AxisSet::first(1)),
+            &crate::plc::IDENTITY,
+            crate::plc::Boot::DEFAULT,
+        );
         let mut registers = gateway.registers(Instant::ZERO, SlaveCounters::default());
         let mut out = [0u16; 1];
         let read = registers.read_registers(63, RegisterTable::Holding, G_RESPONSE, &mut out);

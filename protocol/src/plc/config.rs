@@ -1,13 +1,12 @@
 //! What the gateway is set up with.
 
-use super::boot::Boot;
 use crate::axes::{AxisMap, AxisSet};
 use crate::engine::Config;
 use crate::modbus::Identity;
 use crate::net::NetConfig;
 use crate::pio::{Pattern, Ports, StartMode};
 use crate::time::Duration;
-use crate::units::{Complement, Lead, Length, Scale};
+use crate::units::{Complement, Lead, Length, Scale, Speed};
 use crate::{Axis, HomeDirection};
 
 /// Who the gateway is unless the firmware says otherwise (it names its board in `model_name`).
@@ -115,9 +114,45 @@ pub(crate) fn stroke_of(raw: u32) -> Option<Length> {
     i32::try_from(raw).ok().map(Length)
 }
 
-/// Whether a gateway unit id is one (Serial Line §2.2's slave addresses).
-pub(crate) fn unit_ok(unit: u16) -> bool {
-    (1..=247).contains(&unit)
+/// The gateway's own Modbus unit id (UNITID): 1 to 247, Serial Line §2.2's slave addresses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct UnitId(u8);
+
+impl UnitId {
+    /// [`DEFAULT_GATEWAY_UNIT`].
+    pub const DEFAULT: UnitId = UnitId(DEFAULT_GATEWAY_UNIT);
+
+    /// The unit id `unit`, if it is a slave address.
+    pub const fn new(unit: u8) -> Option<UnitId> {
+        if unit >= 1 && unit <= 247 {
+            Some(UnitId(unit))
+        } else {
+            None
+        }
+    }
+
+    /// The unit id of a UNITID value or a stored byte, if it is one.
+    pub(crate) fn of(value: u16) -> Option<UnitId> {
+        u8::try_from(value).ok().and_then(UnitId::new)
+    }
+
+    /// The id.
+    pub const fn get(self) -> u8 {
+        self.0
+    }
+}
+
+impl core::fmt::Display for UnitId {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
+impl Default for UnitId {
+    fn default() -> UnitId {
+        UnitId::DEFAULT
+    }
 }
 
 /// The unit id of axis 0 unless set: axis n is unit n + 1, as IAI's SIO-through mode.
@@ -125,22 +160,81 @@ pub const DEFAULT_AXIS_BASE: u8 = 1;
 /// The highest AXISBASE: axis 15 is then unit 247, the last slave address (Serial Line §2.2).
 pub const MAX_AXIS_BASE: u8 = 247 - 15;
 
-/// Whether `base` is an AXISBASE: every axis' unit a slave address, 1 to 247.
-pub(crate) fn axis_base_ok(base: u16) -> bool {
-    (1..=u16::from(MAX_AXIS_BASE)).contains(&base)
+/// The unit id of axis 0 (AXISBASE): axis n is unit `base + n`, so that several gateways on
+/// one PLC line each take their own range. 1 to [`MAX_AXIS_BASE`]: every axis' unit a slave
+/// address, 1 to 247.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AxisBase(u8);
+
+impl AxisBase {
+    /// [`DEFAULT_AXIS_BASE`].
+    pub const DEFAULT: AxisBase = AxisBase(DEFAULT_AXIS_BASE);
+
+    /// The base `base`, if it is one.
+    pub const fn new(base: u8) -> Option<AxisBase> {
+        if base >= 1 && base <= MAX_AXIS_BASE {
+            Some(AxisBase(base))
+        } else {
+            None
+        }
+    }
+
+    /// The base of an AXISBASE value or a stored byte, if it is one.
+    pub(crate) fn of(value: u16) -> Option<AxisBase> {
+        u8::try_from(value).ok().and_then(AxisBase::new)
+    }
+
+    /// The unit id of axis 0.
+    pub const fn get(self) -> u8 {
+        self.0
+    }
+
+    /// The axis of `axes` whose unit is `unit` (a unit id as addressed), if any: the gateway's
+    /// own unit must not be one.
+    pub fn axis_of(self, unit: u8, axes: AxisSet) -> Option<Axis> {
+        unit.checked_sub(self.0)
+            .and_then(Axis::new)
+            .filter(|&a| axes.contains(a))
+    }
 }
 
-/// The axis of `axes` whose unit is `unit` (axis n is unit `base` + n), if any: the gateway's
-/// own unit must not be one.
-pub(crate) fn axis_of(unit: u8, base: u8, axes: AxisSet) -> Option<Axis> {
-    unit.checked_sub(base)
-        .and_then(Axis::new)
-        .filter(|&a| axes.contains(a))
+impl core::fmt::Display for AxisBase {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        self.0.fmt(f)
+    }
 }
 
-/// Whether a PLC watchdog time is one: 0 (off) or 50-60000 ms.
-pub(crate) fn watchdog_ok(ms: u16) -> bool {
-    ms == 0 || (50..=60_000).contains(&ms)
+impl Default for AxisBase {
+    fn default() -> AxisBase {
+        AxisBase::DEFAULT
+    }
+}
+
+/// A PLC watchdog time (WATCHDOG, the stored record): 0 (off) or 50-60000 ms.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WatchdogTime(u16);
+
+impl WatchdogTime {
+    /// The time of `ms`, if it is one.
+    pub const fn from_millis(ms: u16) -> Option<WatchdogTime> {
+        if ms == 0 || (ms >= 50 && ms <= 60_000) {
+            Some(WatchdogTime(ms))
+        } else {
+            None
+        }
+    }
+
+    /// The time, ms (0: off).
+    pub const fn millis(self) -> u16 {
+        self.0
+    }
+
+    /// The time (zero: off).
+    pub const fn duration(self) -> Duration {
+        Duration::from_millis(self.0 as u64)
+    }
 }
 
 /// Parity of the PLC line (8 data bits; one stop bit with parity, as Modbus RTU frames
@@ -170,12 +264,52 @@ impl Parity {
     }
 }
 
+/// PLC line rates the gateway accepts, bit/s.
+pub const PLC_BAUDS: [u32; 8] = [1_200, 2_400, 4_800, 9_600, 19_200, 38_400, 57_600, 115_200];
+
+/// A PLC line rate, one of [`PLC_BAUDS`] (PLCBAUD holds it in 100 bit/s, the stored record in
+/// bit/s).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+// In 100 bit/s, as PLCBAUD: two bytes, so that a parsed write ([`GatewayWrite`](super::write::GatewayWrite))
+// stays small enough to be returned in registers.
+pub struct PlcBaud(u16);
+
+impl PlcBaud {
+    /// 115.2 kbit/s.
+    pub const B115200: PlcBaud = PlcBaud(1152);
+
+    /// The rate of `bits_per_second`, if the gateway accepts it.
+    pub fn new(bits_per_second: u32) -> Option<PlcBaud> {
+        PLC_BAUDS
+            .contains(&bits_per_second)
+            .then_some(PlcBaud((bits_per_second / 100) as u16))
+    }
+
+    /// The rate of a PLCBAUD value (100 bit/s), if it is one.
+    pub(crate) fn from_register(hundreds: u16) -> Option<PlcBaud> {
+        PLC_BAUDS
+            .contains(&(u32::from(hundreds) * 100))
+            .then_some(PlcBaud(hundreds))
+    }
+
+    /// Bits per second.
+    pub const fn bits_per_second(self) -> u32 {
+        self.0 as u32 * 100
+    }
+
+    /// The PLCBAUD value: 100 bit/s.
+    pub(crate) const fn register(self) -> u16 {
+        self.0
+    }
+}
+
 /// The PLC line's settings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct PlcLine {
-    /// Bits per second (sets the Modbus t1.5/t3.5 timers).
-    pub baud: u32,
+    /// The line rate (sets the Modbus t1.5/t3.5 timers).
+    pub baud: PlcBaud,
     /// Parity.
     pub parity: Parity,
 }
@@ -183,7 +317,7 @@ pub struct PlcLine {
 impl PlcLine {
     /// 115.2 kbit/s, no parity.
     pub const DEFAULT: PlcLine = PlcLine {
-        baud: 115_200,
+        baud: PlcBaud::B115200,
         parity: Parity::None,
     };
 }
@@ -198,20 +332,79 @@ pub const PIO_ACCEL: u16 = 30;
 /// The longest inching step: 1.00 mm (0.01 mm), PCON's range.
 pub const MAX_PIO_INCH: u16 = 100;
 
-/// Whether `inch` (0.01 mm) is an inching step PIOINCH takes: 0.01-1.00 mm.
-pub(crate) const fn pio_inch_ok(inch: u16) -> bool {
-    inch != 0 && inch <= MAX_PIO_INCH
-}
-
-/// Everything the gateway is set up with.
+/// Pattern 1's jog speed (PIOJOG; PCON parameter No. 26): 0.01 to 655.35 mm/s.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct JogSpeed(u16);
+
+impl JogSpeed {
+    /// [`DEFAULT_PIO_JOG`].
+    pub const DEFAULT: JogSpeed = JogSpeed(DEFAULT_PIO_JOG);
+
+    /// The speed of `hundredths` (0.01 mm/s), if it is one (not 0).
+    pub const fn from_hundredths(hundredths: u16) -> Option<JogSpeed> {
+        if hundredths != 0 {
+            Some(JogSpeed(hundredths))
+        } else {
+            None
+        }
+    }
+
+    /// The speed, 0.01 mm/s (PIOJOG's value).
+    pub const fn hundredths(self) -> u16 {
+        self.0
+    }
+
+    /// The speed.
+    pub const fn speed(self) -> Speed {
+        Speed(self.0 as u32)
+    }
+}
+
+/// Pattern 1's inching step (PIOINCH; PCON parameter No. 48): 0.01 to 1.00 mm.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct InchStep(u16);
+
+impl InchStep {
+    /// [`DEFAULT_PIO_INCH`].
+    pub const DEFAULT: InchStep = InchStep(DEFAULT_PIO_INCH);
+
+    /// The step of `hundredths` (0.01 mm), if it is one: 1 to [`MAX_PIO_INCH`].
+    pub const fn from_hundredths(hundredths: u16) -> Option<InchStep> {
+        if hundredths != 0 && hundredths <= MAX_PIO_INCH {
+            Some(InchStep(hundredths))
+        } else {
+            None
+        }
+    }
+
+    /// The step, 0.01 mm (PIOINCH's value).
+    pub const fn hundredths(self) -> u16 {
+        self.0
+    }
+
+    /// The step.
+    pub const fn length(self) -> Length {
+        Length(self.0 as i32)
+    }
+}
+
+/// Everything the gateway is set up with: what the PLC can set (and SAVE) and what the board
+/// decides. Not what the firmware learns at a start, which [`Node::new`](crate::node::Node::new)
+/// takes apart: who the gateway is ([`Identity`]) and how it started ([`Boot`](super::Boot)).
+///
+/// Start from [`GatewayConfig::new`] (or [`GatewayConfig::DEFAULT`]) and set fields: more may
+/// come.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub struct GatewayConfig {
     /// The gateway's own Modbus unit id.
-    pub unit: u8,
+    pub unit: UnitId,
     /// The unit id of axis 0: axis n is unit `axis_base + n` (several gateways on one PLC
     /// line each take their own range).
-    pub axis_base: u8,
+    pub axis_base: AxisBase,
     /// The PLC line.
     pub plc: PlcLine,
     /// The silence that ends a Modbus frame on the PLC line when it must be longer than t3.5 of
@@ -235,25 +428,27 @@ pub struct GatewayConfig {
     pub pio_start: StartMode,
     /// The PIO ports the board has: a pattern needing others is refused.
     pub pio_ports: Ports,
-    /// Pattern 1's jog speed, 0.01 mm/s (PIOJOG; PCON parameter No. 26).
-    pub pio_jog: u16,
-    /// Pattern 1's inching step, 0.01 mm (PIOINCH; PCON parameter No. 48).
-    pub pio_inch: u16,
+    /// Pattern 1's jog speed (PIOJOG).
+    pub pio_jog: JogSpeed,
+    /// Pattern 1's inching step (PIOINCH).
+    pub pio_inch: InchStep,
     /// The Ethernet board's address and the Modbus TCP server's policy (stored on every
     /// board; used where there is Ethernet).
     pub net: NetConfig,
-    /// Who the gateway is (FC2B/0E, FC11), and its firmware version (VERSION).
-    pub identity: Identity,
-    /// What the firmware knows about this start (settings source, saves, reset cause).
-    pub boot: Boot,
 }
 
 impl GatewayConfig {
+    /// The defaults, with no axis on the bus: unit 63, axis 0 at unit 1, the PLC line at
+    /// 115.2 kbit/s without parity, the bus as [`Config::DEFAULT`], the watchdog at 1 s
+    /// stopping every axis, no PIO axis (pattern 0, level start, every port), the jog's
+    /// factory values, the network's defaults.
+    pub const DEFAULT: GatewayConfig = GatewayConfig::new(AxisSet::EMPTY);
+
     /// A gateway for `axes` with defaults everywhere else.
     pub const fn new(axes: AxisSet) -> GatewayConfig {
         GatewayConfig {
-            unit: DEFAULT_GATEWAY_UNIT,
-            axis_base: DEFAULT_AXIS_BASE,
+            unit: UnitId::DEFAULT,
+            axis_base: AxisBase::DEFAULT,
             plc: PlcLine::DEFAULT,
             plc_frame_gap: None,
             bus: Config {
@@ -267,16 +462,20 @@ impl GatewayConfig {
             pio_pattern: Pattern::Positioning,
             pio_start: StartMode::Level,
             pio_ports: Ports::ALL,
-            pio_jog: DEFAULT_PIO_JOG,
-            pio_inch: DEFAULT_PIO_INCH,
+            pio_jog: JogSpeed::DEFAULT,
+            pio_inch: InchStep::DEFAULT,
             net: NetConfig::DEFAULT,
-            identity: IDENTITY,
-            boot: Boot::DEFAULT,
         }
     }
 
     /// The axis addressed by a Modbus unit id, if the PLC may address it.
     pub fn axis_of_unit(&self, unit: u8) -> Option<Axis> {
-        axis_of(unit, self.axis_base, self.bus.axes)
+        self.axis_base.axis_of(unit, self.bus.axes)
+    }
+}
+
+impl Default for GatewayConfig {
+    fn default() -> GatewayConfig {
+        GatewayConfig::DEFAULT
     }
 }

@@ -8,6 +8,7 @@
 //! and drives the [`Engine`]; none calls back into the gateway: it reports what happened and the
 //! gateway updates what the PLC sees.
 
+use super::boot::Boot;
 use super::channel::Channel;
 use super::command::{CommandState, Motion, PlcAxis, Reason};
 use super::config::GatewayConfig;
@@ -22,6 +23,7 @@ use crate::engine::point_jobs::PointReadback;
 use crate::engine::{
     Engine, Event, Job, JobError, JobId, JobKind, JobOutput, Link, Output, SubmitError,
 };
+use crate::modbus::Identity;
 use crate::pio::TEACHING;
 use crate::time::{earliest, Duration, Instant};
 use crate::{Axis, PositionNo};
@@ -33,6 +35,8 @@ const SON_RETRY: Duration = Duration::from_millis(2000);
 #[derive(Debug)]
 pub struct Gateway {
     pub(super) config: GatewayConfig,
+    /// Who the gateway is (FC2B/0E, FC11), and its firmware version (VERSION).
+    pub(super) identity: &'static Identity,
     pub(super) axes: AxisMap<PlcAxis>,
     pub(super) failsafe: FailSafe,
     pub(super) sync: SyncStart,
@@ -61,9 +65,10 @@ impl Gateway {
     /// built in place (see [`Node::new`](crate::node::Node::new)): a call made after it into
     /// the same result would keep the engine in a temporary (7 KB, measured on the MCU).
     #[inline(never)]
-    pub const fn new(config: GatewayConfig) -> Gateway {
+    pub const fn new(config: GatewayConfig, identity: &'static Identity, boot: Boot) -> Gateway {
         Gateway {
             config,
+            identity,
             axes: AxisMap::new(PlcAxis::new()),
             failsafe: FailSafe::new(),
             sync: SyncStart::new(),
@@ -71,7 +76,7 @@ impl Gateway {
             points: PointCache::new(),
             teach: Teach::new(),
             taught: None,
-            persist: Persist::new(&config),
+            persist: Persist::new(&config, boot),
             plc_line_changed: false,
             now: Instant::ZERO,
             events_lost: 0,
@@ -435,7 +440,7 @@ impl Gateway {
     }
 
     fn job_done(&mut self, id: JobId, axis: Axis, result: Result<JobOutput, JobError>) {
-        let jog_speed = self.config.pio_jog;
+        let jog_speed = self.config.pio_jog.hundredths();
         let teach = if TEACHING {
             let config = &self.config.axes[axis];
             self.teach

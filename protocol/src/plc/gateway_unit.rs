@@ -12,10 +12,8 @@ use super::persist::Store;
 use super::refused::Refused;
 use super::registers::{join, split};
 use super::write::{admit, axis_cfg, nth, per_axis, AxisSetting, GatewayWrite, Pending};
-use crate::axes::AxisSet;
 use crate::engine::LinkError;
 use crate::modbus::{Exception, SlaveCounters};
-use crate::time::Duration;
 use crate::Axis;
 
 /// DIAG word offsets past the seven u32 counters.
@@ -37,7 +35,7 @@ impl Gateway {
     pub(super) fn gateway_read(&self, address: u16, link: &SlaveCounters) -> Result<u16, Refused> {
         Ok(match address {
             G_VERSION | 0x0001 => {
-                let (major, minor, patch) = self.config.identity.version();
+                let (major, minor, patch) = self.identity.version();
                 if address == G_VERSION {
                     u16::from(major) << 8 | u16::from(minor)
                 } else {
@@ -53,26 +51,26 @@ impl Gateway {
             G_WATCHDOG => u16::try_from(self.config.watchdog.as_millis()).unwrap_or(u16::MAX),
             G_BUS_BAUD => u16::try_from(self.persist.baud.bits_per_second() / 100).unwrap_or(0),
             G_BUS_RTIM => u16::from(self.persist.rtim.get()),
-            G_PLC_BAUD => u16::try_from(self.persist.plc.baud / 100).unwrap_or(0),
+            G_PLC_BAUD => self.persist.plc.baud.register(),
             G_PLC_PARITY => self.persist.plc.parity as u16,
-            G_UNIT_ID => u16::from(self.persist.unit),
-            G_AXIS_BASE => u16::from(self.persist.axis_base),
+            G_UNIT_ID => u16::from(self.persist.unit.get()),
+            G_AXIS_BASE => u16::from(self.persist.axis_base.get()),
             G_SAVE | G_FACTORY | G_RESTART => 0,
             G_SAVE_STATUS => self.persist.status as u16,
             G_SAVE_COUNT | 0x0016 => {
-                counter_register(&[self.persist.saves], address - G_SAVE_COUNT)
+                counter_register(&[self.persist.boot.save_count], address - G_SAVE_COUNT)
             }
-            G_CONFIG_SOURCE => self.config.boot.source as u16,
-            G_CONFIG_ERRORS => self.config.boot.load_errors,
-            G_RESET_CAUSE => self.config.boot.reset as u16,
+            G_CONFIG_SOURCE => self.persist.boot.source as u16,
+            G_CONFIG_ERRORS => self.persist.boot.load_errors,
+            G_RESET_CAUSE => self.persist.boot.reset as u16,
             G_RETRIES => u16::from(self.engine.config().retries),
             G_APPLY | G_SYNC_START => 0,
             G_WD_ACTION => self.config.watchdog_action as u16,
             G_PIO_AXIS => self.config.pio_axis.map_or(0xFFFF, |a| u16::from(a.get())),
             G_PIO_PATTERN => self.config.pio_pattern.code(),
             G_PIO_START => self.config.pio_start as u16,
-            G_PIO_JOG => self.config.pio_jog,
-            G_PIO_INCH => self.config.pio_inch,
+            G_PIO_JOG => self.config.pio_jog.hundredths(),
+            G_PIO_INCH => self.config.pio_inch.hundredths(),
             G_SYNC_MASK => self.sync.mask().0,
             G_SYNC_STATUS => self.sync.status() as u16,
             a => {
@@ -210,23 +208,19 @@ impl Gateway {
     #[inline(never)]
     fn apply(&mut self, write: GatewayWrite) {
         match write {
-            GatewayWrite::Nothing | GatewayWrite::ChannelRequest | GatewayWrite::SyncStart => {}
+            GatewayWrite::Nothing | GatewayWrite::ChannelRequest(..) | GatewayWrite::SyncStart => {}
             GatewayWrite::AckFailsafe => self.failsafe.acknowledge(true),
-            GatewayWrite::Watchdog(ms) => {
-                self.config.watchdog = Duration::from_millis(u64::from(ms))
-            }
+            GatewayWrite::Watchdog(time) => self.config.watchdog = time.duration(),
             GatewayWrite::WatchdogAction(action) => self.config.watchdog_action = action,
             GatewayWrite::BusBaud(baud) => self.persist.baud = baud,
             GatewayWrite::BusRtim(rtim) => self.persist.rtim = rtim,
             GatewayWrite::Retries(retries) => self.engine.set_retries(retries),
-            GatewayWrite::PlcBaud(hundreds) => self.persist.plc.baud = u32::from(hundreds) * 100,
+            GatewayWrite::PlcBaud(baud) => self.persist.plc.baud = baud,
             GatewayWrite::PlcParity(parity) => self.persist.plc.parity = parity,
             GatewayWrite::UnitId(unit) => self.persist.unit = unit,
             GatewayWrite::AxisBase(base) => self.persist.axis_base = base,
             #[cfg(feature = "tcp")]
-            GatewayWrite::Net(offset, value) => {
-                let _ = self.config.net.set_register(offset, value);
-            }
+            GatewayWrite::Net(setting) => self.config.net.set(setting),
             GatewayWrite::Apply => {
                 let pending = self.persist.pending(&self.config);
                 self.plc_line_changed |= pending.plc != self.config.plc;
@@ -278,23 +272,35 @@ impl Gateway {
     /// order (parsed again: parsing is pure); the command channel's request block as a whole,
     /// and SYNCSTART last (with the mask the same write sets).
     pub(super) fn gateway_write(&mut self, address: u16, values: &[u16]) -> Result<(), Refused> {
+        // SYNCSTART, and the mask it starts with: the one this write sets, else the one held.
+        let mut start_sync = false;
+        let mut mask = self.sync.mask();
+        // The command channel's request block as the write leaves it, if the write is to it.
+        let mut request = self.channel.request();
+        let mut requested = false;
         for (i, &value) in values.iter().enumerate() {
             let a = nth(address, i).ok_or(Refused::NoSuchAddress)?;
-            self.admit(GatewayWrite::parse(a, value)?)?;
+            let write = GatewayWrite::parse(a, value)?;
+            self.admit(write)?;
+            match write {
+                GatewayWrite::SyncStart => start_sync = true,
+                GatewayWrite::SyncMask(set) => mask = set,
+                GatewayWrite::ChannelRequest(offset, value) => {
+                    if let Some(slot) = request.get_mut(usize::from(offset)) {
+                        *slot = value;
+                        requested = true;
+                    }
+                }
+                _ => {}
+            }
         }
-        let at = |register: u16| {
-            register
-                .checked_sub(address)
-                .and_then(|i| values.get(usize::from(i)))
-                .copied()
-        };
-        let start_sync = at(G_SYNC_START) == Some(1);
         if start_sync {
-            let mask = at(G_SYNC_MASK).map_or(self.sync.mask(), AxisSet);
             let blocked = self.blocked();
             self.sync.check(mask, blocked, &mut self.engine)?;
         }
-        let request = self.channel.after_write(address, values);
+        // (Never on a build without the channel, whose parser refuses the block: said here
+        // too, so that such a build has none of the channel's code.)
+        let request = (CHANNEL && requested).then_some(request);
         let start = match request {
             Some(request) => self.channel.check(request, &self.config)?,
             None => None,

@@ -501,7 +501,11 @@ mod tests {
     /// The defaults are what a gateway with nothing set reads.
     #[test]
     fn every_default_is_what_a_new_gateway_reads() {
-        let mut gateway = Gateway::new(GatewayConfig::new(AxisSet(0)));
+        let mut gateway = Gateway::new(
+            GatewayConfig::new(AxisSet(0)),
+            &crate::plc::IDENTITY,
+            crate::plc::Boot::DEFAULT,
+        );
         let mut registers = gateway.registers(Instant::ZERO, SlaveCounters::default());
         for e in settings() {
             let mut out = [0];

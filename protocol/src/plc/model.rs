@@ -158,7 +158,7 @@ impl DataModel for Registers<'_> {
     }
 
     fn identity(&self, _unit: u8) -> Option<Identity> {
-        Some(self.gateway.config.identity)
+        Some(*self.gateway.identity)
     }
 
     /// The gateway unit runs unless the fail-safe is latched; an axis unit while its axis
@@ -177,7 +177,7 @@ impl DataModel for Registers<'_> {
 
     fn serves(&self, unit: u8) -> bool {
         let config = &self.gateway.config;
-        unit == config.unit || config.axis_of_unit(unit).is_some()
+        unit == config.unit.get() || config.axis_of_unit(unit).is_some()
     }
 
     fn read_bits(

@@ -6,7 +6,8 @@
 //! request the firmware carries out ([`Node`](crate::node::Node) hands it over as an action)
 //! and reports back, as IAI's controllers write their parameters to flash only on request.
 
-use super::config::{GatewayConfig, PlcLine};
+use super::boot::Boot;
+use super::config::{AxisBase, GatewayConfig, PlcLine, UnitId};
 use super::settings::{Settings, RECORD_LEN};
 use crate::axes::AxisSet;
 use crate::line::Baud;
@@ -48,19 +49,21 @@ pub(super) struct Persist {
     /// PLCBAUD, PLCPARITY.
     pub(super) plc: PlcLine,
     /// UNITID.
-    pub(super) unit: u8,
+    pub(super) unit: UnitId,
     /// AXISBASE.
-    pub(super) axis_base: u8,
+    pub(super) axis_base: AxisBase,
     /// AXISCFG's "enabled" bits.
     pub(super) axes: AxisSet,
     pub(super) status: SaveStatus,
-    pub(super) saves: u32,
+    /// How this start found the stored settings, and the saves so far (counted on).
+    pub(super) boot: Boot,
     /// A request for the firmware, not taken yet.
     pub(super) request: Option<Store>,
 }
 
 impl Persist {
-    pub(super) const fn new(config: &GatewayConfig) -> Persist {
+    /// The settings of `config` in force, after a start `boot` reports.
+    pub(super) const fn new(config: &GatewayConfig, boot: Boot) -> Persist {
         Persist {
             baud: config.bus.baud,
             rtim: config.bus.rtim,
@@ -69,7 +72,7 @@ impl Persist {
             axis_base: config.axis_base,
             axes: config.bus.axes,
             status: SaveStatus::Idle,
-            saves: config.boot.save_count,
+            boot,
             request: None,
         }
     }
@@ -103,7 +106,7 @@ impl Persist {
     pub(super) fn saved(&mut self, result: Result<u32, ()>) {
         match result {
             Ok(count) => {
-                self.saves = count;
+                self.boot.save_count = count;
                 self.status = SaveStatus::Saved;
             }
             Err(()) => self.status = SaveStatus::Failed,

@@ -43,9 +43,8 @@
 //! factory values); so the settings a gateway stored before an update survive it.
 
 use super::config::{
-    axis_base_ok, axis_of, complement_code, complement_of, home_of, pio_inch_ok, stroke_of,
-    unit_ok, watchdog_ok, AxisConfig, GatewayConfig, Parity, PlcLine, WatchdogAction,
-    DEFAULT_AXIS_BASE, DEFAULT_PIO_INCH, DEFAULT_PIO_JOG,
+    complement_code, complement_of, home_of, stroke_of, AxisBase, AxisConfig, GatewayConfig,
+    InchStep, JogSpeed, Parity, PlcBaud, PlcLine, UnitId, WatchdogAction, WatchdogTime,
 };
 use crate::axes::AxisSet;
 use crate::engine::MAX_RETRIES;
@@ -78,8 +77,7 @@ pub const RECORD_LEN_2: usize = NET_AT + 2;
 /// A format 1 record's length, CRC included.
 pub const RECORD_LEN_1: usize = PIO_AT + 2;
 
-/// PLC line rates the gateway accepts, bit/s.
-pub const PLC_BAUDS: [u32; 8] = [1_200, 2_400, 4_800, 9_600, 19_200, 38_400, 57_600, 115_200];
+pub use super::config::PLC_BAUDS;
 
 /// Why a stored record is not used.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -100,7 +98,7 @@ pub enum SettingsError {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Settings {
     /// Gateway unit id.
-    pub unit: u8,
+    pub unit: UnitId,
     /// PLC line.
     pub plc: PlcLine,
     /// PLC watchdog.
@@ -119,14 +117,14 @@ pub struct Settings {
     pub pio_pattern: Pattern,
     /// PIO start mode (patterns 4 and 5).
     pub pio_start: StartMode,
-    /// Pattern 1's jog speed, 0.01 mm/s.
-    pub pio_jog: u16,
-    /// Pattern 1's inching step, 0.01 mm.
-    pub pio_inch: u16,
+    /// Pattern 1's jog speed.
+    pub pio_jog: JogSpeed,
+    /// Pattern 1's inching step.
+    pub pio_inch: InchStep,
     /// Axes on the bus.
     pub axes: AxisSet,
     /// The unit id of axis 0.
-    pub axis_base: u8,
+    pub axis_base: AxisBase,
     /// The Ethernet board's address and the Modbus TCP server's policy.
     pub net: NetConfig,
     /// Every axis' configuration.
@@ -191,8 +189,8 @@ impl Settings {
         let mut out = [0u8; RECORD_LEN];
         let mut w = Fields(&mut out, 0);
         w.u8(FORMAT);
-        w.u8(self.unit);
-        w.bytes(&self.plc.baud.to_le_bytes());
+        w.u8(self.unit.get());
+        w.bytes(&self.plc.baud.bits_per_second().to_le_bytes());
         w.u8(self.plc.parity as u8);
         let ms = u16::try_from(self.watchdog.as_millis()).unwrap_or(u16::MAX);
         w.bytes(&ms.to_le_bytes());
@@ -212,9 +210,9 @@ impl Settings {
         // Both codes are below 256.
         w.u8(self.pio_pattern.code() as u8);
         w.u8(self.pio_start as u8);
-        w.bytes(&self.pio_jog.to_le_bytes());
-        w.bytes(&self.pio_inch.to_le_bytes());
-        w.u8(self.axis_base);
+        w.bytes(&self.pio_jog.hundredths().to_le_bytes());
+        w.bytes(&self.pio_inch.hundredths().to_le_bytes());
+        w.u8(self.axis_base.get());
         w.bytes(&self.net.ip.0);
         w.u8(self.net.prefix);
         w.bytes(&self.net.router.0);
@@ -248,13 +246,13 @@ impl Settings {
         }
         let r = Reader(body);
         let bad = |at: usize| SettingsError::Field(u8::try_from(at).unwrap_or(u8::MAX));
-        let unit = r.u8(1).filter(|&u| unit_ok(u.into())).ok_or(bad(1))?;
-        let baud = r.u32(2).filter(|b| PLC_BAUDS.contains(b)).ok_or(bad(2))?;
+        let unit = r.u8(1).and_then(UnitId::new).ok_or(bad(1))?;
+        let baud = r.u32(2).and_then(PlcBaud::new).ok_or(bad(2))?;
         let parity = r
             .u8(6)
             .and_then(|c| Parity::from_code(c.into()))
             .ok_or(bad(6))?;
-        let ms = r.u16(7).filter(|&ms| watchdog_ok(ms)).ok_or(bad(7))?;
+        let watchdog = r.u16(7).and_then(WatchdogTime::from_millis).ok_or(bad(7))?;
         let watchdog_action = r
             .u8(9)
             .and_then(|c| WatchdogAction::from_code(c.into()))
@@ -295,7 +293,7 @@ impl Settings {
             slot.stroke = stroke;
         }
         let (pio_pattern, pio_start, pio_jog, pio_inch) = if len == RECORD_LEN_1 {
-            let jog = (DEFAULT_PIO_JOG, DEFAULT_PIO_INCH);
+            let jog = (JogSpeed::DEFAULT, InchStep::DEFAULT);
             (Pattern::Positioning, StartMode::Level, jog.0, jog.1)
         } else {
             let pattern = r
@@ -308,19 +306,16 @@ impl Settings {
                 .ok_or(bad(PIO_AT + 1))?;
             let jog = r
                 .u16(PIO_AT + 2)
-                .filter(|&v| v != 0)
+                .and_then(JogSpeed::from_hundredths)
                 .ok_or(bad(PIO_AT + 2))?;
             let inch = r
                 .u16(PIO_AT + 4)
-                .filter(|&v| pio_inch_ok(v))
+                .and_then(InchStep::from_hundredths)
                 .ok_or(bad(PIO_AT + 4))?;
             (pattern, start, jog, inch)
         };
         let (axis_base, net) = if len == RECORD_LEN {
-            let base = r
-                .u8(NET_AT)
-                .filter(|&b| axis_base_ok(b.into()))
-                .ok_or(bad(NET_AT))?;
+            let base = r.u8(NET_AT).and_then(AxisBase::new).ok_or(bad(NET_AT))?;
             let prefix = r
                 .u8(NET_AT + 5)
                 .filter(|&p| prefix_ok(p.into()))
@@ -350,12 +345,12 @@ impl Settings {
             };
             (base, net)
         } else {
-            (DEFAULT_AXIS_BASE, NetConfig::DEFAULT)
+            (AxisBase::DEFAULT, NetConfig::DEFAULT)
         };
         let settings = Settings {
             unit,
             plc: PlcLine { baud, parity },
-            watchdog: Duration::from_millis(u64::from(ms)),
+            watchdog: watchdog.duration(),
             watchdog_action,
             baud: bus_baud,
             rtim,
@@ -371,7 +366,7 @@ impl Settings {
             axis_config,
         };
         // The gateway unit must not be one of the axes' units.
-        if axis_of(unit, axis_base, axes).is_some() {
+        if axis_base.axis_of(unit.get(), axes).is_some() {
             return Err(bad(1));
         }
         Ok(settings)

@@ -13,13 +13,12 @@
 use core::num::NonZeroU16;
 
 use super::config::{
-    axis_base_ok, axis_of, complement_of, home_of, pio_inch_ok, unit_ok, watchdog_ok, Parity,
-    WatchdogAction,
+    complement_of, home_of, AxisBase, InchStep, JogSpeed, Parity, PlcBaud, UnitId, WatchdogAction,
+    WatchdogTime,
 };
 use super::map::{self, *};
 use super::refused::Refused;
 use super::registers::join;
-use super::settings::PLC_BAUDS;
 use crate::axes::AxisSet;
 use crate::engine::MAX_RETRIES;
 use crate::line::Baud;
@@ -262,8 +261,8 @@ pub enum GatewayWrite {
     Nothing,
     /// FAILSAFE = 0: the latch acknowledged.
     AckFailsafe,
-    /// WATCHDOG: the PLC silence that stops the axes, ms (0: off).
-    Watchdog(u16),
+    /// WATCHDOG: the PLC silence that stops the axes (0: off).
+    Watchdog(WatchdogTime),
     /// WDACTION.
     WatchdogAction(WatchdogAction),
     /// BUSBAUD (taken on APPLY).
@@ -272,12 +271,12 @@ pub enum GatewayWrite {
     BusRtim(Rtim),
     /// RETRIES (at once).
     Retries(u8),
-    /// PLCBAUD, in 100 bit/s as written (taken on APPLY).
-    PlcBaud(u16),
+    /// PLCBAUD (taken on APPLY).
+    PlcBaud(PlcBaud),
     /// PLCPARITY (taken on APPLY).
     PlcParity(Parity),
     /// UNITID (taken on APPLY).
-    UnitId(u8),
+    UnitId(UnitId),
     /// APPLY = 1.
     Apply,
     /// SAVE = 1.
@@ -291,22 +290,23 @@ pub enum GatewayWrite {
     /// PIOPAT.
     PioPattern(Pattern),
     /// AXISBASE (taken on APPLY).
-    AxisBase(u8),
-    /// A register of the network block, at its offset (feature `tcp`).
+    AxisBase(AxisBase),
+    /// A register of the network block (feature `tcp`).
     #[cfg(feature = "tcp")]
-    Net(u16, u16),
+    Net(crate::net::NetSetting),
     /// PIOSTART.
     PioStart(StartMode),
-    /// PIOJOG, 0.01 mm/s.
-    PioJog(u16),
-    /// PIOINCH, 0.01 mm.
-    PioInch(u16),
+    /// PIOJOG.
+    PioJog(JogSpeed),
+    /// PIOINCH.
+    PioInch(InchStep),
     /// SYNCMASK.
     SyncMask(AxisSet),
     /// SYNCSTART = 1 (started after the write's other registers, with its mask).
     SyncStart,
-    /// A register of the command channel's request block (taken as a block).
-    ChannelRequest,
+    /// A register of the command channel's request block: its offset in the block and its
+    /// value (the block is taken whole, once the write's registers are in it).
+    ChannelRequest(u16, u16),
     /// An AXISCFG field.
     Axis(Axis, AxisSetting),
 }
@@ -325,7 +325,7 @@ impl GatewayWrite {
         };
         let write = match address {
             G_FAILSAFE => (value == 0).then_some(GatewayWrite::AckFailsafe),
-            G_WATCHDOG => watchdog_ok(value).then_some(GatewayWrite::Watchdog(value)),
+            G_WATCHDOG => WatchdogTime::from_millis(value).map(GatewayWrite::Watchdog),
             G_WD_ACTION => WatchdogAction::from_code(value).map(GatewayWrite::WatchdogAction),
             G_BUS_BAUD => {
                 Baud::from_bits_per_second(u32::from(value) * 100).map(GatewayWrite::BusBaud)
@@ -338,18 +338,10 @@ impl GatewayWrite {
                 .ok()
                 .filter(|&r| r <= MAX_RETRIES)
                 .map(GatewayWrite::Retries),
-            G_PLC_BAUD => PLC_BAUDS
-                .contains(&(u32::from(value) * 100))
-                .then_some(GatewayWrite::PlcBaud(value)),
+            G_PLC_BAUD => PlcBaud::from_register(value).map(GatewayWrite::PlcBaud),
             G_PLC_PARITY => Parity::from_code(value).map(GatewayWrite::PlcParity),
-            G_UNIT_ID => u8::try_from(value)
-                .ok()
-                .filter(|_| unit_ok(value))
-                .map(GatewayWrite::UnitId),
-            G_AXIS_BASE => u8::try_from(value)
-                .ok()
-                .filter(|_| axis_base_ok(value))
-                .map(GatewayWrite::AxisBase),
+            G_UNIT_ID => UnitId::of(value).map(GatewayWrite::UnitId),
+            G_AXIS_BASE => AxisBase::of(value).map(GatewayWrite::AxisBase),
             G_APPLY => trigger(GatewayWrite::Apply),
             G_SAVE => trigger(GatewayWrite::Save),
             G_RESTART => trigger(GatewayWrite::Restart),
@@ -368,24 +360,19 @@ impl GatewayWrite {
             },
             G_PIO_PATTERN => Pattern::from_code(value).map(GatewayWrite::PioPattern),
             G_PIO_START => StartMode::from_code(value).map(GatewayWrite::PioStart),
-            G_PIO_JOG => (value != 0).then_some(GatewayWrite::PioJog(value)),
-            G_PIO_INCH => pio_inch_ok(value).then_some(GatewayWrite::PioInch(value)),
+            G_PIO_JOG => JogSpeed::from_hundredths(value).map(GatewayWrite::PioJog),
+            G_PIO_INCH => InchStep::from_hundredths(value).map(GatewayWrite::PioInch),
             G_SYNC_MASK => Some(GatewayWrite::SyncMask(AxisSet(value))),
             a if a.checked_sub(G_REQUEST).is_some_and(|i| i < G_REQUEST_LEN) => {
                 if !CHANNEL {
                     // A build without the command channel (the F103's): not there.
                     return Err(Refused::NoSuchAddress);
                 }
-                Some(GatewayWrite::ChannelRequest)
+                Some(GatewayWrite::ChannelRequest(a - G_REQUEST, value))
             }
             #[cfg(feature = "tcp")]
             a if a.checked_sub(G_NET).is_some_and(|i| i < G_NET_LEN) => {
-                let offset = a - G_NET;
-                // Checked on a copy; applied after every register of the write is checked.
-                let mut probe = crate::net::NetConfig::DEFAULT;
-                probe
-                    .set_register(offset, value)
-                    .then_some(GatewayWrite::Net(offset, value))
+                crate::net::NetSetting::parse(a - G_NET, value).map(GatewayWrite::Net)
             }
             a => per_axis(a, G_AXIS_CONFIG, G_AXIS_CONFIG_LEN).and_then(|(axis, field)| {
                 AxisSetting::parse(field, value).map(|s| GatewayWrite::Axis(axis, s))
@@ -400,9 +387,9 @@ impl GatewayWrite {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Pending {
     /// UNITID as written (the gateway's unit from the next APPLY or start).
-    pub unit: u8,
+    pub unit: UnitId,
     /// AXISBASE as written.
-    pub axis_base: u8,
+    pub axis_base: AxisBase,
     /// The axes enabled in AXISCFG (on the bus from the next APPLY or start).
     pub enabled: AxisSet,
     /// The axes on the bus now.
@@ -426,7 +413,7 @@ pub enum Conflict {
 /// with it (`rcgw`). Writes these rules do not concern are admitted.
 pub fn admit(pending: &Pending, write: GatewayWrite) -> Result<(), Conflict> {
     let axes = AxisSet(pending.bus.0 | pending.enabled.0);
-    let clash = |unit: u8, base: u8| match axis_of(unit, base, axes) {
+    let clash = |unit: UnitId, base: AxisBase| match base.axis_of(unit.get(), axes) {
         Some(axis) => Err(Conflict::AxisUnit(axis)),
         None => Ok(()),
     };
@@ -434,7 +421,7 @@ pub fn admit(pending: &Pending, write: GatewayWrite) -> Result<(), Conflict> {
         GatewayWrite::UnitId(unit) => clash(unit, pending.axis_base),
         GatewayWrite::AxisBase(base) => clash(pending.unit, base),
         GatewayWrite::Axis(axis, AxisSetting::Enabled(true))
-            if axis.get().checked_add(pending.axis_base) == Some(pending.unit) =>
+            if axis.get().checked_add(pending.axis_base.get()) == Some(pending.unit.get()) =>
         {
             Err(Conflict::AxisUnit(axis))
         }

@@ -330,8 +330,13 @@ pub struct Rig {
 
 impl Rig {
     pub fn new(config: GatewayConfig, axes: &[u8]) -> Rig {
+        Rig::started(config, protocol::plc::Boot::DEFAULT, axes)
+    }
+
+    /// [`Rig::new`] for a start the firmware reports as `boot`.
+    pub fn started(config: GatewayConfig, boot: protocol::plc::Boot, axes: &[u8]) -> Rig {
         Rig {
-            node: Box::new(Node::new(config)),
+            node: Box::new(Node::new(config, &protocol::plc::IDENTITY, boot)),
             bus: FakeBus::new(axes),
             now: 0,
             sent: Vec::new(),
@@ -348,6 +353,15 @@ impl Rig {
     /// Axes 0..n already at the bus' settings (no establishment), homed, servo on, points
     /// 0..15 at 10 mm steps (8 mm lead: 1000 pulses = 10 mm), the PLC watchdog at `watchdog`.
     pub fn ready(n: u8, config: impl FnOnce(&mut GatewayConfig)) -> Rig {
+        Rig::ready_after(protocol::plc::Boot::DEFAULT, n, config)
+    }
+
+    /// [`Rig::ready`] for a start the firmware reports as `boot`.
+    pub fn ready_after(
+        boot: protocol::plc::Boot,
+        n: u8,
+        config: impl FnOnce(&mut GatewayConfig),
+    ) -> Rig {
         let mut c = GatewayConfig::new(AxisSet::first(n));
         c.bus.establish = false;
         c.axes = protocol::AxisMap::new(protocol::plc::AxisConfig {
@@ -359,7 +373,7 @@ impl Rig {
         });
         config(&mut c);
         let axes: Vec<u8> = (0..n).collect();
-        let mut rig = Rig::new(c, &axes);
+        let mut rig = Rig::started(c, boot, &axes);
         for fake in rig.bus.axes.values_mut() {
             fake.servo = true;
             fake.homed = true;

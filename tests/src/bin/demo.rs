@@ -90,7 +90,14 @@ fn main() {
         scale,
         stroke: Length(100_00),
     });
-    let mut h = NodeHarness::new(Node::new(config), bus);
+    let mut h = NodeHarness::new(
+        Node::new(
+            config,
+            &protocol::plc::IDENTITY,
+            protocol::plc::Boot::DEFAULT,
+        ),
+        bus,
+    );
 
     println!(
         "== {AXES} simulated controllers power up at 9.6 kbit/s, RTIM 255 ms (their defaults)"

@@ -2,8 +2,7 @@
 
 use std::io;
 
-use protocol::plc::{AxisConfig, GatewayConfig};
-use protocol::time::Duration;
+use protocol::plc::{AxisConfig, GatewayConfig, PlcBaud, UnitId, WatchdogTime, PLC_BAUDS};
 use protocol::units::{Lead, Length, Scale};
 use protocol::AxisSet;
 use protocol::{Axis, PositionNo, Rtim};
@@ -36,9 +35,14 @@ pub fn gateway_config(options: &Options) -> io::Result<GatewayConfig> {
         return Err(invalid("no axis".into()));
     }
     let mut config = GatewayConfig::new(axes);
-    config.unit = options.unit;
+    let baud = PlcBaud::new(options.plc_baud).ok_or_else(|| {
+        invalid(format!(
+            "PLC line {} bit/s: the gateway takes {PLC_BAUDS:?}",
+            options.plc_baud
+        ))
+    })?;
     config.plc = protocol::plc::PlcLine {
-        baud: options.plc_baud,
+        baud,
         parity: options.plc_parity,
     };
     if let Some(tcp) = &options.tcp {
@@ -59,19 +63,20 @@ pub fn gateway_config(options: &Options) -> io::Result<GatewayConfig> {
     config.bus.echo = echo;
     // Bytes are stamped when read: a pseudo-terminal or a USB adapter has no wire time.
     config.bus.wire_timing = false;
-    if !(1..=247).contains(&options.unit) || config.axis_of_unit(options.unit).is_some() {
-        return Err(invalid(format!(
+    let unit = UnitId::new(options.unit).filter(|_| config.axis_of_unit(options.unit).is_none());
+    config.unit = unit.ok_or_else(|| {
+        invalid(format!(
             "unit {}: 1-247 and not an axis unit (axis n is unit n + 1)",
             options.unit
-        )));
-    }
-    if options.watchdog_ms != 0 && !(50..=60_000).contains(&options.watchdog_ms) {
-        return Err(invalid(format!(
+        ))
+    })?;
+    let watchdog = WatchdogTime::from_millis(options.watchdog_ms).ok_or_else(|| {
+        invalid(format!(
             "watchdog {} ms: 0 (off) or 50-60000",
             options.watchdog_ms
-        )));
-    }
-    config.watchdog = Duration::from_millis(u64::from(options.watchdog_ms));
+        ))
+    })?;
+    config.watchdog = watchdog.duration();
     if options.stroke.0 <= 0 {
         return Err(invalid("the stroke must be positive".into()));
     }

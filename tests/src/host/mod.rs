@@ -214,7 +214,11 @@ impl Host {
     /// Open both lines and build the gateway.
     pub fn new(options: &Options) -> io::Result<Host> {
         let config = gateway_config(options)?;
-        let node = Box::new(Node::new(config));
+        let node = Box::new(Node::new(
+            config,
+            &protocol::plc::IDENTITY,
+            protocol::plc::Boot::DEFAULT,
+        ));
         let bus = match &options.bus {
             BusLine::Sim { axes, points } => {
                 BusSide::Sim(Box::new(simulated_bus(options, *axes, *points)?))

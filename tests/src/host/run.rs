@@ -132,7 +132,7 @@ impl Host {
                 Some(Action::PlcLine(line)) => {
                     if let Some(plc) = &mut self.plc {
                         plc.drain()?;
-                        plc.set_rate(line.baud)?;
+                        plc.set_rate(line.baud.bits_per_second())?;
                     }
                     self.log.note(now, &format!("PLC line: {line:?}"));
                 }

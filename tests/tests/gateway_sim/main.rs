@@ -62,7 +62,14 @@ fn gateway_with(n: u8, stroke: i32, row3: Option<[u32; 10]>, silent: &[u8]) -> N
     for &a in silent {
         bus.set_silent(axis(a), true);
     }
-    let mut h = NodeHarness::new(Node::new(config), bus);
+    let mut h = NodeHarness::new(
+        Node::new(
+            config,
+            &protocol::plc::IDENTITY,
+            protocol::plc::Boot::DEFAULT,
+        ),
+        bus,
+    );
     h.run_until(300 * MS);
     h
 }

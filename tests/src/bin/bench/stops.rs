@@ -116,7 +116,14 @@ fn gateway() -> Result<NodeHarness, String> {
     config.watchdog = Duration::ZERO;
     config.plc = PlcLine::DEFAULT;
     config.pio_axis = Some(axis(MOVERS[0])?);
-    let mut h = NodeHarness::new(Node::new(config), bus);
+    let mut h = NodeHarness::new(
+        Node::new(
+            config,
+            &protocol::plc::IDENTITY,
+            protocol::plc::Boot::DEFAULT,
+        ),
+        bus,
+    );
     h.inputs = Some(PioInputs::from_bits(
         PioInputs::STP_N.bits() | PioInputs::SON.bits(),
     ));
@@ -154,7 +161,7 @@ fn stopped_by(face: Face, mover: u8) -> Vec<u8> {
 
 /// Apply the stop at `h.now`; its face's own delay (µs) before the gateway can know of it.
 fn apply(h: &mut NodeHarness, face: Face, mover: u8) -> Result<u64, String> {
-    let modbus = t3_5(PlcLine::DEFAULT.baud).0;
+    let modbus = t3_5(PlcLine::DEFAULT.baud.bits_per_second()).0;
     Ok(match face {
         Face::StopInput => {
             h.node.set_stop_input(Instant(h.now), true);

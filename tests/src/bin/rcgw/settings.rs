@@ -11,7 +11,7 @@ use protocol::axes::AXES;
 use protocol::modbus::Exception;
 use protocol::plc::map::*;
 use protocol::plc::write::{AxisSetting, GatewayWrite};
-use protocol::plc::{admit, Conflict, Pending, DEFAULT_AXIS_BASE, DEFAULT_GATEWAY_UNIT};
+use protocol::plc::{admit, AxisBase, Conflict, Pending, UnitId};
 
 use crate::link::{Fail, Gw};
 
@@ -710,15 +710,16 @@ struct Admit(Pending);
 impl Admit {
     /// The gateway as read: the enabled axes on the bus (nothing pending).
     fn of(now: &Settings) -> Admit {
-        let word = |key, default: u8| {
+        let word = |key| {
             now.word(Section::Gateway, key)
                 .and_then(|w| u8::try_from(w).ok())
-                .unwrap_or(default)
         };
         let enabled = AxisSet(now.enabled().iter().fold(0u16, |m, &n| m | 1 << n));
         Admit(Pending {
-            unit: word("unit_id", DEFAULT_GATEWAY_UNIT),
-            axis_base: word("axis_base", DEFAULT_AXIS_BASE),
+            unit: word("unit_id").and_then(UnitId::new).unwrap_or_default(),
+            axis_base: word("axis_base")
+                .and_then(AxisBase::new)
+                .unwrap_or_default(),
             enabled,
             bus: enabled,
         })
@@ -1126,9 +1127,13 @@ mod tests {
     /// A gateway started with these settings running: `unit`, `base`, `axes` on the bus.
     fn gateway(unit: u8, base: u8, axes: AxisSet) -> Gateway {
         let mut config = GatewayConfig::new(axes);
-        config.unit = unit;
-        config.axis_base = base;
-        Gateway::new(config)
+        config.unit = UnitId::new(unit).unwrap();
+        config.axis_base = AxisBase::new(base).unwrap();
+        Gateway::new(
+            config,
+            &protocol::plc::IDENTITY,
+            protocol::plc::Boot::DEFAULT,
+        )
     }
 
     /// What rcgw starts a plan from: the same settings, read.
