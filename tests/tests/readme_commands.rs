@@ -185,16 +185,30 @@ fn binaries() -> BTreeSet<String> {
         .collect()
 }
 
+/// Each `--bin NAME` is a binary, and of the package the same line names with `-p`, if any
+/// (`cargo run -p rc-tools --bin rcgw`).
 #[test]
 fn every_binary_shown_exists() {
-    let bins = binaries();
+    let bins = binaries_by_package();
     let mut problems = Vec::new();
     let mut seen = 0;
     for (doc, text) in documents() {
-        for name in words_after(&text, "--bin ") {
-            seen += 1;
-            if !bins.contains(name) {
-                problems.push(format!("{}: --bin {name} is not a binary", doc.display()));
+        for line in text.lines() {
+            let packages = words_after(line, "-p ");
+            for name in words_after(line, "--bin ") {
+                seen += 1;
+                match bins.iter().find(|(bin, _)| bin == name) {
+                    None => {
+                        problems.push(format!("{}: --bin {name} is not a binary", doc.display()))
+                    }
+                    Some((_, package)) if !packages.is_empty() && !packages.contains(package) => {
+                        problems.push(format!(
+                            "{}: --bin {name} is a binary of {package}, not of {packages:?}",
+                            doc.display()
+                        ))
+                    }
+                    Some(_) => {}
+                }
             }
         }
     }
@@ -430,8 +444,9 @@ fn layout_paths(doc: &str) -> Vec<String> {
 }
 
 /// docs/development.md's Layout table is the tree's: every path it names exists, and it names
-/// every crate of the workspace, every file and folder of `src/` and `protocol/src/`, every
-/// board module and every host program.
+/// every folder at the repository's root, every crate of the workspace, every file and folder of
+/// `src/`, `protocol/src/`, `tools/src/` and `tests/src/`, every board module and every host
+/// program.
 #[test]
 fn the_layout_table_matches_the_tree() {
     let root = repo();
@@ -463,7 +478,15 @@ fn the_layout_table_matches_the_tree() {
         let name = entry.unwrap().file_name().into_string().unwrap();
         expected.push(format!("src/board/{name}"));
     }
-    for folder in ["protocol/src", "src"] {
+    for entry in fs::read_dir(&root).unwrap() {
+        let entry = entry.unwrap();
+        let name = entry.file_name().into_string().unwrap();
+        // Not git's, cargo's or an editor's, nor the build's output.
+        if entry.path().is_dir() && !name.starts_with('.') && name != "target" {
+            expected.push(format!("{name}/"));
+        }
+    }
+    for folder in ["protocol/src", "src", "tools/src", "tests/src"] {
         for entry in fs::read_dir(root.join(folder)).unwrap() {
             let entry = entry.unwrap();
             let name = entry.file_name().into_string().unwrap();
