@@ -35,7 +35,7 @@ cargo run --release --locked -p rc-host --bin bench -- ${cpu[@]+"${cpu[@]}"} "$@
 # log against the run's own mean transaction time (`tests/src/bin/rt-bench`). About 2 minutes
 # (RT_BENCH_SECONDS per run, 20 by default); BENCH_RT=0 skips it. One line `BENCH_RT {...}`.
 if [[ ${BENCH_RT:-1} != 0 ]]; then
-    cargo build --release --locked --quiet -p rc-host --bin rt-bench --bin rc-sim --bin rc-gateway-host
+    cargo build --release --locked --quiet -p rc-host -p rc-tools --bin rt-bench --bin rc-sim --bin rc-gateway-host
     "${CARGO_TARGET_DIR:-target}/release/rt-bench" --seconds "${RT_BENCH_SECONDS:-20}"
 fi
 
@@ -44,7 +44,7 @@ fi
 # reads); then the same against the network firmware in QEMU's mps2-an386 when QEMU is there
 # (an emulator's figure: slirp and TCG in the path, not the Ethernet board's), BENCH_NET_EMU=0
 # skips it.
-cargo build --release --locked --quiet -p rc-host --bin tcp-bench --bin rc-gateway-host
+cargo build --release --locked --quiet -p rc-host -p rc-tools --bin tcp-bench --bin rc-gateway-host
 "${CARGO_TARGET_DIR:-target}/release/tcp-bench"
 if [[ ${BENCH_NET_EMU:-1} != 0 ]] && command -v qemu-system-arm >/dev/null; then
     net_elf=$(scripts/emu-net.sh build 2>/dev/null)

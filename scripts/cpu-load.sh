@@ -16,7 +16,7 @@ fi
 scripts/qemu-install.sh >&2
 rustup toolchain install >/dev/null 2>&1 || rustup toolchain install >&2
 elf=$(scripts/emu-build.sh)
-cargo build --locked --quiet -p rc-host --bin rc-sim >&2
+cargo build --locked --quiet -p rc-tools --bin rc-sim >&2
 python=$(scripts/py-env.sh)
 export PYTHONDONTWRITEBYTECODE=1
 exec timeout --kill-after=10 300 "$python" "$measure" "$elf" "$@"

@@ -6,7 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 rustup toolchain install >/dev/null 2>&1 || rustup toolchain install
-cargo build --quiet --locked -p rc-host --bin rcframe --bin demo
+cargo build --quiet --locked -p rc-tools -p rc-host --bin rcframe --bin demo
 rcframe=target/debug/rcframe
 
 echo "== The gateway with simulated actuators and a scripted PLC"

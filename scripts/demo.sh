@@ -17,7 +17,7 @@ if [[ ${1:-} == --host-gateway ]]; then
 fi
 
 rustup toolchain install >/dev/null 2>&1 || rustup toolchain install
-cargo build --quiet --locked -p rc-host --bin rc-sim --bin rcframe
+cargo build --quiet --locked -p rc-tools --bin rc-sim --bin rcframe
 python=$(scripts/py-env.sh)
 if [[ " $* " == *" --help "* || " $* " == *" -h "* ]]; then
     exec "$python" tests/demo/demo.py --elf - "$@"

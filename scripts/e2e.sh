@@ -14,7 +14,7 @@ PYTEST_VERSION=8.4.2
 
 rustup toolchain install >/dev/null
 # rc-sim: the --bus side's test talks to it through a pseudo-terminal.
-cargo build --locked -p rc-host --bin rc-gateway-host --bin rc-sim
+cargo build --locked -p rc-tools --bin rc-gateway-host --bin rc-sim
 
 python=$(scripts/py-env.sh target/e2e-venv "pymodbus==$PYMODBUS_VERSION" "pyserial==$PYSERIAL_VERSION" \
     "pytest==$PYTEST_VERSION")

@@ -66,7 +66,7 @@ if ((${#missing[@]})); then
 fi
 
 rustup toolchain install >/dev/null
-cargo build --locked -p rc-host --bin rc-gateway-host
+cargo build --locked -p rc-tools --bin rc-gateway-host
 gateway_bin="$target/debug/rc-gateway-host"
 mkdir -p "$target/interop"
 client="$target/interop/libmodbus_client"
@@ -709,7 +709,7 @@ if [[ " ${targets[*]} " == *" firmware "* ]]; then
     scripts/qemu-install.sh
     net_elf=$(scripts/emu-net.sh build)
     elf=$(scripts/emu-build.sh)
-    cargo build --locked --quiet -p rc-host --bin rc-sim
+    cargo build --locked --quiet -p rc-tools --bin rc-sim
     python=$(scripts/py-env.sh)
 fi
 for kind in "${targets[@]}"; do

@@ -14,7 +14,7 @@ cd "$(dirname "$0")/.."
 scripts/qemu-install.sh
 rustup toolchain install >/dev/null 2>&1 || rustup toolchain install
 elf=$(scripts/emu-build.sh)
-cargo build --locked --quiet -p rc-host --bin rc-sim
+cargo build --locked --quiet -p rc-tools --bin rc-sim
 python=$(scripts/py-env.sh)
 
 export PYTHONDONTWRITEBYTECODE=1

@@ -19,7 +19,7 @@ if [[ ${1:-} == --target ]]; then
     shift 2
 fi
 rustup toolchain install >/dev/null 2>&1 || rustup toolchain install
-cargo build --locked --quiet -p rc-host --bin rc-gateway-host
+cargo build --locked --quiet -p rc-tools --bin rc-gateway-host
 if [[ $target != host ]]; then
     scripts/qemu-install.sh
     scripts/emu-net.sh build >/dev/null

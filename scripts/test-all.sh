@@ -19,7 +19,7 @@ scripts/flip-link-install.sh
 step "format"
 cargo fmt --all -- --check
 
-step "clippy: host crates (protocol, rc-host), warnings denied"
+step "clippy: host crates (protocol, rc-tools, rc-host), warnings denied"
 cargo clippy --all-targets --locked -- -D warnings
 
 step "clippy: firmware for thumbv7em-none-eabihf, warnings denied"
@@ -38,7 +38,7 @@ step "protocol: no_std build (with defmt) for the firmware target"
 cargo clippy -p protocol --target thumbv7em-none-eabihf --features defmt --locked -- -D warnings
 
 step "docs: host crates' API documentation, broken or private links denied"
-RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked -p protocol -p rc-host -p settings-store -p small-mem
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked -p protocol -p rc-tools -p rc-host -p settings-store -p small-mem
 
 step "tests: protocol (codec, engine, Modbus, PIO, properties) and host (simulator, gateway, soak)"
 cargo test --locked

@@ -150,7 +150,7 @@ def pytest_runtest_makereport(item, call):
 def gateway(request, tmp_path):
     """`rc-gateway-host --plc-pty --sim 3 --points --watchdog-ms 2000`, axes online."""
     if not BINARY.exists():
-        pytest.fail(f"{BINARY} is missing: cargo build -p rc-host --bin rc-gateway-host")
+        pytest.fail(f"{BINARY} is missing: cargo build -p rc-tools --bin rc-gateway-host")
     log_path = tmp_path / "rc-gateway-host.log"
     with open(log_path, "wb") as log:
         process = subprocess.Popen(

@@ -36,7 +36,7 @@ RC_SIM = BINARY.parent / "rc-sim"
 @pytest.fixture
 def bus_gateway(tmp_path):
     if not RC_SIM.exists():
-        pytest.skip(f"{RC_SIM} is missing: cargo build -p rc-host --bin rc-sim")
+        pytest.skip(f"{RC_SIM} is missing: cargo build -p rc-tools --bin rc-sim")
     with open(tmp_path / "rc-sim.log", "wb") as log:
         sim = subprocess.Popen(
             [str(RC_SIM), "--pty", "--axes", "2", "--slow-baud-is-break"],

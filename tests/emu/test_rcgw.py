@@ -55,7 +55,7 @@ band_mm = 0.50
 
 @pytest.fixture(scope="module", autouse=True)
 def rcgw_built():
-    result = subprocess.run(["cargo", "build", "--locked", "--quiet", "-p", "rc-host", "--bin", "rcgw"],
+    result = subprocess.run(["cargo", "build", "--locked", "--quiet", "-p", "rc-tools", "--bin", "rcgw"],
                             cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert result.returncode == 0, result.stderr[-3000:]
 

@@ -254,7 +254,7 @@ class Emulator:
         if shutil.which(QEMU) is None:
             raise EmulatorError(f"{QEMU} not found: run scripts/qemu-install.sh (or scripts/emu-test.sh)")
         if not RC_SIM.is_file():
-            raise EmulatorError(f"{RC_SIM} missing: cargo build -p rc-host --bin rc-sim")
+            raise EmulatorError(f"{RC_SIM} missing: cargo build -p rc-tools --bin rc-sim")
         self.sim_log_path = self.workdir / "rc-sim.log"
         with open(self.sim_log_path, "wb") as sim_log:
             self.sim = subprocess.Popen(

@@ -4,12 +4,12 @@
 //! place of the UART and a number in place of the clock. Bytes are handed to the engine at
 //! their exact arrival times, so time-outs, host gaps and cycle times are those the wire gives.
 
-use crate::sim::Bus;
 use protocol::engine::{Engine, Event, Output};
 use protocol::frame::COMM_CHANGE;
 use protocol::line::Baud;
 use protocol::line::{LineAction, BREAK_MS};
 use protocol::time::Instant;
+use rc_tools::sim::Bus;
 
 /// What the harness drives: the engine itself, or something that owns one. (The whole
 /// gateway has its own harness, [`NodeHarness`](crate::node_harness::NodeHarness).)

@@ -1,8 +1,5 @@
-//! Host-side tools and test harnesses for the Robo Cylinder gateway.
+//! Test harnesses for the Robo Cylinder gateway: the engine and the whole Node against the
+//! simulator (`rc_tools::sim`) in virtual time, and the register table docs/plc.md shows.
 pub mod harness;
-pub mod host;
 pub mod node_harness;
-pub mod pty;
-pub mod rcframe;
 pub mod regmap;
-pub mod sim;

@@ -6,7 +6,6 @@
 //! [`Action::Reply`] hands back, decoded. So a test here exercises exactly the object the
 //! firmware runs, down to the bytes on both lines.
 
-use crate::sim::Bus;
 use protocol::frame::COMM_CHANGE;
 use protocol::line::{LineAction, BREAK_MS};
 use protocol::modbus::tcp::SocketHandle;
@@ -15,6 +14,7 @@ use protocol::node::{Action, Node, TcpAction};
 use protocol::pio::{PioInputs, PioOutputs};
 use protocol::time::Instant;
 use protocol::Request;
+use rc_tools::sim::Bus;
 
 /// How long a request may wait for its reply before the master gives up (virtual µs).
 const REPLY_TIMEOUT_US: u64 = 500_000;

@@ -11,9 +11,9 @@ use protocol::time::{Duration, Instant};
 use protocol::units::{Lead, Length, Scale};
 use protocol::{Axis, AxisSet, HomeDirection, PositionNo, Rtim};
 use rc_host::node_harness::NodeHarness;
-use rc_host::sim::memory::pi;
-use rc_host::sim::realtime::bus_at_line;
-use rc_host::sim::{BusConfig, ControllerConfig};
+use rc_tools::sim::memory::pi;
+use rc_tools::sim::realtime::bus_at_line;
+use rc_tools::sim::{BusConfig, ControllerConfig};
 
 const MS: u64 = 1000;
 

@@ -154,32 +154,61 @@ fn every_cargo_alias_shown_is_defined() {
     assert!(problems.is_empty(), "{problems:#?}");
 }
 
-/// The host crate's binaries, from tests/Cargo.toml, each checked to have its source.
-fn binaries() -> BTreeSet<String> {
-    let manifest = fs::read_to_string(repo().join("tests/Cargo.toml")).unwrap();
-    let table: toml::Table = manifest.parse().unwrap();
-    table["bin"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|bin| {
+/// The host packages: each one's name and folder.
+const HOST_PACKAGES: &[(&str, &str)] = &[("rc-tools", "tools"), ("rc-host", "tests")];
+
+/// The host packages' binaries, from their manifests, each checked to have its source: the
+/// binary's name and its package's.
+fn binaries_by_package() -> Vec<(String, &'static str)> {
+    let mut out = Vec::new();
+    for (package, folder) in HOST_PACKAGES {
+        let manifest = fs::read_to_string(repo().join(folder).join("Cargo.toml")).unwrap();
+        let table: toml::Table = manifest.parse().unwrap();
+        assert_eq!(table["package"]["name"].as_str(), Some(*package));
+        for bin in table["bin"].as_array().unwrap() {
             let path = bin["path"].as_str().unwrap();
-            assert!(repo().join("tests").join(path).is_file(), "{path} missing");
-            bin["name"].as_str().unwrap().to_string()
-        })
+            assert!(
+                repo().join(folder).join(path).is_file(),
+                "{folder}/{path} missing"
+            );
+            out.push((bin["name"].as_str().unwrap().to_string(), *package));
+        }
+    }
+    out
+}
+
+/// The host packages' binaries.
+fn binaries() -> BTreeSet<String> {
+    binaries_by_package()
+        .into_iter()
+        .map(|(bin, _)| bin)
         .collect()
 }
 
+/// Each `--bin NAME` is a binary, and of the package the same line names with `-p`, if any
+/// (`cargo run -p rc-tools --bin rcgw`).
 #[test]
 fn every_binary_shown_exists() {
-    let bins = binaries();
+    let bins = binaries_by_package();
     let mut problems = Vec::new();
     let mut seen = 0;
     for (doc, text) in documents() {
-        for name in words_after(&text, "--bin ") {
-            seen += 1;
-            if !bins.contains(name) {
-                problems.push(format!("{}: --bin {name} is not a binary", doc.display()));
+        for line in text.lines() {
+            let packages = words_after(line, "-p ");
+            for name in words_after(line, "--bin ") {
+                seen += 1;
+                match bins.iter().find(|(bin, _)| bin == name) {
+                    None => {
+                        problems.push(format!("{}: --bin {name} is not a binary", doc.display()))
+                    }
+                    Some((_, package)) if !packages.is_empty() && !packages.contains(package) => {
+                        problems.push(format!(
+                            "{}: --bin {name} is a binary of {package}, not of {packages:?}",
+                            doc.display()
+                        ))
+                    }
+                    Some(_) => {}
+                }
             }
         }
     }
@@ -252,18 +281,19 @@ fn every_relative_link_points_at_a_file_and_anchor() {
     assert!(problems.is_empty(), "{problems:#?}");
 }
 
-/// Where each host binary's command line is defined (its flags are clap fields or `long`s).
+/// Where each host binary's command line is defined (its flags are clap fields or `long`s), from
+/// the repository's root.
 fn binary_sources(bin: &str) -> Vec<&'static str> {
     match bin {
-        "rcframe" => vec!["src/bin/rcframe.rs", "src/rcframe"],
+        "rcframe" => vec!["tools/src/bin/rcframe.rs", "tools/src/rcframe"],
         // Its actuator flags (--lead, --home, --twos, --ppr) are rcframe's `ScaleArgs`.
-        "rc-commission" => vec!["src/bin/rc-commission", "src/rcframe"],
-        "rc-sim" => vec!["src/bin/rc-sim.rs", "src/sim"],
-        "rc-gateway-host" => vec!["src/bin/rc-gateway-host.rs", "src/host"],
-        "bench" => vec!["src/bin/bench"],
-        "demo" => vec!["src/bin/demo.rs"],
-        "regmap" => vec!["src/bin/regmap.rs"],
-        "rcgw" => vec!["src/bin/rcgw"],
+        "rc-commission" => vec!["tools/src/bin/rc-commission", "tools/src/rcframe"],
+        "rc-sim" => vec!["tools/src/bin/rc-sim.rs", "tools/src/sim"],
+        "rc-gateway-host" => vec!["tools/src/bin/rc-gateway-host.rs", "tools/src/host"],
+        "rcgw" => vec!["tools/src/bin/rcgw"],
+        "bench" => vec!["tests/src/bin/bench"],
+        "demo" => vec!["tests/src/bin/demo.rs"],
+        "regmap" => vec!["tests/src/bin/regmap.rs"],
         other => panic!("binary {other}: add where its flags are defined"),
     }
 }
@@ -353,7 +383,7 @@ fn every_flag_shown_in_a_code_block_is_defined() {
                     };
                     let mut s = String::new();
                     for path in binary_sources(bin) {
-                        let path = root.join("tests").join(path);
+                        let path = root.join(path);
                         assert!(path.exists(), "{} missing", path.display());
                         read_tree(&path, &mut s);
                     }
@@ -414,8 +444,9 @@ fn layout_paths(doc: &str) -> Vec<String> {
 }
 
 /// docs/development.md's Layout table is the tree's: every path it names exists, and it names
-/// every crate of the workspace, every file and folder of `src/` and `protocol/src/`, every
-/// board module and every host program.
+/// every folder at the repository's root, every crate of the workspace, every file and folder of
+/// `src/`, `protocol/src/`, `tools/src/` and `tests/src/`, every board module and every host
+/// program.
 #[test]
 fn the_layout_table_matches_the_tree() {
     let root = repo();
@@ -447,7 +478,15 @@ fn the_layout_table_matches_the_tree() {
         let name = entry.unwrap().file_name().into_string().unwrap();
         expected.push(format!("src/board/{name}"));
     }
-    for folder in ["protocol/src", "src"] {
+    for entry in fs::read_dir(&root).unwrap() {
+        let entry = entry.unwrap();
+        let name = entry.file_name().into_string().unwrap();
+        // Not git's, cargo's or an editor's, nor the build's output.
+        if entry.path().is_dir() && !name.starts_with('.') && name != "target" {
+            expected.push(format!("{name}/"));
+        }
+    }
+    for folder in ["protocol/src", "src", "tools/src", "tests/src"] {
         for entry in fs::read_dir(root.join(folder)).unwrap() {
             let entry = entry.unwrap();
             let name = entry.file_name().into_string().unwrap();
@@ -465,11 +504,13 @@ fn the_layout_table_matches_the_tree() {
     }
     // Every host program, by name.
     let table = &doc[doc.find("## Layout").unwrap()..];
-    for entry in fs::read_dir(root.join("tests/src/bin")).unwrap() {
-        let name = entry.unwrap().file_name().into_string().unwrap();
-        let name = name.trim_end_matches(".rs");
-        if !table.contains(&format!("`{name}`")) {
-            problems.push(format!("tests/src/bin/{name} not in the table"));
+    for folder in ["tools/src/bin", "tests/src/bin"] {
+        for entry in fs::read_dir(root.join(folder)).unwrap() {
+            let name = entry.unwrap().file_name().into_string().unwrap();
+            let name = name.trim_end_matches(".rs");
+            if !table.contains(&format!("`{name}`")) {
+                problems.push(format!("{folder}/{name} not in the table"));
+            }
         }
     }
     assert!(problems.is_empty(), "{problems:#?}");

@@ -15,7 +15,7 @@ use protocol::plc::{AxisConfig, GatewayConfig};
 use protocol::units::{Lead, Length, Scale};
 use protocol::{Axis, AxisMap, AxisSet, PositionNo};
 use rc_host::node_harness::NodeHarness;
-use rc_host::sim::{Bus, BusConfig, ControllerConfig};
+use rc_tools::sim::{Bus, BusConfig, ControllerConfig};
 
 const MS: u64 = 1000;
 const AXES: u8 = 4;

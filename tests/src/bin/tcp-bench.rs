@@ -75,7 +75,7 @@ fn start_gateway() -> Result<(Gateway, SocketAddr), String> {
         .spawn()
         .map_err(|e| {
             format!(
-                "{}: {e} (build it: cargo build --release -p rc-host)",
+                "{}: {e} (build it: cargo build --release -p rc-tools)",
                 host.display()
             )
         })?;

@@ -6,7 +6,7 @@ use protocol::line::Baud;
 use protocol::*;
 
 use rc_host::harness::Harness;
-use rc_host::sim::{Bus, BusConfig};
+use rc_tools::sim::{Bus, BusConfig};
 
 use crate::{axis, established, MS, S};
 
@@ -94,7 +94,7 @@ fn a_power_cycled_axis_rejoins_at_its_stored_rate_without_stalling_the_others() 
 /// Every injected fault kind, one at a time: the engine recovers and counts.
 #[test]
 fn each_fault_kind_is_survived_and_counted() {
-    use rc_host::sim::Faults;
+    use rc_tools::sim::Faults;
     let kinds = [
         (
             "corruption",
@@ -216,7 +216,7 @@ fn sixteen_axes_are_all_polled() {
 fn a_slow_bus_starves_neither_position_reads_nor_probes() {
     let present: Vec<Axis> = (0..15).map(axis).collect();
     let mut bus = Bus::with_axes(BusConfig::default(), &present);
-    bus.set_faults(rc_host::sim::Faults {
+    bus.set_faults(rc_tools::sim::Faults {
         reply_delay: 1.0,
         reply_delay_us: 6 * MS,
         ..Default::default()

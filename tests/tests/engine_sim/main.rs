@@ -9,7 +9,7 @@ use protocol::engine::*;
 use protocol::line::Baud;
 use protocol::*;
 use rc_host::harness::Harness;
-use rc_host::sim::{Bus, BusConfig};
+use rc_tools::sim::{Bus, BusConfig};
 
 const MS: u64 = 1000;
 const S: u64 = 1_000_000;

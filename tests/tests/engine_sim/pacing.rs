@@ -8,7 +8,7 @@ use protocol::memory::PointField;
 use protocol::status::Outputs;
 use protocol::*;
 use rc_host::harness::Harness;
-use rc_host::sim::memory::pi;
+use rc_tools::sim::memory::pi;
 
 use crate::{axis, run_job, MS, S};
 
@@ -19,7 +19,7 @@ const MOVERS: [u8; 4] = [2, 6, 10, 14];
 /// come (no wire time, as on a pseudo-terminal); points 1 and 2 of the movers stored.
 fn fast_bus() -> (Harness, [[i32; 2]; 4]) {
     let axes: Vec<Axis> = (0..16).map(axis).collect();
-    let bus = rc_host::sim::Bus::with_axes(rc_host::sim::BusConfig::default(), &axes);
+    let bus = rc_tools::sim::Bus::with_axes(rc_tools::sim::BusConfig::default(), &axes);
     let engine = Engine::new(Config {
         axes: AxisSet::first(16),
         baud: line::Baud::B115200,

@@ -23,8 +23,8 @@ use protocol::units::{Lead, Length};
 use protocol::{Axis, PositionNo, Rtim};
 use protocol::{AxisMap, AxisSet};
 use rc_host::node_harness::NodeHarness;
-use rc_host::sim::realtime::bus_at_line;
-use rc_host::sim::{BusConfig, ControllerConfig};
+use rc_tools::sim::realtime::bus_at_line;
+use rc_tools::sim::{BusConfig, ControllerConfig};
 
 const MS: u64 = 1000;
 const S: u64 = 1_000_000;

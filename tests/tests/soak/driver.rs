@@ -7,9 +7,9 @@ use protocol::time::{Duration, Instant};
 use protocol::AxisSet;
 use protocol::{Axis, Command, Deframer, Frame, Request, Rtim};
 use rc_host::harness::Harness;
-use rc_host::sim::rng::Rng;
-use rc_host::sim::wire::byte_offset;
-use rc_host::sim::{Bus, BusConfig, ControllerConfig, Faults};
+use rc_tools::sim::rng::Rng;
+use rc_tools::sim::wire::byte_offset;
+use rc_tools::sim::{Bus, BusConfig, ControllerConfig, Faults};
 
 use crate::job_records::JobRec;
 use crate::plc::Plc;

@@ -4,7 +4,7 @@ use protocol::engine::{Config, Engine, Event, Job, JobError, JobKind, JobOutput}
 use protocol::AxisSet;
 use protocol::{Command, HomeDirection, Request, Rtim};
 use rc_host::harness::Harness;
-use rc_host::sim::{Bus, BusConfig, ControllerConfig};
+use rc_tools::sim::{Bus, BusConfig, ControllerConfig};
 
 use crate::{axis, BAUD, MS, S};
 

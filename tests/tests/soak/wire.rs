@@ -4,7 +4,7 @@
 use protocol::nb;
 use protocol::time::Instant;
 use protocol::{Axis, Error, Frame, Packet};
-use rc_host::sim::wire::transmit_time;
+use rc_tools::sim::wire::transmit_time;
 
 use crate::driver::Soak;
 use crate::{axis, BAUD, FRAME_LEN, S};

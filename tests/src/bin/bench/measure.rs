@@ -6,7 +6,7 @@ use protocol::line::Baud;
 use protocol::AxisSet;
 use protocol::{Axis, Command, Request, Rtim};
 use rc_host::harness::Harness;
-use rc_host::sim::{Bus, BusConfig};
+use rc_tools::sim::{Bus, BusConfig};
 use serde_json::{json, Value};
 
 use crate::{AXES, S, WARM_UP};

@@ -148,7 +148,7 @@ pub(crate) fn movers(dead: bool, ends: Ends, moves: Moves) -> Result<MoversResul
                 .memory_mut();
             for (index, at) in [(1usize, near), (2, far(i))] {
                 let mut row = memory.exec.point;
-                let position = rc_host::sim::memory::pi(PointField::Position);
+                let position = rc_tools::sim::memory::pi(PointField::Position);
                 *row.get_mut(position).ok_or("no position field")? = Pulses(at).to_wire();
                 *memory.nv.points.get_mut(index).ok_or("no point")? = row;
                 *memory.nv.written.get_mut(index).ok_or("no point")? = true;

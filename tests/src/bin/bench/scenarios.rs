@@ -4,7 +4,7 @@ use protocol::engine::{Config, Event, Job, JobError, JobId, JobKind, JobOutput, 
 use protocol::line::Baud;
 use protocol::{Axis, Command, HomeDirection, Pulses, Request};
 use rc_host::harness::Harness;
-use rc_host::sim::rng::Rng;
+use rc_tools::sim::rng::Rng;
 
 use crate::measure::{all_axes, axis, config, cycles, established, timeouts, transaction, Stats};
 use crate::{AXES, DEAD, MOVER, MS, S, WARM_UP, WINDOW};

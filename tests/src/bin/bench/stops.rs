@@ -24,9 +24,9 @@ use protocol::time::{Duration, Instant};
 use protocol::units::{Lead, Length, Scale};
 use protocol::{Axis, AxisMap, AxisSet, Command, Rtim};
 use rc_host::node_harness::NodeHarness;
-use rc_host::sim::realtime::bus_at_line;
-use rc_host::sim::rng::Rng;
-use rc_host::sim::{BusConfig, ControllerConfig};
+use rc_tools::sim::realtime::bus_at_line;
+use rc_tools::sim::rng::Rng;
+use rc_tools::sim::{BusConfig, ControllerConfig};
 
 use crate::measure::{axis, Stats};
 use crate::movers::MOVERS;

@@ -25,7 +25,7 @@
 
 mod analyse;
 #[allow(dead_code)]
-#[path = "../rcgw/link.rs"]
+#[path = "../../../../tools/src/bin/rcgw/link.rs"]
 mod link;
 
 use std::io::{BufRead, BufReader};
@@ -38,7 +38,7 @@ use link::{Gw, Link};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 use protocol::plc::{map, DEFAULT_GATEWAY_UNIT};
-use rc_host::sim::realtime::monotonic_us;
+use rc_tools::sim::realtime::monotonic_us;
 use serialport::Parity;
 
 /// The movers: spread over the address range, as a machine's would be.
@@ -149,7 +149,7 @@ fn spawn(
         .spawn()
         .map_err(|e| {
             format!(
-                "{}: {e} (build it: cargo build --release -p rc-host)",
+                "{}: {e} (build it: cargo build --release -p rc-tools)",
                 path.display()
             )
         })?;

@@ -4,8 +4,8 @@ use protocol::frame::COMM_CHANGE;
 use protocol::line::Baud;
 use protocol::memory::{self, common};
 use protocol::{Command, Pulses, Request};
-use rc_host::sim::wire::{ms, transmit_time};
-use rc_host::sim::{BusConfig, ControllerConfig};
+use rc_tools::sim::wire::{ms, transmit_time};
+use rc_tools::sim::{BusConfig, ControllerConfig};
 
 use crate::{accept, axis, controller, establish, fast_host, host_on, host_with, rtim, send};
 

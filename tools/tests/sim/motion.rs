@@ -6,9 +6,9 @@ use protocol::memory::{self, common};
 use protocol::{
     Acceleration, AlarmCode, Buffered, Command, DataType, HomeDirection, Pulses, Request, Velocity,
 };
-use rc_host::sim::motion::Limits;
-use rc_host::sim::wire::{ms, transmit_time};
-use rc_host::sim::BusConfig;
+use rc_tools::sim::motion::Limits;
+use rc_tools::sim::wire::{ms, transmit_time};
+use rc_tools::sim::BusConfig;
 
 use crate::{
     accept, axis, brief_point, controller, establish, fast_host, home, host_on, host_with, move_to,

@@ -4,7 +4,7 @@
 use std::time::{Duration, Instant};
 
 use protocol::{Axis, Deframer, Packet, Reply, Request, Rtim};
-use rc_host::rcframe::describe;
+use rc_tools::rcframe::describe;
 
 use crate::{baud, report_text, Cli};
 

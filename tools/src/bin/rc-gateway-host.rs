@@ -10,7 +10,7 @@
 //! TCP 127.0.0.1:5020
 //! ```
 //!
-//! See `rc_host::host` for the loop and its timing limits; `--help` for the options, the
+//! See `rc_tools::host` for the loop and its timing limits; `--help` for the options, the
 //! control lines and the exit status.
 
 use std::io::Write;
@@ -24,7 +24,7 @@ use protocol::line::Baud;
 use protocol::units::{Lead, Length};
 use protocol::AxisSet;
 use protocol::HomeDirection;
-use rc_host::host::{BusLine, Ended, Host, Level, Options, Parity, PlcLine, TcpOptions};
+use rc_tools::host::{BusLine, Ended, Host, Level, Options, Parity, PlcLine, TcpOptions};
 
 const ABOUT: &str = "\
 The Robo Cylinder gateway on a PC: the firmware's bus master and Modbus register map, between a
@@ -211,7 +211,7 @@ fn parse_axes(text: &str) -> Result<AxisSetArg, String> {
 fn parse_bus_baud(text: &str) -> Result<u32, String> {
     let bps: u32 = text.parse().map_err(|_| format!("{text:?}: not a rate"))?;
     match Baud::from_bits_per_second(bps) {
-        Some(baud) if rc_host::host::port::termios_rate(bps).is_some() => {
+        Some(baud) if rc_tools::host::port::termios_rate(bps).is_some() => {
             Ok(baud.bits_per_second())
         }
         _ => Err(format!(
@@ -286,7 +286,7 @@ fn options(cli: &Cli) -> Result<Options, String> {
             .map(|a| protocol::net::Ipv4(a.octets()))
             .collect(),
     });
-    if rc_host::host::port::termios_rate(cli.plc_baud).is_none() {
+    if rc_tools::host::port::termios_rate(cli.plc_baud).is_none() {
         return Err(format!(
             "--plc-baud {}: termios has no constant for this rate",
             cli.plc_baud

@@ -315,7 +315,7 @@ band_mm = 0.1
 
 #[test]
 fn sniff_decodes_what_is_on_the_line() {
-    let (master, _slave, path) = rc_host::pty::open_raw(None).expect("pty");
+    let (master, _slave, path) = rc_tools::pty::open_raw(None).expect("pty");
     let path = path.to_str().expect("path").to_string();
     let sniffer = std::thread::spawn(move || {
         commission(&[

@@ -7,8 +7,8 @@ use protocol::memory::{self, common};
 use protocol::{
     Acceleration, AlarmCode, Command, HomeDirection, Pulses, Request, ResetKind, Transfer, Velocity,
 };
-use rc_host::sim::wire::ms;
-use rc_host::sim::{BadBccPolicy, BusConfig, ControllerConfig};
+use rc_tools::sim::wire::ms;
+use rc_tools::sim::{BadBccPolicy, BusConfig, ControllerConfig};
 
 use crate::{
     accept, axis, controller, establish, fast_host, home, host_with, move_to, point, read, reject,

@@ -4,7 +4,7 @@ use protocol::engine::point_jobs as jobs;
 use protocol::frame::Frame;
 use protocol::memory::{self, PointField};
 use protocol::{Address, AlarmCode, Command, Transfer};
-use rc_host::sim::wire::ms;
+use rc_tools::sim::wire::ms;
 
 use crate::{
     accept, axis, brief_point, controller, fast_host, home, point, read, reject, send, wait_pfin,

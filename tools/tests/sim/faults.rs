@@ -3,9 +3,9 @@
 use protocol::line::Baud;
 use protocol::memory::{self, common};
 use protocol::{Command, Pulses, Request, Transfer};
-use rc_host::sim::realtime::Control;
-use rc_host::sim::wire::{ms, transmit_time};
-use rc_host::sim::{BusConfig, ControllerConfig, Faults, ScriptedHost};
+use rc_tools::sim::realtime::Control;
+use rc_tools::sim::wire::{ms, transmit_time};
+use rc_tools::sim::{BusConfig, ControllerConfig, Faults, ScriptedHost};
 
 use crate::{
     accept, axis, controller, establish, fast_host, home, host_on, host_with, move_to, read,

@@ -27,7 +27,7 @@ use protocol::line::Baud;
 use protocol::memory::common;
 use protocol::units::{Accel, Length, Speed};
 use protocol::{Axis, AxisSet, PositionNo, Rtim};
-use rc_host::rcframe::units::{parse_axis, parse_point, ScaleArgs};
+use rc_tools::rcframe::units::{parse_axis, parse_point, ScaleArgs};
 
 use crate::line::Line;
 
@@ -174,7 +174,7 @@ fn parse_baud(text: &str) -> Result<u32, String> {
 }
 
 fn parse_stroke(text: &str) -> Result<Length, String> {
-    let length = rc_host::rcframe::units::parse_length(text)?;
+    let length = rc_tools::rcframe::units::parse_length(text)?;
     if length.0 <= 0 {
         return Err(format!("`{text}`: a stroke is a length, more than 0 mm"));
     }

@@ -39,7 +39,7 @@ pub enum Control {
 }
 
 impl Control {
-    /// Parse one control line (see the module documentation, `tests/src/sim/realtime/control.rs`).
+    /// Parse one control line (see the module documentation, `tools/src/sim/realtime/control.rs`).
     pub fn parse(line: &str) -> Result<Control, String> {
         let words: Vec<&str> = line.split_whitespace().collect();
         let axis = |text: Option<&&str>| {

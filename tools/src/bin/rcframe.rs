@@ -50,7 +50,7 @@
 
 use clap::{Parser, Subcommand};
 use protocol::alarm::AlarmCode;
-use rc_host::rcframe::{decode, encode};
+use rc_tools::rcframe::{decode, encode};
 use std::process::ExitCode;
 
 /// Encode and decode IAI Robo Cylinder serial frames, for debugging an RS485 bus.

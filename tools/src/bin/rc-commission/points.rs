@@ -12,7 +12,7 @@ use protocol::engine::point_jobs::{PointData, PointReadback};
 use protocol::memory::PointField;
 use protocol::units::{Accel, Length, Scale, Speed, UnitError};
 use protocol::{Acceleration, PositionNo, Pulses, Velocity};
-use rc_host::rcframe::units::hundredths as exact_hundredths;
+use rc_tools::rcframe::units::hundredths as exact_hundredths;
 use serde::{Deserialize, Serialize};
 
 /// One row, in hundredths (0.01 mm, 0.01 mm/s, 0.01 G): exact in both directions.

@@ -17,9 +17,9 @@ use protocol::{
     Acceleration, Address, Axis, Command, HomeDirection, PositionNo, Pulses, Request, Rtim,
     StatusReport, Velocity,
 };
-use rc_host::sim::host::Answer;
-use rc_host::sim::wire::ms;
-use rc_host::sim::{Bus, BusConfig, Controller, ControllerConfig, ScriptedHost};
+use rc_tools::sim::host::Answer;
+use rc_tools::sim::wire::ms;
+use rc_tools::sim::{Bus, BusConfig, Controller, ControllerConfig, ScriptedHost};
 
 // ----- helpers -----
 
@@ -188,10 +188,10 @@ fn brief_point() -> PointData {
     }
 }
 
-fn point_row(data: &PointData) -> rc_host::sim::memory::PointRow {
-    let mut row = [0u32; rc_host::sim::memory::POINT_LEN];
+fn point_row(data: &PointData) -> rc_tools::sim::memory::PointRow {
+    let mut row = [0u32; rc_tools::sim::memory::POINT_LEN];
     for (field, value) in data.fields() {
-        row[rc_host::sim::memory::pi(field)] = value;
+        row[rc_tools::sim::memory::pi(field)] = value;
     }
     row
 }

@@ -17,11 +17,11 @@
 //! `ERR why`: `silent 2 on|off` (axis 2 executes commands but never answers), `cut 2 on|off`
 //! (the wire to axis 2 cut: it hears nothing and answers nothing, a move it makes goes on;
 //! what the master sends it meanwhile is lost), `alarm 2 E0`, `power 2 500`, `where 2` (see
-//! `rc_host::sim::realtime::Control`). The log (`--log`) notes each as it is applied, e.g.
+//! `rc_tools::sim::realtime::Control`). The log (`--log`) notes each as it is applied, e.g.
 //! `-- control: Cut(Axis(2), false)`: the frames logged after that note are the ones the axis
 //! hears.
 //!
-//! See `rc_host::sim::realtime` for the clock mapping and the line-rate and break decisions,
+//! See `rc_tools::sim::realtime` for the clock mapping and the line-rate and break decisions,
 //! summarised in `--help`.
 
 use std::io::Write;
@@ -34,10 +34,10 @@ use clap::{ArgGroup, Parser};
 use nix::sys::signal::{self, SigHandler, Signal};
 use protocol::line::Baud;
 use protocol::{Axis, Rtim};
-use rc_host::sim::realtime::{
+use rc_tools::sim::realtime::{
     bus_at_line, Control, Ended, Options, Pty, RealTime, TcpServer, Transport,
 };
-use rc_host::sim::{BusConfig, Faults};
+use rc_tools::sim::{BusConfig, Faults};
 
 const ABOUT: &str = "\
 Simulated IAI Robo Cylinder controllers on an RS485 bus, in real time, for a real bus master.
@@ -142,7 +142,7 @@ struct Cli {
     #[arg(long)]
     log: bool,
     /// Write the event log to FILE: every command, reply and move start with its time in µs of
-    /// CLOCK_MONOTONIC (`rc_host::sim::realtime` events), for benchmarks.
+    /// CLOCK_MONOTONIC (`rc_tools::sim::realtime` events), for benchmarks.
     #[arg(long, value_name = "FILE")]
     events: Option<std::path::PathBuf>,
     /// Bytes take no time on the wire: a frame reaches the controllers (and a reply the master)

@@ -19,10 +19,10 @@ use protocol::alarm::AlarmCode;
 use protocol::frame::Packet;
 use protocol::line::Baud;
 use protocol::{Axis, Command, Deframer, Reply, Request, Rtim};
-use rc_host::sim::realtime::{
+use rc_tools::sim::realtime::{
     bus_at_line, Control, Ended, Handle, Options, Outcome, Pty, RealTime, TcpServer, Transport,
 };
-use rc_host::sim::BusConfig;
+use rc_tools::sim::BusConfig;
 
 /// Long enough for any answer on a loaded machine (RTIM 255 ms at 9.6 kbit/s included).
 const ANSWER_TIMEOUT: Duration = Duration::from_secs(3);
