@@ -35,9 +35,9 @@ use crate::io::{self, Sample, SAMPLED};
 use crate::net::PORT;
 use crate::node::{Action, Instant, Node};
 use crate::serial::Rs485;
-use crate::settings::Settings;
+use crate::settings::SavedSettings;
 use protocol::line::LineAction;
-use protocol::plc::Store;
+use protocol::plc::SettingsRequest;
 
 /// The loop passes at least this often, whatever happens on the lines: it feeds the watchdog
 /// and blinks the run LED (through the I/O task).
@@ -110,7 +110,7 @@ async fn fed(watchdog: &mut crate::board::Watchdog, work: Pin<&mut dyn Future<Ou
 #[embassy_executor::task]
 pub async fn run(
     board: &'static mut Board,
-    settings: &'static mut Settings,
+    settings: &'static mut SavedSettings,
     boot: Sample,
     node: &'static mut Node,
 ) -> ! {
@@ -236,7 +236,7 @@ pub async fn run(
                     )
                     .await
                 }
-                Action::Store(store) => {
+                Action::Settings(request) => {
                     // The reply to the write that asked for it leaves first: on the F103 an
                     // erase stops the CPU, and with it the interrupt that feeds the UART, for
                     // 20-40 ms; a restart would cut it.
@@ -248,13 +248,13 @@ pub async fn run(
                     // left of it (the F429 feeds it again before each 16 KiB sector, 0.5 s
                     // at most: `board::f429::SettingsSectors`).
                     watchdog.pet();
-                    match store {
-                        Store::Save => {
+                    match request {
+                        SettingsRequest::Save => {
                             let saved = settings.save(&node.settings_record());
                             node.stored(saved);
                         }
-                        Store::FactoryReset | Store::Restart => {
-                            if matches!(store, Store::FactoryReset) {
+                        SettingsRequest::FactoryReset | SettingsRequest::Restart => {
+                            if matches!(request, SettingsRequest::FactoryReset) {
                                 settings.factory_reset();
                             }
                             cortex_m::peripheral::SCB::sys_reset();

@@ -93,7 +93,7 @@ static PARTS: StaticCell<Parts> = StaticCell::new();
 struct Parts {
     board: board::Board,
     pins: io::Pins,
-    settings: settings::Settings,
+    settings: settings::SavedSettings,
     /// The pins at power-up.
     boot: io::Sample,
     /// The network settings, as loaded: the stack starts at this address.
@@ -155,7 +155,7 @@ fn bring_up(plc: protocol::plc::PlcLine) -> Option<&'static mut Parts> {
     match board::board(p, plc) {
         Ok((mut board, pins)) => {
             let boot = io::Sample::of(&pins.inputs);
-            let settings = settings::Settings::new(board.settings_flash.take());
+            let settings = settings::SavedSettings::new(board.settings_flash.take());
             Some(PARTS.init(Parts {
                 board,
                 pins,

@@ -20,23 +20,23 @@ pub const FACTORY_RESET_INPUTS: PioInputs =
     PioInputs::from_bits(PioInputs::HOME.bits() | PioInputs::RES.bits());
 
 /// The settings store, if the board has one.
-pub struct Settings {
+pub struct SavedSettings {
     #[cfg(feature = "hw")]
     store: Option<settings_store::Store<SettingsFlash>>,
     /// What the start found: where the settings came from, the saves so far, why the board
-    /// started ([`Settings::load`]).
+    /// started ([`SavedSettings::load`]).
     pub boot: Boot,
 }
 
-impl Settings {
+impl SavedSettings {
     /// The store on `flash` (`None`: the board has none, or its range is not whole pages).
     #[cfg(feature = "hw")]
-    pub fn new(flash: Option<SettingsFlash>) -> Settings {
+    pub fn new(flash: Option<SettingsFlash>) -> SavedSettings {
         let store = flash.and_then(|f| settings_store::Store::new(f, crate::board::SETTINGS_RANGE));
         if store.is_none() {
             warn!("settings: no store, the defaults apply");
         }
-        Settings {
+        SavedSettings {
             store,
             boot: Boot::DEFAULT,
         }
@@ -44,15 +44,15 @@ impl Settings {
 
     /// No store (the emulator).
     #[cfg(feature = "emulator")]
-    pub fn new(_flash: Option<SettingsFlash>) -> Settings {
-        Settings {
+    pub fn new(_flash: Option<SettingsFlash>) -> SavedSettings {
+        SavedSettings {
             boot: Boot::DEFAULT,
         }
     }
 
     /// The configuration to start with, into `config` (which holds the defaults): the stored
     /// settings over them, or nothing (after a factory reset if `inputs` ask for one); and
-    /// what the start found, into [`Settings::boot`].
+    /// what the start found, into [`SavedSettings::boot`].
     ///
     /// The store's operations block (the chip's flash is blocking): each is run to completion on
     /// the spot, in a function of its own, so that the store's code is in the firmware once
@@ -78,11 +78,11 @@ impl Settings {
         );
     }
 
-    /// What the store holds, into `config` and [`Settings::boot`]: the settings loaded are
+    /// What the store holds, into `config` and [`SavedSettings::boot`]: the settings loaded are
     /// applied here, not returned.
     // Not inlined, like each store operation here: each one's frames (its nested calls, what it
     // returns) are then on the stack only while it runs, not all of them at once under
-    // `Settings::load` (the deepest stack at start-up is this one: `scripts/stack_depth.py`).
+    // `SavedSettings::load` (the deepest stack at start-up is this one: `scripts/stack_depth.py`).
     #[cfg(feature = "hw")]
     #[inline(never)]
     fn apply_stored(&mut self, config: &mut GatewayConfig) {

@@ -36,7 +36,7 @@ use embassy_net::{Config, Ipv4Address, Ipv4Cidr, Stack, StackResources, StaticCo
 use embassy_time::Timer;
 use protocol::net::Ipv4;
 use protocol::node::{Action, Node};
-use protocol::plc::{Boot, GatewayConfig, Store, IDENTITY};
+use protocol::plc::{Boot, GatewayConfig, SettingsRequest, IDENTITY};
 use protocol::time::Instant;
 use protocol::AxisSet;
 use rc_net::{Port, SocketHandle, SOCKETS};
@@ -193,7 +193,7 @@ async fn gateway_task(node: &'static mut Node) -> ! {
             while let Some(action) = node.poll(clock) {
                 match action {
                     Action::Tcp(tcp) => PORT.act(tcp, node, clock),
-                    Action::Store(Store::Save) => {
+                    Action::Settings(SettingsRequest::Save) => {
                         saves += 1;
                         node.stored(Ok(saves));
                     }
@@ -202,7 +202,7 @@ async fn gateway_task(node: &'static mut Node) -> ! {
                     | Action::Line(_)
                     | Action::Reply(_)
                     | Action::PlcLine(_)
-                    | Action::Store(_) => {}
+                    | Action::Settings(_) => {}
                 }
             }
             // What came meanwhile, and what a request that got no reply left waiting in a pipe.

@@ -393,7 +393,7 @@ fn the_network_registers_are_checked_stored_and_read_back() {
     // SAVE stores them.
     rig.write(63, G_SAVE, &[1]).unwrap();
     rig.run_for(10 * MS);
-    let (Some((_, protocol::plc::Store::Save)), Some(&record)) =
+    let (Some((_, protocol::plc::SettingsRequest::Save)), Some(&record)) =
         (rig.stores.last(), rig.saved.last())
     else {
         panic!("a save");

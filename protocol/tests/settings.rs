@@ -14,7 +14,7 @@ use protocol::plc::settings::{
 };
 use protocol::plc::{
     AxisBase, Boot, ConfigSource, GatewayConfig, InchStep, JogSpeed, Parity, PlcBaud, ResetCause,
-    Store, UnitId,
+    SettingsRequest, UnitId,
 };
 use protocol::units::Lead;
 use protocol::AxisSet;
@@ -251,7 +251,7 @@ fn save_stores_the_settings_with_the_pending_ones() {
     rig.write(63, G_SAVE, &[1]).unwrap();
     rig.run_for(10 * MS);
     let record = match (rig.stores.as_slice(), rig.saved.as_slice()) {
-        ([(_, Store::Save)], [record]) => *record,
+        ([(_, SettingsRequest::Save)], [record]) => *record,
         other => panic!("one save expected: {other:?}"),
     };
     let saved = Settings::decode(&record).unwrap();
@@ -298,7 +298,7 @@ fn a_saved_stroke_of_zero_loads() {
     rig.write(63, G_SAVE, &[1]).unwrap();
     rig.run_for(10 * MS);
     let record = match (rig.stores.as_slice(), rig.saved.as_slice()) {
-        ([(_, Store::Save)], [record]) => *record,
+        ([(_, SettingsRequest::Save)], [record]) => *record,
         other => panic!("one save expected: {other:?}"),
     };
     let saved = Settings::decode(&record).expect("the saved record loads");
@@ -345,8 +345,11 @@ fn factory_reset_and_restart_need_their_keys() {
     rig.run_for(MS);
     rig.write(63, G_FACTORY, &[FACTORY_KEY]).unwrap();
     rig.run_for(MS);
-    let asked: Vec<Store> = rig.stores.iter().map(|(_, s)| *s).collect();
-    assert_eq!(asked, [Store::Restart, Store::FactoryReset]);
+    let asked: Vec<SettingsRequest> = rig.stores.iter().map(|(_, s)| *s).collect();
+    assert_eq!(
+        asked,
+        [SettingsRequest::Restart, SettingsRequest::FactoryReset]
+    );
     // Writing 0 is harmless.
     rig.write(63, G_FACTORY, &[0]).unwrap();
     rig.write(63, G_RESTART, &[0]).unwrap();

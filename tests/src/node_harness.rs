@@ -47,7 +47,7 @@ pub struct NodeHarness {
     /// PLC line changes the node asked for, with their time.
     pub plc_lines: Vec<(u64, protocol::plc::PlcLine)>,
     /// Flash requests (each save succeeds), with their time.
-    pub stores: Vec<(u64, protocol::plc::Store)>,
+    pub stores: Vec<(u64, protocol::plc::SettingsRequest)>,
     /// Modbus replies not yet taken, with the time they were sent.
     replies: Vec<(u64, Vec<u8>)>,
     /// Modbus TCP replies, with their socket and time, in order.
@@ -113,8 +113,8 @@ impl NodeHarness {
                     self.tcp_closes.push((self.now, socket));
                     self.node.tcp_closed(socket);
                 }
-                Some(Action::Store(store)) => {
-                    if let protocol::plc::Store::Save = store {
+                Some(Action::Settings(store)) => {
+                    if let protocol::plc::SettingsRequest::Save = store {
                         let saves = self.stores.len() as u32 + 1;
                         self.node.stored(Ok(saves));
                     }

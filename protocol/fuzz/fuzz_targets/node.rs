@@ -38,7 +38,7 @@ use protocol::node::TcpAction;
 use protocol::net::Ipv4;
 use protocol::node::{Action, Node};
 use protocol::pio::{Pattern, PioInputs};
-use protocol::plc::{GatewayConfig, Store};
+use protocol::plc::{GatewayConfig, SettingsRequest};
 use protocol::time::Instant;
 use protocol::{Axis, AxisSet};
 
@@ -229,9 +229,9 @@ fn drain(
                 assert!(crc::is_valid(reply), "reply CRC");
                 *asked = false;
             }
-            Action::Store(Store::Save) => node.stored(Ok(1)),
+            Action::Settings(SettingsRequest::Save) => node.stored(Ok(1)),
             // The board restarts.
-            Action::Store(Store::FactoryReset | Store::Restart) => return false,
+            Action::Settings(SettingsRequest::FactoryReset | SettingsRequest::Restart) => return false,
             Action::Line(_) | Action::PlcLine(_) => {}
             Action::Tcp(TcpAction::Reply(handle)) => {
                 let (socket, bytes) = (handle.index(), node.tcp_reply());

@@ -29,14 +29,14 @@
 //!   while it is on the wire (255 bytes take 2.3 s at 1.2 kbit/s), as long as it flushes it and
 //!   releases DE before it hands the node any more PLC bytes (the PLC answers only after the
 //!   reply, and the receiver is off while the driver is on), before [`Action::PlcLine`] and
-//!   before [`Action::Store`]. The PLC watchdog counts the PLC's silence from the reply's end,
+//!   before [`Action::Settings`]. The PLC watchdog counts the PLC's silence from the reply's end,
 //!   at the line's rate.
 //! - **[`Action::Line`]**: [`LineAction::SetBaud`] only after the previous transmission has been
 //!   flushed (a rate change mid-byte garbles it); [`LineAction::BreakStart`] holds the bus' TX
 //!   low (the driver enabled) until [`LineAction::BreakEnd`]; [`LineAction::CommChange`] writes
 //!   [`COMM_CHANGE`](crate::frame::COMM_CHANGE) (nobody answers).
 //! - **[`Action::PlcLine`]**: flush the reply before, then switch the PLC UART's rate and parity.
-//! - **[`Action::Store`]**: write the settings record to flash (or erase it, or restart) when
+//! - **[`Action::Settings`]**: write the settings record to flash (or erase it, or restart) when
 //!   asked, never otherwise; report a save with [`Node::stored`].
 //! - **Inputs** are sampled every millisecond or so ([`sample_inputs`](Node::sample_inputs));
 //!   the PIO's debounce and settle times count in the samples' times. The outputs are valid at
@@ -51,7 +51,7 @@
 //! use protocol::node::{Action, Node};
 //! use protocol::line::LineAction;
 //! use protocol::pio::PioInputs;
-//! use protocol::plc::{Boot, GatewayConfig, Store, IDENTITY};
+//! use protocol::plc::{Boot, GatewayConfig, SettingsRequest, IDENTITY};
 //! use protocol::time::Instant;
 //! use protocol::AxisSet;
 //!
@@ -102,11 +102,11 @@
 //!                 board.bus_write_and_flush(&protocol::frame::COMM_CHANGE)
 //!             }
 //!             Action::PlcLine(line) => board.set_plc_line(line.baud.bits_per_second()),
-//!             Action::Store(Store::Save) => {
+//!             Action::Settings(SettingsRequest::Save) => {
 //!                 let saved = board.write_settings(&node.settings_record());
 //!                 node.stored(saved);
 //!             }
-//!             Action::Store(Store::FactoryReset | Store::Restart) => board.restart(),
+//!             Action::Settings(SettingsRequest::FactoryReset | SettingsRequest::Restart) => board.restart(),
 //!             // A board with Ethernet (feature `tcp`) sends or closes on its sockets.
 //!             #[cfg(feature = "tcp")]
 //!             Action::Tcp(_) => {}
@@ -129,7 +129,7 @@ use crate::modbus::{
     SlaveCounters,
 };
 use crate::pio::{self, Band, Jog, Pattern, Pio, PioInputs, PioOutputs};
-use crate::plc::{Boot, Gateway, GatewayConfig, PlcLine, Store, PIO_ACCEL};
+use crate::plc::{Boot, Gateway, GatewayConfig, PlcLine, SettingsRequest, PIO_ACCEL};
 use crate::time::{earliest, Duration, Instant};
 use crate::units::{Accel, Length};
 use crate::{Axis, PositionNo, Pulses};
@@ -173,7 +173,7 @@ pub enum Action<'a> {
     PlcLine(PlcLine),
     /// Do this with the flash (SAVE, FACTORY, RESTART), then report a save with
     /// [`Node::stored`]. A factory reset and a restart end with the board restarting.
-    Store(Store),
+    Settings(SettingsRequest),
     /// Do this on a Modbus TCP socket (feature `tcp`).
     #[cfg(feature = "tcp")]
     Tcp(TcpAction),
@@ -337,8 +337,8 @@ impl Node {
             self.receiver.set_frame_end(end);
             return Some(Action::PlcLine(line));
         }
-        if let Some(store) = self.gateway.take_store() {
-            return Some(Action::Store(store));
+        if let Some(store) = self.gateway.take_settings_request() {
+            return Some(Action::Settings(store));
         }
         match self.gateway.poll(now) {
             Output::Transmit(frame) => Some(Action::Bus(frame.to_bytes())),
@@ -351,14 +351,14 @@ impl Node {
         }
     }
 
-    /// The settings record to store for [`Store::Save`]: the settings in force with the
+    /// The settings record to store for [`SettingsRequest::Save`]: the settings in force with the
     /// pending ones. Asked for when the save is carried out, not carried in the action: 213
     /// bytes less in every action and in the node.
     pub fn settings_record(&self) -> [u8; crate::plc::settings::RECORD_LEN] {
         self.gateway.settings_record()
     }
 
-    /// How the save asked for by [`Action::Store`] went: the new save count, or a failure
+    /// How the save asked for by [`Action::Settings`] went: the new save count, or a failure
     /// (SAVESTAT shows it).
     pub fn stored(&mut self, result: Result<u32, ()>) {
         self.gateway.stored(result);

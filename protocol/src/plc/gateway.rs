@@ -13,7 +13,7 @@ use super::channel::Channel;
 use super::command::{CommandState, Motion, PlcAxis, Reason};
 use super::config::GatewayConfig;
 use super::failsafe::{FailSafe, Trip};
-use super::persist::{Persist, Store};
+use super::persist::{Persist, SettingsRequest};
 use super::points::PointCache;
 use super::refused::Refused;
 use super::sync::{SyncEnd, SyncStart};
@@ -154,11 +154,11 @@ impl Gateway {
     }
 
     /// What the firmware is asked to do with the flash (SAVE, a factory reset, RESTART), once.
-    pub fn take_store(&mut self) -> Option<Store> {
+    pub fn take_settings_request(&mut self) -> Option<SettingsRequest> {
         self.persist.request.take()
     }
 
-    /// The settings record a SAVE stores ([`Store::Save`]): the settings in force with the
+    /// The settings record a SAVE stores ([`SettingsRequest::Save`]): the settings in force with the
     /// pending ones (those APPLY or the next start takes).
     pub fn settings_record(&self) -> [u8; super::settings::RECORD_LEN] {
         self.persist.record(&self.config)

@@ -8,7 +8,7 @@ use super::axis_unit::link_code;
 use super::config::complement_code;
 use super::gateway::Gateway;
 use super::map::*;
-use super::persist::Store;
+use super::persist::SettingsRequest;
 use super::refused::Refused;
 use super::registers::{join, split};
 use super::write::{admit, axis_cfg, nth, per_axis, AxisSetting, GatewayWrite, Pending};
@@ -234,8 +234,10 @@ impl Gateway {
                     .reconfigure(pending.bus.axes, pending.bus.baud, pending.bus.rtim);
             }
             GatewayWrite::Save => self.persist.save(),
-            GatewayWrite::Restart => self.persist.request = Some(Store::Restart),
-            GatewayWrite::FactoryReset => self.persist.request = Some(Store::FactoryReset),
+            GatewayWrite::Restart => self.persist.request = Some(SettingsRequest::Restart),
+            GatewayWrite::FactoryReset => {
+                self.persist.request = Some(SettingsRequest::FactoryReset)
+            }
             GatewayWrite::PioAxis(axis) => self.config.pio_axis = axis,
             GatewayWrite::PioPattern(pattern) => self.config.pio_pattern = pattern,
             GatewayWrite::PioStart(start) => self.config.pio_start = start,

@@ -59,7 +59,7 @@ pub use gateway::Gateway;
 #[cfg(feature = "tcp")]
 pub use model::TcpView;
 pub use model::{diagnostic, Registers};
-pub use persist::Store;
+pub use persist::SettingsRequest;
 pub use points::CACHED_ROWS;
 pub use refused::Refused;
 pub use write::{admit, Conflict, Pending};

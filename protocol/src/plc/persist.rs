@@ -2,7 +2,7 @@
 //! or at the next start (the lines and the axes on the bus), SAVE and factory reset. What the
 //! firmware says about the start itself is [`Boot`](super::Boot), in `boot`.
 //!
-//! The gateway never writes flash by itself: a SAVE (or a factory reset) becomes a [`Store`]
+//! The gateway never writes flash by itself: a SAVE (or a factory reset) becomes a [`SettingsRequest`]
 //! request the firmware carries out ([`Node`](crate::node::Node) hands it over as an action)
 //! and reports back, as IAI's controllers write their parameters to flash only on request.
 
@@ -13,10 +13,12 @@ use crate::axes::AxisSet;
 use crate::line::Baud;
 use crate::Rtim;
 
-/// What the firmware is asked to do with the flash.
+/// What the PLC asked of the stored settings (SAVE, FACTORY, RESTART): the firmware writes
+/// them, erases them, or restarts with them. (Not `Store`: that is the flash store, and `V5`
+/// stores a point on a controller.)
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Store {
+pub enum SettingsRequest {
     /// Store the settings record [`Node::settings_record`](crate::node::Node::settings_record)
     /// gives now.
     // Not carried here: 213 bytes in every action and in the node, on a stack with a hundred
@@ -58,7 +60,7 @@ pub(super) struct Persist {
     /// How this start found the stored settings, and the saves so far (counted on).
     pub(super) boot: Boot,
     /// A request for the firmware, not taken yet.
-    pub(super) request: Option<Store>,
+    pub(super) request: Option<SettingsRequest>,
 }
 
 impl Persist {
@@ -93,7 +95,7 @@ impl Persist {
     ///
     /// [`record`]: Persist::record
     pub(super) fn save(&mut self) {
-        self.request = Some(Store::Save);
+        self.request = Some(SettingsRequest::Save);
         self.status = SaveStatus::Saving;
     }
 

@@ -318,7 +318,7 @@ pub struct Rig {
     /// PLC line changes, with their time.
     pub plc_lines: Vec<(u64, protocol::plc::PlcLine)>,
     /// Flash requests (each save succeeds), with their time.
-    pub stores: Vec<(u64, protocol::plc::Store)>,
+    pub stores: Vec<(u64, protocol::plc::SettingsRequest)>,
     /// The records saved, as the firmware would write them, in order.
     pub saved: Vec<[u8; protocol::plc::settings::RECORD_LEN]>,
     replies: Vec<Vec<u8>>,
@@ -401,8 +401,8 @@ impl Rig {
                 Some(Action::Line(action)) => self.lines.push((self.now, action)),
                 Some(Action::Reply(bytes)) => self.replies.push(bytes.to_vec()),
                 Some(Action::PlcLine(line)) => self.plc_lines.push((self.now, line)),
-                Some(Action::Store(store)) => {
-                    if let protocol::plc::Store::Save = store {
+                Some(Action::Settings(store)) => {
+                    if let protocol::plc::SettingsRequest::Save = store {
                         self.saved.push(self.node.settings_record());
                         let saves = self.stores.len() as u32 + 1;
                         self.node.stored(Ok(saves));

@@ -149,10 +149,10 @@ impl Host {
                         tcp.close(socket, &mut self.node);
                     }
                 }
-                Some(Action::Store(store)) => {
+                Some(Action::Settings(store)) => {
                     // A PC has no settings flash: a save is kept for the run (and counted), a
                     // restart or factory reset is only logged.
-                    if let protocol::plc::Store::Save = store {
+                    if let protocol::plc::SettingsRequest::Save = store {
                         self.saves += 1;
                         self.node.stored(Ok(self.saves));
                     }
