@@ -42,7 +42,6 @@ use std::process::ExitCode;
 
 use clap::{ArgGroup, Parser, Subcommand};
 use protocol::plc::map::G_AXIS_BASE;
-use serde_json::Value;
 
 use crate::link::{Fail, Gw, Link};
 use crate::settings::Settings;
@@ -210,7 +209,8 @@ fn bad_file(path: &str, errors: Vec<String>) -> Fail {
     ))
 }
 
-fn print_json(value: &Value) {
+/// `value` as pretty JSON, keys in the order its struct or `json!` has them.
+fn print_json(value: &impl serde::Serialize) {
     outln!(
         "{}",
         serde_json::to_string_pretty(value).unwrap_or_default()

@@ -1,6 +1,7 @@
 //! `rcgw status`: every enabled axis as the PLC sees it, FAILSAFE, the LEDs and the settings
 //! that wait for APPLY.
 
+use std::fmt;
 use std::io::IsTerminal;
 use std::time::Duration;
 
@@ -8,7 +9,7 @@ use protocol::modbus::Exception;
 use protocol::plc::map::*;
 use protocol::plc::Reason;
 use protocol::AlarmCode;
-use serde_json::{json, Value};
+use serde::Serialize;
 
 use crate::link::{Fail, Gw};
 use crate::print_json;
@@ -43,49 +44,132 @@ fn command_text(cmst: u16, cmer: u16, cmct: u16) -> String {
     }
 }
 
-fn axis_status(gw: &mut Gw, axis: u8) -> Result<Value, Fail> {
+/// An axis as `status` shows it (`axes[]` in its JSON).
+#[derive(Serialize, Debug)]
+pub struct AxisStatus {
+    pub axis: u8,
+    pub unit: u8,
+    pub link: &'static str,
+    pub last_command: String,
+    /// `false` only: the axis is enabled but its unit not served (pending until APPLY); the
+    /// key is absent for an axis that answers.
+    #[serde(skip_serializing_if = "is_true")]
+    pub served: bool,
+    /// Its command registers, when its unit answers.
+    #[serde(flatten)]
+    pub command: Option<CommandRegs>,
+    /// Its drive, when the controller answers (02 04 of an axis offline: absent).
+    #[serde(flatten)]
+    pub drive: Option<Drive>,
+}
+
+fn is_true(v: &bool) -> bool {
+    *v
+}
+
+/// CMST, CMER and CMCT as read.
+#[derive(Serialize, Debug)]
+pub struct CommandRegs {
+    pub cmst: u16,
+    pub cmer: u16,
+    pub cmct: u16,
+}
+
+/// What the controller reports: DSS1's and DSSE's bits, PNOW, ALMC.
+#[derive(Serialize, Debug)]
+pub struct Drive {
+    pub servo: bool,
+    pub homed: bool,
+    pub in_position: bool,
+    pub moving: bool,
+    pub position_mm: f64,
+    /// `null` in JSON when there is none.
+    pub alarm: Option<Alarm>,
+}
+
+/// An alarm: its code in hex and its text.
+#[derive(Serialize, Debug)]
+pub struct Alarm {
+    pub code: String,
+    pub text: &'static str,
+}
+
+/// FAILSAFE: latched or not, why, how often.
+#[derive(Serialize, Debug)]
+pub struct Failsafe {
+    pub latched: bool,
+    pub causes: Vec<&'static str>,
+    pub trips: u16,
+}
+
+/// What each LED shows, in words.
+#[derive(Serialize, Debug)]
+pub struct Leds {
+    pub run: &'static str,
+    pub bus_link: &'static str,
+    pub alarm: &'static str,
+}
+
+/// `rcgw status`'s report: the JSON as serialised, the text by [`fmt::Display`].
+#[derive(Serialize, Debug)]
+pub struct Status {
+    pub port: String,
+    pub unit: u8,
+    pub version: String,
+    pub uptime_s: u32,
+    pub failsafe: Failsafe,
+    pub leds: Leds,
+    pub axes: Vec<AxisStatus>,
+    pub pending: Vec<String>,
+}
+
+fn axis_status(gw: &mut Gw, axis: u8) -> Result<AxisStatus, Fail> {
     let unit = gw.axis_unit(axis);
     let Some(ext) = gw.probe(unit, CMST, 4)? else {
         // Enabled (AXISCFG) but its unit not served: enabled, or AXISBASE changed, pending
         // until APPLY.
-        return Ok(json!({
-            "axis": axis,
-            "unit": unit,
-            "link": "not served",
-            "last_command": "-",
-            "served": false,
-        }));
+        return Ok(AxisStatus {
+            axis,
+            unit,
+            link: "not served",
+            last_command: "-".into(),
+            served: false,
+            command: None,
+            drive: None,
+        });
     };
     let (cmst, cmer, link, cmct) = (ext[0], ext[1], ext[2], ext[3]);
-    let mut v = json!({
-        "axis": axis,
-        "unit": unit,
-        "link": link_name(link),
-        "last_command": command_text(cmst, cmer, cmct),
-        "cmst": cmst, "cmer": cmer, "cmct": cmct,
-    });
-    match gw.try_read(unit, PNOW, 8)? {
+    let drive = match gw.try_read(unit, PNOW, 8)? {
         Ok(r) => {
             let pnow = (u32::from(r[0]) << 16 | u32::from(r[1])) as i32;
             let (almc, dss1, dsse) = (r[2], r[5], r[7]);
-            v["servo"] = json!(dss1 & DSS1_SV != 0);
-            v["homed"] = json!(dss1 & DSS1_HEND != 0);
-            v["in_position"] = json!(dss1 & DSS1_PEND != 0);
-            v["moving"] = json!(dsse & DSSE_MOVE != 0);
-            v["position_mm"] = json!(f64::from(pnow) / 100.0);
-            v["alarm"] = if almc != 0 {
-                json!({"code": format!("{almc:02X}"), "text": AlarmCode(almc as u8).text()})
-            } else {
-                Value::Null
-            };
+            Some(Drive {
+                servo: dss1 & DSS1_SV != 0,
+                homed: dss1 & DSS1_HEND != 0,
+                in_position: dss1 & DSS1_PEND != 0,
+                moving: dsse & DSSE_MOVE != 0,
+                position_mm: f64::from(pnow) / 100.0,
+                alarm: (almc != 0).then(|| Alarm {
+                    code: format!("{almc:02X}"),
+                    text: AlarmCode(almc as u8).text(),
+                }),
+            })
         }
-        Err(Exception::ServerDeviceFailure) => {}
+        Err(Exception::ServerDeviceFailure) => None,
         Err(e) => return Err(Fail::Device(format!("{}: {e}", gw.at(unit, PNOW)))),
-    }
-    Ok(v)
+    };
+    Ok(AxisStatus {
+        axis,
+        unit,
+        link: link_name(link),
+        last_command: command_text(cmst, cmer, cmct),
+        served: true,
+        command: Some(CommandRegs { cmst, cmer, cmct }),
+        drive,
+    })
 }
 
-fn status_once(gw: &mut Gw) -> Result<Value, Fail> {
+fn status_once(gw: &mut Gw) -> Result<Status, Fail> {
     let unit = gw.unit;
     let g = gw.read(unit, 0, 6)?;
     let enabled = Settings::read_enabled(gw)?;
@@ -95,8 +179,10 @@ fn status_once(gw: &mut Gw) -> Result<Value, Fail> {
     }
     let pending = pending_settings(gw, &axes)?;
     let failsafe = g[4];
-    let all_online = axes.iter().all(|a| a["link"] == "online");
-    let alarm = axes.iter().any(|a| !a["alarm"].is_null());
+    let all_online = axes.iter().all(|a| a.link == "online");
+    let alarm = axes
+        .iter()
+        .any(|a| a.drive.as_ref().is_some_and(|d| d.alarm.is_some()));
     let alarm_led = failsafe != 0 || !all_online || alarm;
     let mut causes = Vec::new();
     if failsafe & 1 != 0 {
@@ -105,25 +191,37 @@ fn status_once(gw: &mut Gw) -> Result<Value, Fail> {
     if failsafe & 2 != 0 {
         causes.push("stop input");
     }
-    Ok(json!({
-        "port": gw.link.name,
-        "unit": unit,
-        "version": format!("{}.{}.{}", g[0] >> 8, g[0] & 0xFF, g[1]),
-        "uptime_s": u32::from(g[2]) << 16 | u32::from(g[3]),
-        "failsafe": {"latched": failsafe != 0, "causes": causes, "trips": g[5]},
-        "leds": {
-            "run": "blinking: the gateway task runs (it answers)",
-            "bus_link": if all_online { "on: every enabled axis answers" } else { "off: an enabled axis does not answer" },
-            "alarm": if alarm_led { "on: FAILSAFE latched, an axis offline or in alarm" } else { "off" },
+    Ok(Status {
+        port: gw.link.name.clone(),
+        unit,
+        version: format!("{}.{}.{}", g[0] >> 8, g[0] & 0xFF, g[1]),
+        uptime_s: u32::from(g[2]) << 16 | u32::from(g[3]),
+        failsafe: Failsafe {
+            latched: failsafe != 0,
+            causes,
+            trips: g[5],
         },
-        "axes": axes,
-        "pending": pending,
-    }))
+        leds: Leds {
+            run: "blinking: the gateway task runs (it answers)",
+            bus_link: if all_online {
+                "on: every enabled axis answers"
+            } else {
+                "off: an enabled axis does not answer"
+            },
+            alarm: if alarm_led {
+                "on: FAILSAFE latched, an axis offline or in alarm"
+            } else {
+                "off"
+            },
+        },
+        axes,
+        pending,
+    })
 }
 
 /// Signs that settings wait for APPLY (registers read the pending values): UNITID not the unit
 /// that answers, an enabled axis whose unit is not served.
-fn pending_settings(gw: &mut Gw, axes: &[Value]) -> Result<Vec<String>, Fail> {
+fn pending_settings(gw: &mut Gw, axes: &[AxisStatus]) -> Result<Vec<String>, Fail> {
     let mut pending = Vec::new();
     let unit_id = gw.get(G_UNIT_ID)?;
     if gw.unit != 255 && u16::from(gw.unit) != unit_id {
@@ -134,8 +232,8 @@ fn pending_settings(gw: &mut Gw, axes: &[Value]) -> Result<Vec<String>, Fail> {
     }
     let unserved: Vec<String> = axes
         .iter()
-        .filter(|a| a["served"] == false)
-        .map(|a| format!("axis {} (unit {})", a["axis"], a["unit"]))
+        .filter(|a| !a.served)
+        .map(|a| format!("axis {} (unit {})", a.axis, a.unit))
         .collect();
     if !unserved.is_empty() {
         pending.push(format!(
@@ -158,81 +256,62 @@ fn pending_text(pending: &[String]) -> String {
     )
 }
 
-fn status_text(s: &Value) -> String {
-    let mut out = format!(
-        "gateway unit {} on {}: firmware {}, up {} s\n",
-        s["unit"],
-        s["port"].as_str().unwrap_or(""),
-        s["version"].as_str().unwrap_or(""),
-        s["uptime_s"]
-    );
-    let fs = &s["failsafe"];
-    if fs["latched"] == true {
-        let causes: Vec<&str> = fs["causes"]
-            .as_array()
-            .map(|a| a.iter().filter_map(|c| c.as_str()).collect())
-            .unwrap_or_default();
-        out += &format!(
-            "FAILSAFE: LATCHED ({}); no motion until acknowledged (rcgw ack); trips {}\n",
-            causes.join(", "),
-            fs["trips"]
-        );
-    } else {
-        out += &format!("FAILSAFE: clear (trips {})\n", fs["trips"]);
-    }
-    out += &pending_text(
-        &s["pending"]
-            .as_array()
-            .map(|p| {
-                p.iter()
-                    .filter_map(|x| x.as_str().map(String::from))
-                    .collect::<Vec<_>>()
-            })
-            .unwrap_or_default(),
-    );
-    for led in ["run", "bus_link", "alarm"] {
-        out += &format!(
-            "LED {:<9} {}\n",
-            led.replace('_', " "),
-            s["leds"][led].as_str().unwrap_or("")
-        );
-    }
-    out += &format!(
-        "{:<4} {:<4} {:<8} {:<5} {:<5} {:<6} {:>9}  {:<28} {}\n",
-        "axis", "unit", "link", "servo", "homed", "moving", "pos mm", "alarm", "last command"
-    );
-    let yes = |v: &Value| match v.as_bool() {
-        Some(true) => "yes",
-        Some(false) => "no",
-        None => "-",
-    };
-    for a in s["axes"].as_array().into_iter().flatten() {
-        let pos = a["position_mm"]
-            .as_f64()
-            .map_or("-".to_string(), |p| format!("{p:.2}"));
-        let alarm = if a["alarm"].is_null() {
-            "-".to_string()
+impl fmt::Display for Status {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "gateway unit {} on {}: firmware {}, up {} s",
+            self.unit, self.port, self.version, self.uptime_s
+        )?;
+        let fs = &self.failsafe;
+        if fs.latched {
+            writeln!(
+                f,
+                "FAILSAFE: LATCHED ({}); no motion until acknowledged (rcgw ack); trips {}",
+                fs.causes.join(", "),
+                fs.trips
+            )?;
         } else {
-            format!(
-                "{} {}",
-                a["alarm"]["code"].as_str().unwrap_or(""),
-                a["alarm"]["text"].as_str().unwrap_or("")
-            )
-        };
-        out += &format!(
-            "{:<4} {:<4} {:<8} {:<5} {:<5} {:<6} {:>9}  {:<28} {}\n",
-            a["axis"].to_string(),
-            a["unit"].to_string(),
-            a["link"].as_str().unwrap_or(""),
-            yes(&a["servo"]).replace("yes", "on").replace("no", "off"),
-            yes(&a["homed"]),
-            yes(&a["moving"]),
-            pos,
-            alarm,
-            a["last_command"].as_str().unwrap_or("")
-        );
+            writeln!(f, "FAILSAFE: clear (trips {})", fs.trips)?;
+        }
+        f.write_str(&pending_text(&self.pending))?;
+        for (name, led) in [
+            ("run", self.leds.run),
+            ("bus link", self.leds.bus_link),
+            ("alarm", self.leds.alarm),
+        ] {
+            writeln!(f, "LED {name:<9} {led}")?;
+        }
+        writeln!(
+            f,
+            "{:<4} {:<4} {:<8} {:<5} {:<5} {:<6} {:>9}  {:<28} last command",
+            "axis", "unit", "link", "servo", "homed", "moving", "pos mm", "alarm"
+        )?;
+        for a in &self.axes {
+            let d = a.drive.as_ref();
+            let flag = |get: fn(&Drive) -> bool, yes: &'static str, no: &'static str| {
+                d.map_or("-", |d| if get(d) { yes } else { no })
+            };
+            let pos = d.map_or("-".to_string(), |d| format!("{:.2}", d.position_mm));
+            let alarm = d
+                .and_then(|d| d.alarm.as_ref())
+                .map_or("-".to_string(), |a| format!("{} {}", a.code, a.text));
+            writeln!(
+                f,
+                "{:<4} {:<4} {:<8} {:<5} {:<5} {:<6} {:>9}  {:<28} {}",
+                a.axis,
+                a.unit,
+                a.link,
+                flag(|d| d.servo, "on", "off"),
+                flag(|d| d.homed, "yes", "no"),
+                flag(|d| d.moving, "yes", "no"),
+                pos,
+                alarm,
+                a.last_command
+            )?;
+        }
+        Ok(())
     }
-    out
 }
 
 /// `rcgw status`, once or `--watch`.
@@ -251,7 +330,7 @@ pub fn status(
         let s = status_once(gw)?;
         if json {
             if watch {
-                outln!("{s}");
+                outln!("{}", serde_json::to_string(&s).unwrap_or_default());
             } else {
                 print_json(&s);
             }
@@ -259,12 +338,70 @@ pub fn status(
             if watch && std::io::stdout().is_terminal() {
                 out!("\x1b[2J\x1b[H");
             }
-            out!("{}", status_text(&s));
+            out!("{s}");
         }
         n += 1;
         if !watch || count.is_some_and(|c| n >= c) {
             return Ok(());
         }
         std::thread::sleep(Duration::from_secs_f64(interval));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The JSON of each kind of axis keeps the keys (and their order) scripts read: an axis
+    /// not served has `served: false` and nothing else, one offline no drive keys, one that
+    /// answers `alarm` as `null` or an object.
+    #[test]
+    fn axis_json_keys() {
+        let not_served = AxisStatus {
+            axis: 3,
+            unit: 4,
+            link: "not served",
+            last_command: "-".into(),
+            served: false,
+            command: None,
+            drive: None,
+        };
+        assert_eq!(
+            serde_json::to_string(&not_served).unwrap(),
+            r#"{"axis":3,"unit":4,"link":"not served","last_command":"-","served":false}"#
+        );
+        let offline = AxisStatus {
+            link: "offline",
+            last_command: "none".into(),
+            served: true,
+            command: Some(CommandRegs {
+                cmst: 0,
+                cmer: 0,
+                cmct: 0,
+            }),
+            ..not_served
+        };
+        assert_eq!(
+            serde_json::to_string(&offline).unwrap(),
+            r#"{"axis":3,"unit":4,"link":"offline","last_command":"none","cmst":0,"cmer":0,"cmct":0}"#
+        );
+        let alarm = AxisStatus {
+            drive: Some(Drive {
+                servo: true,
+                homed: false,
+                in_position: true,
+                moving: false,
+                position_mm: 12.5,
+                alarm: Some(Alarm {
+                    code: "0E".into(),
+                    text: "x",
+                }),
+            }),
+            ..offline
+        };
+        assert_eq!(
+            serde_json::to_string(&alarm).unwrap(),
+            r#"{"axis":3,"unit":4,"link":"offline","last_command":"none","cmst":0,"cmer":0,"cmct":0,"servo":true,"homed":false,"in_position":true,"moving":false,"position_mm":12.5,"alarm":{"code":"0E","text":"x"}}"#
+        );
     }
 }
