@@ -1,11 +1,12 @@
 //! `rcgw backup`, and a backup file read and checked for `rcgw restore`: the settings,
 //! version, identity and the point table of every online axis, in one TOML file.
 
+use std::fmt;
 use std::io::IsTerminal;
 
 use protocol::axes::AXES;
 use protocol::plc::map::*;
-use serde_json::{json, Value};
+use serde::Serialize;
 
 use crate::link::{Fail, Gw};
 use crate::points::{self, Row};
@@ -188,33 +189,81 @@ pub fn backup(gw: &mut Gw, json: bool, file: &str) -> Result<(), Fail> {
         _ => String::new(),
     });
     std::fs::write(file, &text).map_err(|e| Fail::Input(format!("{file}: {e}")))?;
-    let counts: Vec<Value> = tables
+    let axes = tables
         .iter()
-        .map(|(n, rows)| {
-            let no_speed: Vec<usize> = (0..rows.len())
+        .map(|(n, rows)| BackupAxis {
+            axis: *n,
+            points: rows.iter().filter(|r| !r.is_empty()).count(),
+            without_speed: (0..rows.len())
                 .filter(|&p| rows[p].is_empty() && rows[p] != Row::default())
                 .filter(|p| !omitted.iter().any(|(a, q, _)| a == n && q == p))
-                .collect();
-            let left_out: Vec<usize> = omitted.iter().filter(|(a, _, _)| a == n).map(|(_, p, _)| *p).collect();
-            json!({"axis": n, "points": rows.iter().filter(|r| !r.is_empty()).count(), "without_speed": no_speed, "left_out": left_out})
+                .collect(),
+            left_out: omitted
+                .iter()
+                .filter(|(a, _, _)| a == n)
+                .map(|(_, p, _)| *p)
+                .collect(),
         })
         .collect();
+    let report = BackupReport {
+        unit,
+        file: file.to_string(),
+        version,
+        online,
+        axes,
+    };
     if json {
-        print_json(&json!({"file": file, "version": version, "online": online, "axes": counts}));
+        print_json(&report);
     } else {
-        outln!("backup of gateway unit {unit} (firmware {version}) written to {file}");
-        for c in &counts {
-            outln!("axis {}: {} point(s)", c["axis"], c["points"]);
-            if c["without_speed"].as_array().is_some_and(|a| !a.is_empty()) {
-                outln!(
-                    "  points {} hold a position but no speed: not saved (the position table cannot write a row without a speed)",
-                    c["without_speed"]
-                );
-            }
-        }
-        if online.is_empty() {
-            outln!("no axis online: no point table saved");
-        }
+        out!("{report}");
     }
     Ok(())
+}
+
+/// An axis in the backup (`axes[]` in the JSON).
+#[derive(Serialize, Debug)]
+pub struct BackupAxis {
+    pub axis: u8,
+    /// Rows saved.
+    pub points: usize,
+    /// Rows with a position but no speed: not saved.
+    pub without_speed: Vec<usize>,
+    /// Rows the position table would refuse: left out.
+    pub left_out: Vec<usize>,
+}
+
+/// `rcgw backup`'s report: the JSON as serialised, the text by [`fmt::Display`].
+#[derive(Serialize, Debug)]
+pub struct BackupReport {
+    #[serde(skip)]
+    pub unit: u8,
+    pub file: String,
+    pub version: String,
+    pub online: Vec<u8>,
+    pub axes: Vec<BackupAxis>,
+}
+
+impl fmt::Display for BackupReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "backup of gateway unit {} (firmware {}) written to {}",
+            self.unit, self.version, self.file
+        )?;
+        for a in &self.axes {
+            writeln!(f, "axis {}: {} point(s)", a.axis, a.points)?;
+            if !a.without_speed.is_empty() {
+                let list: Vec<String> = a.without_speed.iter().map(|p| p.to_string()).collect();
+                writeln!(
+                    f,
+                    "  points [{}] hold a position but no speed: not saved (the position table cannot write a row without a speed)",
+                    list.join(",")
+                )?;
+            }
+        }
+        if self.online.is_empty() {
+            writeln!(f, "no axis online: no point table saved")?;
+        }
+        Ok(())
+    }
 }

@@ -53,7 +53,7 @@ pub fn config(gw: &mut Gw, json: bool, action: &ConfigCmd) -> Result<(), Fail> {
             };
             if json {
                 print_json(&json!({
-                    "changes": changes.iter().map(|c| c.json()).collect::<Vec<_>>(),
+                    "changes": changes,
                     "phases": phases.len(),
                     "written": apply,
                     "applied": applied,

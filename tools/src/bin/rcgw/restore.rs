@@ -1,17 +1,18 @@
 //! `rcgw restore`: the settings and point tables of a backup, only what differs written, then
 //! verified.
 
+use std::fmt;
 use std::io::IsTerminal;
 use std::time::Duration;
 
 use protocol::plc::map::*;
-use serde_json::{json, Value};
+use serde::Serialize;
 
 use crate::backup::progress;
 use crate::config::keys;
 use crate::link::{Fail, Gw};
 use crate::points::{self, Row};
-use crate::settings::{self, Section, Settings};
+use crate::settings::{self, Change, Section, Settings};
 use crate::{bad_file, print_json};
 
 /// `rcgw restore FILE`.
@@ -73,10 +74,19 @@ pub fn restore(gw: &mut Gw, json: bool, file: &str, dry_run: bool, save: bool) -
     let mut report = Vec::new();
     let mut missing = Vec::new();
     let show = std::io::stderr().is_terminal() && !dry_run;
-    let mut rows_of = |gw: &mut Gw, report: &mut Vec<Value>| -> Result<(), Fail> {
+    let mut rows_of = |gw: &mut Gw, report: &mut Vec<RestoreAxis>| -> Result<(), Fail> {
         for (n, rows) in &tables {
             if dry_run && !was_enabled.contains(n) {
-                report.push(json!({"axis": n, "enabled_on_apply": true, "rows": rows.len(), "written": [], "unchanged": 0, "not_in_backup": []}));
+                report.push(RestoreAxis {
+                    axis: *n,
+                    on_apply: Some(OnApply {
+                        enabled_on_apply: true,
+                        rows: rows.len(),
+                    }),
+                    written: Vec::new(),
+                    unchanged: 0,
+                    not_in_backup: Vec::new(),
+                });
                 continue;
             }
             let axis_unit = gw.axis_unit(*n);
@@ -105,7 +115,13 @@ pub fn restore(gw: &mut Gw, json: bool, file: &str, dry_run: bool, save: bool) -
             let table = points::read_table(gw, *n, &mut |p| {
                 progress(show, &format!("restore: axis {n} reading point {p:>2}"));
             })?;
-            let entry_of = |written: &Vec<Value>, unchanged, kept: &Vec<usize>| json!({"axis": n, "written": written, "unchanged": unchanged, "not_in_backup": kept});
+            let entry_of = |written: &Vec<PointWrite>, unchanged, kept: &Vec<usize>| RestoreAxis {
+                axis: *n,
+                on_apply: None,
+                written: written.clone(),
+                unchanged,
+                not_in_backup: kept.clone(),
+            };
             for (point, row) in rows {
                 let current = table.get(usize::from(*point)).copied().unwrap_or_default();
                 if current == *row {
@@ -113,12 +129,17 @@ pub fn restore(gw: &mut Gw, json: bool, file: &str, dry_run: bool, save: bool) -
                     continue;
                 }
                 progress(show, &format!("restore: axis {n} writing point {point:>2}"));
-                let mut entry = json!({"point": point, "from": if current.is_empty() { Value::Null } else { json!(current.text()) }, "to": row.text()});
+                let mut entry = PointWrite {
+                    point: *point,
+                    from: (!current.is_empty()).then(|| current.text()),
+                    to: row.text(),
+                    stored: None,
+                };
                 if !dry_run {
                     match points::write_row(gw, *n, *point, row) {
                         Ok(stored) => {
                             if stored != *row {
-                                entry["stored"] = json!(stored.text());
+                                entry.stored = Some(stored.text());
                             }
                         }
                         Err(e) => {
@@ -148,85 +169,32 @@ pub fn restore(gw: &mut Gw, json: bool, file: &str, dry_run: bool, save: bool) -
         (Ok(()), true) => Some(settings::save(gw)?),
         _ => None,
     };
+    let out = RestoreReport {
+        dry_run,
+        settings: changes,
+        two_steps: match phases.as_slice() {
+            [first, _] => Some(keys(first)),
+            _ => None,
+        },
+        applied,
+        axes: report,
+        not_restored: missing,
+        skipped,
+        notes,
+        saved: saved.is_some(),
+        save_count: saved,
+        complete: outcome.is_ok(),
+    };
     if json {
-        print_json(&json!({
-            "dry_run": dry_run,
-            "settings": changes.iter().map(|c| c.json()).collect::<Vec<_>>(),
-            "applied": applied,
-            "axes": report,
-            "not_restored": missing,
-            "skipped": skipped,
-            "notes": notes,
-            "saved": saved.is_some(),
-            "save_count": saved,
-            "complete": outcome.is_ok(),
-        }));
+        print_json(&out);
     } else {
-        let verb = if dry_run { "would change" } else { "changed" };
-        outln!("settings: {} {verb}", changes.len());
-        for c in &changes {
-            outln!("  {}", c.line());
-        }
-        if let [first, _] = phases.as_slice() {
-            outln!(
-                "  in two steps: {} first, then APPLY, then the rest",
-                keys(first)
-            );
-        }
-        if changes.iter().any(|c| c.on_restart()) {
-            outln!("  [network] addresses take effect after SAVE and RESTART");
-        }
-        for n in &notes {
-            outln!("  {n}");
-        }
-        if applied {
-            outln!("  APPLY done: the bus was established again");
-        }
-        for r in &report {
-            if r["enabled_on_apply"] == true {
-                outln!(
-                    "axis {}: enabled on APPLY; its {} row(s) compared after it",
-                    r["axis"],
-                    r["rows"]
-                );
-                continue;
-            }
-            let written = r["written"].as_array().map_or(0, |w| w.len());
-            outln!(
-                "axis {}: {written} point(s) {}, {} unchanged",
-                r["axis"],
-                if dry_run {
-                    "would be written"
-                } else {
-                    "written and verified"
-                },
-                r["unchanged"]
-            );
-            for w in r["written"].as_array().into_iter().flatten() {
-                outln!(
-                    "  point {}: {} -> {}",
-                    w["point"],
-                    w["from"].as_str().unwrap_or("empty"),
-                    w["to"].as_str().unwrap_or("")
-                );
-                if let Some(stored) = w["stored"].as_str() {
-                    outln!("    stored as {stored} (the controller's resolution)");
-                }
-            }
-            for p in r["not_in_backup"].as_array().into_iter().flatten() {
-                outln!("  point {p}: holds data the backup has empty: left as it is (a row cannot be emptied over Modbus)");
-            }
-        }
-        for m in &missing {
-            outln!("{m}");
-        }
-        for k in &skipped {
-            outln!("{k}");
-        }
-        if let Some(count) = saved {
-            outln!("saved (SAVECOUNT {count})");
-        }
+        out!("{out}");
     }
+    let RestoreReport {
+        not_restored: missing,
+        skipped,
+        ..
+    } = out;
     outcome.map_err(|e| match e {
         Fail::Device(m) | Fail::Input(m) => Fail::Device(format!(
             "{m}\n  restore stopped there: the report above is what was done"
@@ -247,4 +215,132 @@ pub fn restore(gw: &mut Gw, json: bool, file: &str, dry_run: bool, save: bool) -
         )));
     }
     Ok(())
+}
+
+/// A point row restore writes (or would write).
+#[derive(Serialize, Clone, Debug)]
+pub struct PointWrite {
+    pub point: u16,
+    /// What the row held: `null` for an empty row.
+    pub from: Option<String>,
+    pub to: String,
+    /// What the controller stored, when its resolution changed it; absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stored: Option<String>,
+}
+
+/// An axis enabled by the restore, in a dry run: its rows compared once it is.
+#[derive(Serialize, Debug)]
+pub struct OnApply {
+    pub enabled_on_apply: bool,
+    pub rows: usize,
+}
+
+/// An axis' point table restored (`axes[]` in the JSON).
+#[derive(Serialize, Debug)]
+pub struct RestoreAxis {
+    pub axis: u8,
+    #[serde(flatten)]
+    pub on_apply: Option<OnApply>,
+    pub written: Vec<PointWrite>,
+    pub unchanged: usize,
+    /// Rows that hold data the backup has empty: left as they are.
+    pub not_in_backup: Vec<usize>,
+}
+
+/// `rcgw restore`'s report: the JSON as serialised, the text by [`fmt::Display`].
+#[derive(Serialize, Debug)]
+pub struct RestoreReport {
+    pub dry_run: bool,
+    pub settings: Vec<Change>,
+    /// The first phase's settings, when they are written in two steps (text only).
+    #[serde(skip)]
+    pub two_steps: Option<String>,
+    pub applied: bool,
+    pub axes: Vec<RestoreAxis>,
+    pub not_restored: Vec<String>,
+    pub skipped: Vec<String>,
+    pub notes: Vec<String>,
+    pub saved: bool,
+    pub save_count: Option<u32>,
+    pub complete: bool,
+}
+
+impl fmt::Display for RestoreReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let verb = if self.dry_run {
+            "would change"
+        } else {
+            "changed"
+        };
+        writeln!(f, "settings: {} {verb}", self.settings.len())?;
+        for c in &self.settings {
+            writeln!(f, "  {}", c.line())?;
+        }
+        if let Some(first) = &self.two_steps {
+            writeln!(
+                f,
+                "  in two steps: {first} first, then APPLY, then the rest"
+            )?;
+        }
+        if self.settings.iter().any(|c| c.on_restart()) {
+            writeln!(
+                f,
+                "  [network] addresses take effect after SAVE and RESTART"
+            )?;
+        }
+        for n in &self.notes {
+            writeln!(f, "  {n}")?;
+        }
+        if self.applied {
+            writeln!(f, "  APPLY done: the bus was established again")?;
+        }
+        for r in &self.axes {
+            if let Some(later) = &r.on_apply {
+                writeln!(
+                    f,
+                    "axis {}: enabled on APPLY; its {} row(s) compared after it",
+                    r.axis, later.rows
+                )?;
+                continue;
+            }
+            writeln!(
+                f,
+                "axis {}: {} point(s) {}, {} unchanged",
+                r.axis,
+                r.written.len(),
+                if self.dry_run {
+                    "would be written"
+                } else {
+                    "written and verified"
+                },
+                r.unchanged
+            )?;
+            for w in &r.written {
+                writeln!(
+                    f,
+                    "  point {}: {} -> {}",
+                    w.point,
+                    w.from.as_deref().unwrap_or("empty"),
+                    w.to
+                )?;
+                if let Some(stored) = &w.stored {
+                    writeln!(f, "    stored as {stored} (the controller's resolution)")?;
+                }
+            }
+            for p in &r.not_in_backup {
+                writeln!(f, "  point {p}: holds data the backup has empty: left as it is (a row cannot be emptied over Modbus)")?;
+            }
+        }
+        for m in &self.not_restored {
+            writeln!(f, "{m}")?;
+        }
+        for k in &self.skipped {
+            writeln!(f, "{k}")?;
+        }
+        if let Some(count) = self.save_count {
+            writeln!(f, "saved (SAVECOUNT {count})")?;
+        }
+        Ok(())
+    }
 }

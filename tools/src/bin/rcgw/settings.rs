@@ -687,17 +687,32 @@ impl Change {
     pub fn on_restart(&self) -> bool {
         self.section == Section::Network && self.key.starts_with("ip_")
     }
+}
 
-    pub fn json(&self) -> serde_json::Value {
-        serde_json::json!({
-            "section": self.section.name(),
-            "key": self.key,
-            "register": format!("{:#06x}", self.address),
-            "from": self.from,
-            "to": self.to,
-            "on_apply": self.on_apply,
-            "on_restart": self.on_restart(),
-        })
+/// A change in JSON: `{"section": "[gateway]", "key", "register": "0x0001", "from", "to",
+/// "on_apply", "on_restart"}`.
+impl serde::Serialize for Change {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        #[derive(serde::Serialize)]
+        struct Json<'a> {
+            section: String,
+            key: &'a str,
+            register: String,
+            from: &'a Option<String>,
+            to: &'a str,
+            on_apply: bool,
+            on_restart: bool,
+        }
+        Json {
+            section: self.section.name(),
+            key: self.key,
+            register: format!("{:#06x}", self.address),
+            from: &self.from,
+            to: &self.to,
+            on_apply: self.on_apply,
+            on_restart: self.on_restart(),
+        }
+        .serialize(serializer)
     }
 }
 
