@@ -12,6 +12,7 @@ use protocol::modbus::tcp::SocketHandle;
 use protocol::modbus::{client, Adu, Exception, Request as Modbus, MAX_ADU_LEN};
 use protocol::node::{Action, Node, TcpAction};
 use protocol::pio::{PioInputs, PioOutputs};
+use protocol::plc::{Boot, GatewayConfig, IDENTITY};
 use protocol::time::Instant;
 use protocol::Request;
 use rc_tools::sim::Bus;
@@ -59,11 +60,13 @@ pub struct NodeHarness {
 }
 
 impl NodeHarness {
-    /// The node starts with the bus at time 0; the bus' host side starts at the node's rate.
-    pub fn new(node: Node, mut bus: Bus) -> NodeHarness {
+    /// A node for `config` as a board starts it the first time (the gateway's identity,
+    /// nothing stored), with the bus at time 0; the bus' host side starts at the node's rate.
+    pub fn new(config: GatewayConfig, mut bus: Bus) -> NodeHarness {
+        let node = Box::new(Node::new(config, &IDENTITY, Boot::DEFAULT));
         bus.set_host_baud(node.gateway().engine().line_baud());
         NodeHarness {
-            node: Box::new(node),
+            node,
             bus,
             now: 0,
             sent: Vec::new(),

@@ -4,7 +4,6 @@
 
 use protocol::line::Baud;
 use protocol::memory::PointField;
-use protocol::node::Node;
 use protocol::pio::{Pattern, PioInputs, PioOutputs};
 use protocol::plc::{AxisConfig, CommandState, GatewayConfig};
 use protocol::time::{Duration, Instant};
@@ -53,14 +52,7 @@ fn rig_with(change: impl FnOnce(&mut GatewayConfig)) -> Rig {
     };
     change(&mut config);
     Rig {
-        h: NodeHarness::new(
-            Node::new(
-                config,
-                &protocol::plc::IDENTITY,
-                protocol::plc::Boot::DEFAULT,
-            ),
-            bus,
-        ),
+        h: NodeHarness::new(config, bus),
         // *STP is negative logic: ON means "run".
         inputs: PioInputs::STP_N,
         outputs: PioOutputs::SAFE,

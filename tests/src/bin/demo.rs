@@ -9,7 +9,6 @@
 
 use protocol::line::Baud;
 use protocol::modbus::Exception;
-use protocol::node::Node;
 use protocol::plc::map::*;
 use protocol::plc::{AxisConfig, GatewayConfig};
 use protocol::units::{Lead, Length, Scale};
@@ -90,14 +89,7 @@ fn main() {
         scale,
         stroke: Length(100_00),
     });
-    let mut h = NodeHarness::new(
-        Node::new(
-            config,
-            &protocol::plc::IDENTITY,
-            protocol::plc::Boot::DEFAULT,
-        ),
-        bus,
-    );
+    let mut h = NodeHarness::new(config, bus);
 
     println!(
         "== {AXES} simulated controllers power up at 9.6 kbit/s, RTIM 255 ms (their defaults)"

@@ -16,7 +16,6 @@ mod sync_start;
 
 use protocol::line::Baud;
 use protocol::modbus::Exception;
-use protocol::node::Node;
 use protocol::plc::map::*;
 use protocol::plc::{AxisConfig, CommandState, GatewayConfig};
 use protocol::units::{Lead, Length};
@@ -62,14 +61,7 @@ fn gateway_with(n: u8, stroke: i32, row3: Option<[u32; 10]>, silent: &[u8]) -> N
     for &a in silent {
         bus.set_silent(axis(a), true);
     }
-    let mut h = NodeHarness::new(
-        Node::new(
-            config,
-            &protocol::plc::IDENTITY,
-            protocol::plc::Boot::DEFAULT,
-        ),
-        bus,
-    );
+    let mut h = NodeHarness::new(config, bus);
     h.run_until(300 * MS);
     h
 }

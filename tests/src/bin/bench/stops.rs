@@ -16,7 +16,6 @@
 use protocol::engine::timing;
 use protocol::line::Baud;
 use protocol::modbus::rtu::t3_5;
-use protocol::node::Node;
 use protocol::pio::PioInputs;
 use protocol::plc::map::*;
 use protocol::plc::{AxisConfig, GatewayConfig, PlcLine};
@@ -116,14 +115,7 @@ fn gateway() -> Result<NodeHarness, String> {
     config.watchdog = Duration::ZERO;
     config.plc = PlcLine::DEFAULT;
     config.pio_axis = Some(axis(MOVERS[0])?);
-    let mut h = NodeHarness::new(
-        Node::new(
-            config,
-            &protocol::plc::IDENTITY,
-            protocol::plc::Boot::DEFAULT,
-        ),
-        bus,
-    );
+    let mut h = NodeHarness::new(config, bus);
     h.inputs = Some(PioInputs::from_bits(
         PioInputs::STP_N.bits() | PioInputs::SON.bits(),
     ));
