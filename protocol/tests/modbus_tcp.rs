@@ -10,7 +10,8 @@ use protocol::modbus::tcp::{MbapError, SocketHandle, Stream, TcpAdu, SOCKETS};
 use protocol::modbus::{Exception, Request as Modbus};
 use protocol::net::Ipv4;
 use protocol::plc::map::*;
-use protocol::time::{Duration, Instant};
+use protocol::plc::WatchdogTime;
+use protocol::time::Instant;
 use support::*;
 
 const PLC: Ipv4 = Ipv4([192, 168, 1, 10]);
@@ -342,7 +343,7 @@ fn a_bad_length_closes_the_connection_and_another_protocol_is_skipped() {
 
 #[test]
 fn requests_over_tcp_feed_the_watchdog() {
-    let mut rig = Rig::ready(1, |c| c.watchdog = Duration::from_millis(200));
+    let mut rig = Rig::ready(1, |c| c.watchdog = WatchdogTime::from_millis(200).unwrap());
     rig.write(63, G_FAILSAFE, &[0]).unwrap();
     assert!(rig.connect(0, PLC));
     for _ in 0..10 {

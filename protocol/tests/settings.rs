@@ -200,7 +200,7 @@ fn settings() -> impl Strategy<Value = Settings> {
             let mut c = GatewayConfig::new(AxisSet(axes & 0x7FFF));
             c.unit = UnitId::new(63).unwrap();
             c.bus.retries = retries;
-            c.watchdog = protocol::time::Duration::from_millis(wd.into());
+            c.watchdog = protocol::plc::WatchdogTime::from_millis(wd).unwrap();
             c.bus.rtim = protocol::Rtim::new(rtim).unwrap();
             c.plc.baud = PlcBaud::new(plc_baud).unwrap();
             c.plc.parity = Parity::Even;
@@ -263,7 +263,10 @@ fn save_stores_the_settings_with_the_pending_ones() {
         ),
         (19_200, Parity::Even, 100)
     );
-    assert_eq!(saved.watchdog, protocol::time::Duration::from_millis(500));
+    assert_eq!(
+        saved.watchdog,
+        protocol::plc::WatchdogTime::from_millis(500).unwrap()
+    );
     assert_eq!(saved.axes, AxisSet::first(2));
     // The rig's flash said "saved, 1 so far".
     assert_eq!(rig.read(63, G_SAVE_STATUS, 3), Ok(vec![2, 0, 1]));

@@ -6,7 +6,7 @@ use protocol::line::Baud;
 use protocol::memory::PointField;
 use protocol::pio::{Pattern, PioInputs, PioOutputs};
 use protocol::plc::{AxisConfig, CommandState, GatewayConfig};
-use protocol::time::{Duration, Instant};
+use protocol::time::Instant;
 use protocol::units::{Lead, Length, Scale};
 use protocol::{Axis, AxisSet, HomeDirection, PositionNo, Rtim};
 use rc_host::node_harness::NodeHarness;
@@ -44,7 +44,7 @@ fn rig_with(change: impl FnOnce(&mut GatewayConfig)) -> Rig {
     bus.add_controller(axis0(), controller);
     let mut config = GatewayConfig::new(AxisSet::first(1));
     config.bus.establish = false;
-    config.watchdog = Duration::ZERO; // wired I/O: no Modbus watchdog
+    config.watchdog = protocol::plc::WatchdogTime::OFF; // wired I/O: no Modbus watchdog
     config.pio_axis = Some(axis0());
     config.axes[axis0()] = AxisConfig {
         scale,

@@ -217,6 +217,11 @@ impl Default for AxisBase {
 pub struct WatchdogTime(u16);
 
 impl WatchdogTime {
+    /// No watchdog: nothing stops the axes when the PLC goes silent.
+    pub const OFF: WatchdogTime = WatchdogTime(0);
+    /// The factory time, [`DEFAULT_WATCHDOG_MS`].
+    pub const DEFAULT: WatchdogTime = WatchdogTime(DEFAULT_WATCHDOG_MS);
+
     /// The time of `ms`, if it is one.
     pub const fn from_millis(ms: u16) -> Option<WatchdogTime> {
         if ms == 0 || (ms >= 50 && ms <= 60_000) {
@@ -416,8 +421,8 @@ pub struct GatewayConfig {
     pub bus: Config,
     /// Per-axis units and travel.
     pub axes: AxisMap<AxisConfig>,
-    /// PLC silence that trips the fail-safe; zero turns it off.
-    pub watchdog: Duration,
+    /// PLC silence that trips the fail-safe ([`WatchdogTime::OFF`]: none).
+    pub watchdog: WatchdogTime,
     /// What the watchdog does.
     pub watchdog_action: WatchdogAction,
     /// The axis the discrete I/O (PIO) drives, if any.
@@ -456,7 +461,7 @@ impl GatewayConfig {
                 ..Config::DEFAULT
             },
             axes: AxisMap::new(AxisConfig::DEFAULT),
-            watchdog: Duration::from_millis(DEFAULT_WATCHDOG_MS as u64),
+            watchdog: WatchdogTime::DEFAULT,
             watchdog_action: WatchdogAction::StopAll,
             pio_axis: None,
             pio_pattern: Pattern::Positioning,

@@ -137,9 +137,11 @@ impl Gateway {
     /// idle answer's deadline is the earlier of the engine's and the watchdog's.
     pub fn poll(&mut self, now: Instant) -> Output {
         self.now = now;
-        let trip = self
-            .failsafe
-            .check(now, self.config.watchdog, self.config.watchdog_action);
+        let trip = self.failsafe.check(
+            now,
+            self.config.watchdog.duration(),
+            self.config.watchdog_action,
+        );
         if trip == Some(Trip::StopAll) {
             self.stop_all();
         }
@@ -177,7 +179,7 @@ impl Gateway {
 
     /// When the PLC watchdog trips if the PLC stays silent.
     pub fn watchdog_deadline(&self) -> Option<Instant> {
-        self.failsafe.deadline(self.config.watchdog)
+        self.failsafe.deadline(self.config.watchdog.duration())
     }
 
     /// Whether every configured axis answers.

@@ -48,7 +48,7 @@ impl Gateway {
             }
             G_FAILSAFE => self.failsafe.latched(),
             G_FAILSAFE_COUNT => self.failsafe.count(),
-            G_WATCHDOG => u16::try_from(self.config.watchdog.as_millis()).unwrap_or(u16::MAX),
+            G_WATCHDOG => self.config.watchdog.millis(),
             G_BUS_BAUD => u16::try_from(self.persist.baud.bits_per_second() / 100).unwrap_or(0),
             G_BUS_RTIM => u16::from(self.persist.rtim.get()),
             G_PLC_BAUD => self.persist.plc.baud.register(),
@@ -210,7 +210,7 @@ impl Gateway {
         match write {
             GatewayWrite::Nothing | GatewayWrite::ChannelRequest(..) | GatewayWrite::SyncStart => {}
             GatewayWrite::AckFailsafe => self.failsafe.acknowledge(true),
-            GatewayWrite::Watchdog(time) => self.config.watchdog = time.duration(),
+            GatewayWrite::Watchdog(time) => self.config.watchdog = time,
             GatewayWrite::WatchdogAction(action) => self.config.watchdog_action = action,
             GatewayWrite::BusBaud(baud) => self.persist.baud = baud,
             GatewayWrite::BusRtim(rtim) => self.persist.rtim = rtim,

@@ -52,7 +52,6 @@ use crate::line::Baud;
 use crate::modbus::crc;
 use crate::net::{idle_ok, max_connections_ok, prefix_ok, Ipv4, NetConfig, Policy};
 use crate::pio::{Pattern, StartMode};
-use crate::time::Duration;
 use crate::units::Lead;
 use crate::{Axis, Rtim};
 
@@ -102,7 +101,7 @@ pub struct Settings {
     /// PLC line.
     pub plc: PlcLine,
     /// PLC watchdog.
-    pub watchdog: Duration,
+    pub watchdog: WatchdogTime,
     /// What the watchdog does.
     pub watchdog_action: WatchdogAction,
     /// Bus rate.
@@ -192,8 +191,7 @@ impl Settings {
         w.u8(self.unit.get());
         w.bytes(&self.plc.baud.bits_per_second().to_le_bytes());
         w.u8(self.plc.parity as u8);
-        let ms = u16::try_from(self.watchdog.as_millis()).unwrap_or(u16::MAX);
-        w.bytes(&ms.to_le_bytes());
+        w.bytes(&self.watchdog.millis().to_le_bytes());
         w.u8(self.watchdog_action as u8);
         w.u8(self.baud.brsl());
         w.u8(self.rtim.get());
@@ -350,7 +348,7 @@ impl Settings {
         let settings = Settings {
             unit,
             plc: PlcLine { baud, parity },
-            watchdog: watchdog.duration(),
+            watchdog,
             watchdog_action,
             baud: bus_baud,
             rtim,

@@ -76,7 +76,7 @@ pub fn gateway_config(options: &Options) -> io::Result<GatewayConfig> {
             options.watchdog_ms
         ))
     })?;
-    config.watchdog = watchdog.duration();
+    config.watchdog = watchdog;
     if options.stroke.0 <= 0 {
         return Err(invalid("the stroke must be positive".into()));
     }

@@ -19,7 +19,7 @@ use protocol::modbus::rtu::t3_5;
 use protocol::pio::PioInputs;
 use protocol::plc::map::*;
 use protocol::plc::{AxisConfig, GatewayConfig, PlcLine};
-use protocol::time::{Duration, Instant};
+use protocol::time::Instant;
 use protocol::units::{Lead, Length, Scale};
 use protocol::{Axis, AxisMap, AxisSet, Command, Rtim};
 use rc_host::node_harness::NodeHarness;
@@ -112,7 +112,7 @@ fn gateway() -> Result<NodeHarness, String> {
     let mut config = GatewayConfig::new(AxisSet::first(AXES));
     config.bus.establish = false;
     config.axes = AxisMap::new(axis_config());
-    config.watchdog = Duration::ZERO;
+    config.watchdog = protocol::plc::WatchdogTime::OFF;
     config.plc = PlcLine::DEFAULT;
     config.pio_axis = Some(axis(MOVERS[0])?);
     let mut h = NodeHarness::new(config, bus);
