@@ -245,6 +245,8 @@ fn save_stores_the_settings_with_the_pending_ones() {
     rig.write(63, G_PLC_PARITY, &[2]).unwrap();
     rig.write(63, G_UNIT_ID, &[100]).unwrap();
     rig.write(63, G_WATCHDOG, &[500]).unwrap();
+    // Taken at once by the engine, and saved with the rest.
+    rig.write(63, G_RETRIES, &[0]).unwrap();
     // Pending: read back as written, not in force (unit 63 still answers).
     assert_eq!(rig.read(63, G_PLC_BAUD, 3), Ok(vec![192, 2, 100]));
     assert_eq!(rig.read(63, G_SAVE_STATUS, 3), Ok(vec![0, 0, 0]));
@@ -267,6 +269,7 @@ fn save_stores_the_settings_with_the_pending_ones() {
         saved.watchdog,
         protocol::plc::WatchdogTime::from_millis(500).unwrap()
     );
+    assert_eq!(saved.retries, 0, "RETRIES, written at once, is saved");
     assert_eq!(saved.axes, AxisSet::first(2));
     // The rig's flash said "saved, 1 so far".
     assert_eq!(rig.read(63, G_SAVE_STATUS, 3), Ok(vec![2, 0, 1]));
@@ -400,4 +403,53 @@ fn enabling_an_axis_takes_effect_on_apply() {
     for unit in 1..=3 {
         assert_eq!(rig.read(unit, LINK, 1), Ok(vec![1]), "unit {unit}");
     }
+}
+
+/// The register map's word on when each setting is taken (its row's `on_apply`, which rcgw and
+/// docs/plc.md read) is what the gateway does: a value other than the default written to the
+/// gateway unit changes the settings in force at once, or only on APPLY.
+#[test]
+fn each_setting_is_taken_when_its_map_row_says() {
+    let settings = MAP
+        .iter()
+        .filter(|e| e.unit == Unit::Gateway && e.table == Table::Holding && e.writable)
+        .filter(|e| !e.allowed.is_empty());
+    let mut checked = 0;
+    for entry in settings {
+        let default = entry.default.expect("a setting's row has a default");
+        // Values the row allows other than the default, the spans' ends first.
+        let candidates = entry
+            .allowed
+            .iter()
+            .flat_map(|&(low, high)| [low, high, low.saturating_add(1)])
+            .filter(|&v| v != default && entry.allows(v));
+        let mut taken = None;
+        for value in candidates {
+            let mut rig = Rig::ready(2, |c| c.bus.wire_timing = false);
+            let before = Settings::of(rig.node.gateway().config());
+            if rig.write(63, entry.address, &[value]).is_err() {
+                continue; // refused against the others (a unit id of an axis'...): the next
+            }
+            let written = Settings::of(rig.node.gateway().config());
+            rig.write(63, G_APPLY, &[1]).unwrap();
+            rig.run_for(S);
+            let applied = Settings::of(rig.node.gateway().config());
+            taken = Some((value, before != written, before != applied));
+            break;
+        }
+        let (value, at_once, by_apply) =
+            taken.unwrap_or_else(|| panic!("{}: no value but the default admitted", entry.name));
+        assert!(
+            by_apply,
+            "{} = {value}: not in force after APPLY",
+            entry.name
+        );
+        assert_eq!(
+            at_once, !entry.on_apply,
+            "{} = {value}: in force at once: {at_once}; the map says on APPLY: {}",
+            entry.name, entry.on_apply
+        );
+        checked += 1;
+    }
+    assert!(checked >= 14, "only {checked} settings checked");
 }

@@ -214,7 +214,11 @@ impl Gateway {
             GatewayWrite::WatchdogAction(action) => self.config.watchdog_action = action,
             GatewayWrite::BusBaud(baud) => self.persist.baud = baud,
             GatewayWrite::BusRtim(rtim) => self.persist.rtim = rtim,
-            GatewayWrite::Retries(retries) => self.engine.set_retries(retries),
+            GatewayWrite::Retries(retries) => {
+                // In the settings a SAVE stores, as well as in the engine that uses them.
+                self.config.bus.retries = retries;
+                self.engine.set_retries(retries);
+            }
             GatewayWrite::PlcBaud(baud) => self.persist.plc.baud = baud,
             GatewayWrite::PlcParity(parity) => self.persist.plc.parity = parity,
             GatewayWrite::UnitId(unit) => self.persist.unit = unit,
