@@ -69,7 +69,7 @@ impl SavedSettings {
             self.apply_stored(config);
         }
         #[cfg(feature = "emulator")]
-        let _ = factory;
+        let _ = (factory, config);
         let boot = &mut self.boot;
         boot.reset = crate::board::reset_cause();
         info!(

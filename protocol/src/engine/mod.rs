@@ -537,9 +537,13 @@ impl Engine {
             return Some(poll);
         }
         self.activate_jobs(now);
-        if let Some(next) = self.next_job_frame() {
-            return Some(next);
+        let cursor = self.job_cursor;
+        let job = self.next_job_frame();
+        if self.job_turn(job.is_some()) {
+            return job;
         }
+        // Polling's turn (or no job frame): the job frame waits, first in turn still.
+        self.job_cursor = cursor;
         // 4. A rejoining axis' next step, every other turn with polling (and whenever polling
         //    has nothing to send).
         if self.rejoin.take_turn() {
@@ -547,7 +551,9 @@ impl Engine {
                 return Some(next);
             }
         }
-        // 5. Polling.
-        self.next_poll(now).or_else(|| self.next_rejoin_frame())
+        // 5. Polling; the job frame whose turn it was when polling has nothing to send.
+        self.next_poll(now)
+            .or_else(|| self.next_rejoin_frame())
+            .or(job)
     }
 }

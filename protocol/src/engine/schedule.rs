@@ -8,7 +8,9 @@
 //!    ([`approach`](super::approach): its target, and its speed between two position reads) is
 //!    polled from that moment on, for up to a cycle, the one polled longest ago first; at most
 //!    [`ARRIVAL_RUN`] polls in a row before one other frame.
-//! 2. Job frames, a rejoining axis' next step (the engine), then the polls below.
+//! 2. Job frames, at most [`JOB_RUN`] in a row before one frame of the rules below (when
+//!    they have one; never between the attempts of a frame being resent); a rejoining axis'
+//!    next step (the engine), then the polls below.
 //! 3. **Urgent position reads (R4 PNOW)**, not counted in the share below: a mover's estimate
 //!    (a move's first reads), and an axis whose position was never read (every position register
 //!    of the axis waits for it).
@@ -83,6 +85,13 @@ pub const IDLE_RUN: u8 = 12;
 /// a row (among the arriving axes); then one other frame goes.
 pub const ARRIVAL_RUN: u8 = 3;
 
+/// Job frames go before polls, at most this many in a row; then polling has one turn (what the
+/// rules below give, when they have anything to send). Jobs of several axes back to back (a PLC writing point rows, each
+/// some twenty frames) would otherwise take the whole bus: the soak saw an axis stopped among
+/// them go 4 s without a position read, and every axis' status age grew as long. With 4, a
+/// fifth of a bus full of jobs is polling's: a row's write takes a quarter longer.
+pub const JOB_RUN: u8 = 4;
+
 /// When an offline axis is probed next, and the wait after an unanswered probe.
 #[derive(Clone, Copy, Debug)]
 struct Probe {
@@ -123,6 +132,8 @@ pub(super) struct Schedule {
     arrival_run: u8,
     /// Polls of idle axes that were due, in a row.
     idle_run: u8,
+    /// Job frames in a row ([`JOB_RUN`]).
+    job_run: u8,
     /// What an answered transaction takes on this bus, measured ([`MEASURE_SHIFT`]), and the
     /// line (rate, RTIM) it was measured on: a pseudo-terminal or a USB adapter answers faster
     /// than the wire's time, a slow converter slower, and a cycle is what the bus really does.
@@ -151,6 +162,7 @@ impl Schedule {
             approach: AxisMap::new(Approach::NONE),
             arrival_run: 0,
             idle_run: 0,
+            job_run: 0,
             transaction: Duration::ZERO,
             measured_on: None,
         }
@@ -357,6 +369,22 @@ impl Engine {
         })
         .or_else(|| self.arriving(pass.arriving))?;
         Some(self.status_poll(now, axis))
+    }
+
+    /// Whether the job frame there is (`ready`) goes now: not after [`JOB_RUN`] in a row
+    /// (then polling goes once, if it has anything to send), unless a frame is being resent (its
+    /// attempts go with nothing else to its axis between them, §5: the axis is offline after
+    /// 1 + Nrt of them). No frame ends a run.
+    pub(super) fn job_turn(&mut self, ready: bool) -> bool {
+        let turn = ready
+            && (self.schedule.job_run < JOB_RUN
+                || self.active.values().flatten().any(|a| a.attempt > 0));
+        self.schedule.job_run = if turn {
+            self.schedule.job_run.saturating_add(1)
+        } else {
+            0
+        };
+        turn
     }
 
     /// The status poll of an arriving mover, unless [`ARRIVAL_RUN`] went in a row: it goes

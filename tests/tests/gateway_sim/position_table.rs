@@ -6,10 +6,11 @@ use protocol::modbus::Exception;
 use protocol::plc::map::*;
 use protocol::plc::CommandState;
 use protocol::units::Length;
+use protocol::Command;
 use rc_host::node_harness::NodeHarness;
 
 use crate::{
-    axis, gateway, gateway_with, home, pnow_mm100, read, scale, settle, unit, write, MS, S,
+    axis, coil, gateway, gateway_with, home, pnow_mm100, read, scale, settle, unit, write, MS, S,
 };
 
 const ROW3: u16 = 0x1000 + 16 * 3;
@@ -249,4 +250,57 @@ fn the_table_of_an_offline_axis_is_not_fetched() {
         .filter(|(_, r)| r.axis == axis(0) && r.command == protocol::Command::Status)
         .count();
     assert!(polls0 > 150, "the live axis keeps its cycle: {polls0}");
+}
+
+/// Issue 34's soak finding (seed 31337): an axis stopped while the PLC kept writing point rows
+/// of the others went 4 s without a position read, so its PNOW showed where the move was, not
+/// where it stopped. Job frames (the rows' writes) go before polls; they must not keep a
+/// stopped axis' position read off the bus for long.
+#[test]
+fn a_stopped_axis_is_read_where_it_stopped_while_table_writes_fill_the_bus() {
+    const SLOW_MOVE: [u16; 7] = [0, 90_00, 0, 10, 0, 2_00, 30];
+    let mut h = gateway(4);
+    for a in 0..4 {
+        home(&mut h, a);
+    }
+    write(&mut h, unit(0), DIRECT, &SLOW_MOVE).unwrap();
+    let mut pcmd = 10_00;
+    // Rows 1-9 of axes 1-3 rewritten as fast as the gateway takes them, for `us`.
+    let mut fill = |h: &mut NodeHarness, us: u64| {
+        let until = h.now + us;
+        while h.now < until {
+            for a in 1..4 {
+                pcmd = if pcmd >= 90_00 { 10_00 } else { pcmd + 1 };
+                let row = 0x1000 + 16 * (1 + pcmd % 9);
+                let _ = write(h, unit(a), row, &row_regs(pcmd.into()));
+            }
+            h.run_for(2 * MS);
+        }
+    };
+    fill(&mut h, S);
+    let moving = |h: &NodeHarness| h.bus.controller(axis(0)).unwrap().moving();
+    assert!(moving(&h), "axis 0 moves");
+    let writes = |h: &NodeHarness| {
+        h.sent
+            .iter()
+            .filter(|(_, r)| r.axis != axis(0) && r.command != Command::Status)
+            .count()
+    };
+    let before = writes(&h);
+    coil(&mut h, unit(0), COIL_STOP, true).unwrap();
+    let stopped_at = h.now;
+    fill(&mut h, 500 * MS);
+    assert!(!moving(&h), "axis 0 stopped");
+    assert!(
+        writes(&h) > before + 40,
+        "the rows' writes filled the bus: {} frames",
+        writes(&h) - before
+    );
+    let rest = h.bus.controller(axis(0)).unwrap().position();
+    let known = h.node.gateway().engine().axis(axis(0)).position;
+    assert_eq!(
+        known.map(|p| i64::from(p.0)),
+        Some(rest),
+        "500 ms after the stop (at {stopped_at} us), the gateway knows where axis 0 rests"
+    );
 }

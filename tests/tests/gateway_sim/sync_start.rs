@@ -267,8 +267,14 @@ fn an_h_whose_answer_is_lost_is_cancelled_before_the_next_t() {
         write(&mut h, unit(a), POSR, &[3]).unwrap();
     }
     write(&mut h, 63, G_SYNC_MASK, &[0b1100]).unwrap();
-    h.bus.set_silent(axis(3), true);
     write(&mut h, 63, G_SYNC_START, &[1]).unwrap();
+    // Silent from its `h` on: it hears that frame, it answers nothing.
+    step_until(&mut h, |h| {
+        h.sent
+            .last()
+            .is_some_and(|(_, r)| r.axis == axis(3) && matches!(r.command, Command::Buffer(_)))
+    });
+    h.bus.set_silent(axis(3), true);
     for _ in 0..50 {
         h.run_until(h.now + 20 * MS);
         let _ = read(&mut h, 63, G_SYNC_STATUS, 1);
