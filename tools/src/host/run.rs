@@ -158,6 +158,8 @@ impl Host {
                     }
                     self.log.note(now, &format!("store: {store:?}"));
                 }
+                // No DFU partition is set (`Node::set_update_target`): never asked.
+                Some(Action::Update(_)) => self.node.update_done(Err(())),
                 None => {
                     if self.node.receiver_counters() != self.seen_receiver {
                         // A burst ended without a reply (a broadcast, another unit, noise).
