@@ -12,7 +12,7 @@ use protocol::modbus::Request as Modbus;
 use protocol::net::Ipv4;
 use protocol::plc::map::*;
 use protocol::plc::update::{
-    begin_registers, chunk_registers, crc32, Status, Target, UpdateError, UpdateState, ABORT,
+    begin_registers, chunk_registers, crc32, Target, UpdateError, UpdateState, UpdateStatus, ABORT,
     FINISH, MAX_CHUNK,
 };
 use protocol::time::Instant;
@@ -115,7 +115,7 @@ impl Link {
         self.request(rig, &request).map(|_| ())
     }
 
-    fn status(self, rig: &mut Rig) -> Status {
+    fn status(self, rig: &mut Rig) -> UpdateStatus {
         let request = Modbus::ReadHoldingRegisters {
             address: G_UPDATE_STATUS,
             quantity: G_UPDATE_STATUS_LEN,
@@ -125,7 +125,7 @@ impl Link {
             .chunks(2)
             .map(|p| u16::from_be_bytes([p[0], p[1]]))
             .collect();
-        Status::parse(&registers).expect("16 registers")
+        UpdateStatus::parse(&registers).expect("16 registers")
     }
 
     fn begin(self, rig: &mut Rig, image: &[u8], board: u16) -> Result<(), u8> {
@@ -150,7 +150,7 @@ impl Link {
     /// What `rcgw update` does: from wherever the gateway is (BEGIN only when it has no
     /// transfer of this image), every chunk at the next offset it shows, FINISH. Stops at the
     /// first refusal.
-    fn send(self, rig: &mut Rig, image: &[u8]) -> Result<Status, u8> {
+    fn send(self, rig: &mut Rig, image: &[u8]) -> Result<UpdateStatus, u8> {
         let status = self.status(rig);
         let ours = status.size == image.len() as u32
             && status.crc32 == crc32(image)

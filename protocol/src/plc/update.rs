@@ -577,7 +577,7 @@ pub fn chunk_registers(offset: u32, bytes: &[u8]) -> heapless::Vec<u16, 120> {
 
 /// UPDSTAT as a tool reads it (16 registers from [`G_UPDATE_STATUS`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Status {
+pub struct UpdateStatus {
     /// [`UpdateState`] as its number (an unknown one kept as read).
     pub state: u16,
     /// [`UpdateError`] as its number.
@@ -600,15 +600,15 @@ pub struct Status {
     pub max_chunk: u16,
 }
 
-impl Status {
+impl UpdateStatus {
     /// UPDSTAT from its registers; `None` unless there are 16.
-    pub fn parse(registers: &[u16]) -> Option<Status> {
+    pub fn parse(registers: &[u16]) -> Option<UpdateStatus> {
         let r = |i: u16| registers.get(usize::from(i)).copied();
         let u32_at = |i: u16| Some(join(r(i)?, r(i + 1)?));
         if registers.len() != usize::from(G_UPDATE_STATUS_LEN) {
             return None;
         }
-        Some(Status {
+        Some(UpdateStatus {
             state: r(status::STATE)?,
             error: r(status::ERROR)?,
             received: u32_at(status::RECEIVED)?,

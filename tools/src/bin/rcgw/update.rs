@@ -9,7 +9,8 @@ use std::time::{Duration, Instant};
 use protocol::modbus::Exception;
 use protocol::plc::map::{G_UPDATE, G_UPDATE_CHUNK, G_UPDATE_STATUS, G_UPDATE_STATUS_LEN};
 use protocol::plc::update::{
-    begin_registers, chunk_registers, crc32, Status, UpdateError, UpdateState, FINISH, MAX_CHUNK,
+    begin_registers, chunk_registers, crc32, UpdateError, UpdateState, UpdateStatus, FINISH,
+    MAX_CHUNK,
 };
 use serde_json::json;
 
@@ -74,10 +75,10 @@ fn error_text(error: u16) -> &'static str {
         .map_or("unknown", |(_, text)| text)
 }
 
-fn read_status(gw: &mut Gw) -> Result<Status, Fail> {
+fn read_status(gw: &mut Gw) -> Result<UpdateStatus, Fail> {
     let unit = gw.unit;
     let registers = gw.read(unit, G_UPDATE_STATUS, G_UPDATE_STATUS_LEN)?;
-    Status::parse(&registers).ok_or_else(|| {
+    UpdateStatus::parse(&registers).ok_or_else(|| {
         Fail::Device(format!(
             "{}: not 16 registers",
             gw.at(unit, G_UPDATE_STATUS)
@@ -86,7 +87,7 @@ fn read_status(gw: &mut Gw) -> Result<Status, Fail> {
 }
 
 /// The gateway's status as JSON.
-fn status_json(s: &Status) -> serde_json::Value {
+fn status_json(s: &UpdateStatus) -> serde_json::Value {
     json!({
         "state": state_name(s.state),
         "error": error_text(s.error),
@@ -134,7 +135,7 @@ pub fn status(gw: &mut Gw, json: bool) -> Result<(), Fail> {
 }
 
 /// Waits while the gateway is in `state` (erasing, finishing): its status after.
-fn wait_out(gw: &mut Gw, state: UpdateState) -> Result<Status, Fail> {
+fn wait_out(gw: &mut Gw, state: UpdateState) -> Result<UpdateStatus, Fail> {
     let deadline = Instant::now() + PATIENCE;
     loop {
         let s = read_status(gw)?;
@@ -160,7 +161,7 @@ fn write_patiently(
     address: u16,
     values: &[u16],
     show: bool,
-) -> Result<Result<(), Status>, Fail> {
+) -> Result<Result<(), UpdateStatus>, Fail> {
     let deadline = Instant::now() + PATIENCE;
     let unit = gw.unit;
     loop {
@@ -181,7 +182,7 @@ fn write_patiently(
     }
 }
 
-fn refused(gw: &Gw, address: u16, s: &Status) -> Fail {
+fn refused(gw: &Gw, address: u16, s: &UpdateStatus) -> Fail {
     Fail::Device(format!(
         "{}: refused: {} (state {})",
         gw.at(gw.unit, address),
