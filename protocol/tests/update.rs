@@ -514,6 +514,69 @@ fn the_bus_and_the_stop_input_are_served_while_a_flash_job_is_under_way() {
     assert_in_partition(&rig, &image);
 }
 
+/// From the stop input to the first stop of the last axis, µs.
+fn stop_latency(rig: &mut Rig) -> u64 {
+    let at = rig.now;
+    rig.node.set_stop_input(Instant(at), true);
+    let latency = loop {
+        rig.run_for(100);
+        let first = |a: u8| {
+            rig.sent
+                .iter()
+                .find(|(t, r)| *t >= at && r.axis.get() == a && r.command == Command::CancelMotion)
+                .map(|(t, _)| t - at)
+        };
+        if let (Some(a), Some(b)) = (first(0), first(1)) {
+            break a.max(b);
+        }
+        assert!(rig.now < at + 100 * MS, "no stop");
+    };
+    rig.node.set_stop_input(Instant(rig.now), false);
+    rig.run_for(20 * MS);
+    rig.write(GW, G_FAILSAFE, &[0]).unwrap();
+    latency
+}
+
+#[test]
+fn the_stop_latency_is_the_same_during_a_transfer() {
+    // Without a transfer, the stop input at ten moments of the poll cycle.
+    let mut idle = rig();
+    let mut without = Vec::new();
+    for k in 0..10 {
+        idle.run_for(1_700 * (k + 1));
+        without.push(stop_latency(&mut idle));
+    }
+    // During one: right after a chunk was taken, its write still under way (held) or done.
+    let mut busy = rig();
+    let image = image(30 * MAX_CHUNK);
+    Link::Rtu.begin(&mut busy, &image, BOARD).unwrap();
+    let mut during = Vec::new();
+    for k in 0..10u64 {
+        busy.run_for(1_700 * (k + 1));
+        let next = busy.node.update().next_offset();
+        busy.dfu.hold = k % 2 == 0;
+        Link::Rtu.chunk(&mut busy, &image, next).unwrap();
+        during.push(stop_latency(&mut busy));
+        if busy.dfu.hold {
+            busy.release_job();
+            busy.dfu.hold = false;
+        }
+    }
+    let (without, during) = (
+        *without.iter().max().unwrap(),
+        *during.iter().max().unwrap(),
+    );
+    assert!(
+        during <= without,
+        "the longest stop latency {during} µs during a transfer, {without} µs without"
+    );
+    assert_eq!(
+        Link::Rtu.send(&mut busy, &image).unwrap().state,
+        UpdateState::Ready as u16
+    );
+    assert_in_partition(&busy, &image);
+}
+
 #[test]
 fn a_flash_failure_fails_the_transfer_until_begin() {
     let mut rig = rig();

@@ -39,8 +39,11 @@
 //! - **[`Action::Settings`]**: write the settings record to flash (or erase it, or restart) when
 //!   asked, never otherwise; report a save with [`Node::stored`].
 //! - **`Action::Update`** (feature `update`): erase, write or finish the DFU partition as the
-//!   job says, never outside it, then report with `Node::update_done`; the node may be polled
-//!   meanwhile (a job may be carried out between other actions, or by another task).
+//!   job says, never outside it, then report with `Node::update_done`. The node is polled
+//!   meanwhile: a long job (an erase of many pages) is carried out in steps between the node's
+//!   other actions, or by another task, and reported once it is whole. It is handed out only
+//!   when no frame is due on the bus, but a step that stalls the CPU (a flash erase on the bank
+//!   the code runs from) delays whatever falls due during it, stops included.
 //! - **Inputs** are sampled every millisecond or so ([`sample_inputs`](Node::sample_inputs));
 //!   the PIO's debounce and settle times count in the samples' times. The outputs are valid at
 //!   any time ([`outputs`](Node::outputs)), and all OFF (the safe state: *ALM OFF shows an
