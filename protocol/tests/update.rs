@@ -484,6 +484,7 @@ fn the_bus_and_the_stop_input_are_served_while_a_flash_job_is_under_way() {
     assert_eq!(Link::Rtu.chunk(&mut rig, &image, 0), Err(4));
     assert_eq!(Link::Rtu.write(&mut rig, G_UPDATE, &[ABORT]), Err(4));
     assert_eq!(Link::Rtu.status(&mut rig).error, UpdateError::Busy as u16);
+    assert_eq!(refusals(&mut rig), 0, "flow control, not counted");
     // Meanwhile the axes are polled and a stop goes out at once.
     let since = rig.now;
     rig.run_for(300 * MS);

@@ -34,8 +34,9 @@
 //! chunk that was taken is never taken twice (its offset is no longer the next one). A restart
 //! of the gateway forgets the transfer (state 0): BEGIN again.
 //!
-//! **Refused** (each refusal counted in UPDSTAT's refusals, its reason in the last error; the
-//! transfer stays where it was, but for a failed FINISH check):
+//! **Refused** (each refusal counted in UPDSTAT's refusals but `Busy`, the flow control a fast
+//! tool meets at nearly every chunk; its reason in the last error; the transfer stays where it
+//! was, but for a failed FINISH check):
 //!
 //! | Reason ([`UpdateError`]) | Exception |
 //! |---|---|
@@ -120,7 +121,7 @@ pub mod status {
     pub const BOARD: u16 = 10;
     /// The DFU partition's size in bytes (u32).
     pub const PARTITION: u16 = 11;
-    /// Refused requests (u32, wrapping).
+    /// Refused requests but those refused as `Busy` (u32, wrapping).
     pub const REFUSALS: u16 = 13;
     /// The largest chunk, in bytes ([`MAX_CHUNK`](super::MAX_CHUNK)).
     pub const MAX_CHUNK: u16 = 15;
@@ -386,7 +387,11 @@ impl Update {
             }
         };
         Some(result.map_err(|error| {
-            self.refusals = self.refusals.wrapping_add(1);
+            // "The flash is still at work" is the tool's flow control, not a fault: a fast
+            // tool meets it at nearly every chunk.
+            if error != UpdateError::Busy {
+                self.refusals = self.refusals.wrapping_add(1);
+            }
             self.error = error;
             error.refused()
         }))
