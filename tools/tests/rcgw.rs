@@ -20,10 +20,15 @@ impl Gateway {
     }
 
     fn with_axes(name: &str, sims: u8) -> Gateway {
+        Gateway::with_args(name, sims, &[])
+    }
+
+    fn with_args(name: &str, sims: u8, extra: &[&str]) -> Gateway {
         let sims = sims.to_string();
         let mut child = Command::new(env!("CARGO_BIN_EXE_rc-gateway-host"))
             .args(["--plc-pty", "--modbus-tcp", "127.0.0.1:0", "--sim", &sims])
             .args(["--no-control", "--watchdog-ms", "0", "--points"])
+            .args(extra)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
@@ -729,4 +734,99 @@ fn restore_reports_the_save_and_network_changes_say_when() {
         "{diff}"
     );
     assert!(diff.contains("[network] tcp_idle_s: 60 -> 30\n"), "{diff}");
+}
+
+#[test]
+fn update_sends_an_image_resumes_a_cut_transfer_and_refuses_another_board() {
+    let dfu = std::env::temp_dir().join(format!("rcgw-test-dfu-{}.bin", std::process::id()));
+    let dfu_path = dfu.to_string_lossy().into_owned();
+    let gw = Gateway::with_args(
+        "update",
+        2,
+        &[
+            "--dfu",
+            &dfu_path,
+            "--dfu-size",
+            "131072",
+            "--board-id",
+            "0x0475",
+        ],
+    );
+    let image: Vec<u8> = (0..100_003u32).map(|i| (i * 31 + i / 977) as u8).collect();
+    let path = gw.path("image.bin");
+    std::fs::write(&path, &image).expect("write image");
+    let idle = json(&gw.tcp(), &["update", "--status"]);
+    assert_eq!(
+        (&idle["state"], &idle["partition"], &idle["board"]),
+        (
+            &serde_json::json!("idle"),
+            &serde_json::json!(131072),
+            &serde_json::json!(0x0475)
+        )
+    );
+    // Over RTU, cut off (the process killed) once a fifth of the image is in.
+    let mut cut = Command::new(env!("CARGO_BIN_EXE_rcgw"))
+        .args(gw.rtu())
+        .args(["update", &path, "--board", "0x0475"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("run rcgw");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    loop {
+        let s = json(&gw.tcp(), &["update", "--status"]);
+        if s["next"].as_u64().unwrap_or(0) > 20_000 {
+            break;
+        }
+        assert!(std::time::Instant::now() < deadline, "no progress: {s}");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    cut.kill().expect("kill rcgw");
+    cut.wait().expect("rcgw ended");
+    let s = json(&gw.tcp(), &["update", "--status"]);
+    assert_eq!(s["state"], "receiving", "{s}");
+    let next = s["next"].as_u64().expect("next");
+    assert!(next > 20_000 && next < 100_003, "{s}");
+    // Again, over TCP: it goes on from there.
+    let done = json(&gw.tcp(), &["update", &path, "--board", "0x0475"]);
+    assert_eq!(done["state"], "ready", "{done}");
+    assert!(
+        done["resumed_at"].as_u64().expect("resumed") >= next,
+        "{done}"
+    );
+    let flash = std::fs::read(&dfu).expect("the partition");
+    assert_eq!(flash.len(), 131072);
+    assert!(
+        flash[..image.len()] == image[..],
+        "the image in the partition"
+    );
+    let mark = std::fs::read_to_string(format!("{dfu_path}.marked")).expect("marked");
+    assert_eq!(
+        mark.trim(),
+        format!("186a3 {}", done["crc32"].as_str().unwrap())
+    );
+    // Another board's image, a missing file, an image larger than the partition.
+    fails(
+        &gw.rtu(),
+        &["update", &path, "--board", "0x0429"],
+        1,
+        &["UPDCTL", "another board"],
+    );
+    fails(
+        &gw.tcp(),
+        &["update", &gw.path("none.bin"), "--board", "1"],
+        2,
+        &["none.bin"],
+    );
+    let large = gw.path("large.bin");
+    std::fs::write(&large, vec![0u8; 131073]).expect("write image");
+    fails(
+        &gw.tcp(),
+        &["update", &large, "--board", "0x0475"],
+        2,
+        &["131073", "131072"],
+    );
+    let _ = std::fs::remove_file(&dfu);
+    let _ = std::fs::remove_file(format!("{dfu_path}.marked"));
 }

@@ -233,6 +233,8 @@ fn drain(
             // The board restarts.
             Action::Settings(SettingsRequest::FactoryReset | SettingsRequest::Restart) => return false,
             Action::Line(_) | Action::PlcLine(_) => {}
+            // No DFU partition is set (`Node::set_update_target`): never asked.
+            Action::Update(_) => node.update_done(Err(())),
             Action::Tcp(TcpAction::Reply(handle)) => {
                 let (socket, bytes) = (handle.index(), node.tcp_reply());
                 assert!(socket < SOCKETS && tcp.open[socket], "a reply to socket {socket}, not open");

@@ -38,6 +38,12 @@
 //! - **[`Action::PlcLine`]**: flush the reply before, then switch the PLC UART's rate and parity.
 //! - **[`Action::Settings`]**: write the settings record to flash (or erase it, or restart) when
 //!   asked, never otherwise; report a save with [`Node::stored`].
+//! - **`Action::Update`** (feature `update`): erase, write or finish the DFU partition as the
+//!   job says, never outside it, then report with `Node::update_done`. The node is polled
+//!   meanwhile: a long job (an erase of many pages) is carried out in steps between the node's
+//!   other actions, or by another task, and reported once it is whole. It is handed out only
+//!   when no frame is due on the bus, but a step that stalls the CPU (a flash erase on the bank
+//!   the code runs from) delays whatever falls due during it, stops included.
 //! - **Inputs** are sampled every millisecond or so ([`sample_inputs`](Node::sample_inputs));
 //!   the PIO's debounce and settle times count in the samples' times. The outputs are valid at
 //!   any time ([`outputs`](Node::outputs)), and all OFF (the safe state: *ALM OFF shows an
@@ -110,6 +116,10 @@
 //!             // A board with Ethernet (feature `tcp`) sends or closes on its sockets.
 //!             #[cfg(feature = "tcp")]
 //!             Action::Tcp(_) => {}
+//!             // A board with a DFU partition (feature `update`) erases or writes it, then
+//!             // reports (`Node::update_done`).
+//!             #[cfg(feature = "update")]
+//!             Action::Update(_) => node.update_done(Ok(())),
 //!         }
 //!     }
 //!     board.write_output_pins(node.outputs().bits());
@@ -177,6 +187,10 @@ pub enum Action<'a> {
     /// Do this on a Modbus TCP socket (feature `tcp`).
     #[cfg(feature = "tcp")]
     Tcp(TcpAction),
+    /// Do this to the DFU partition (feature `update`), then report how it went with
+    /// [`Node::update_done`]; the node goes on meanwhile ([`plc::update`](crate::plc::update)).
+    #[cfg(feature = "update")]
+    Update(crate::plc::update::UpdateJob<'a>),
 }
 
 /// The state of the indicator LEDs (besides a run LED the firmware blinks itself).
@@ -345,6 +359,12 @@ impl Node {
             Output::Line(action) => Some(Action::Line(action)),
             Output::Idle(until) => {
                 self.idle_until = until;
+                // The flash work of a firmware update, when the bus has nothing to send at once
+                // (a stop goes first). The node does not wait for it: the caller reports it.
+                #[cfg(feature = "update")]
+                if let Some(job) = self.gateway.take_update_job() {
+                    return Some(Action::Update(job));
+                }
                 self.dirty = false;
                 None
             }
@@ -362,6 +382,28 @@ impl Node {
     /// (SAVESTAT shows it).
     pub fn stored(&mut self, result: Result<u32, ()>) {
         self.gateway.stored(result);
+    }
+
+    /// The board and its DFU partition (feature `update`): until the caller says, the PLC link
+    /// cannot send an image (UPDCTL answers 02).
+    #[cfg(feature = "update")]
+    pub fn set_update_target(&mut self, target: crate::plc::update::Target) {
+        self.gateway.set_update_target(target);
+    }
+
+    /// How the job of [`Action::Update`] went (feature `update`). Reported once the job is
+    /// done, at any later call: the node goes on meanwhile, and refuses the next chunk (04)
+    /// until it hears.
+    #[cfg(feature = "update")]
+    pub fn update_done(&mut self, result: Result<(), ()>) {
+        self.gateway.update_done(result);
+        self.dirty = true;
+    }
+
+    /// The firmware update's transfer (feature `update`): its state, last error, progress.
+    #[cfg(feature = "update")]
+    pub fn update(&self) -> &crate::plc::update::Update {
+        self.gateway.update()
     }
 
     /// The earliest moment anything is due: the bus engine's next deadline, the PLC watchdog,

@@ -56,6 +56,9 @@ pub struct Gateway {
     events_lost: u32,
     /// Axes that refused a broadcast write (BUS).
     pub(super) broadcast_refusals: u32,
+    /// A firmware image's transfer (feature `update`).
+    #[cfg(feature = "update")]
+    pub(super) update: super::update::Update,
     /// The bus master (last: see [`Gateway::new`]).
     pub(super) engine: Engine,
 }
@@ -81,6 +84,8 @@ impl Gateway {
             now: Instant::ZERO,
             events_lost: 0,
             broadcast_refusals: 0,
+            #[cfg(feature = "update")]
+            update: super::update::Update::new(),
             engine: Engine::new(config.bus),
         }
     }
@@ -158,6 +163,35 @@ impl Gateway {
     /// What the firmware is asked to do with the flash (SAVE, a factory reset, RESTART), once.
     pub fn take_settings_request(&mut self) -> Option<SettingsRequest> {
         self.persist.request.take()
+    }
+
+    /// The firmware update's transfer (feature `update`).
+    #[cfg(feature = "update")]
+    pub fn update(&self) -> &super::update::Update {
+        &self.update
+    }
+
+    /// The board and its DFU partition: from now on the PLC link may send an image (feature
+    /// `update`).
+    #[cfg(feature = "update")]
+    pub fn set_update_target(&mut self, target: super::update::Target) {
+        self.update.set_target(target);
+    }
+
+    /// The flash job of the transfer, if one is due: handed out once (feature `update`).
+    #[cfg(feature = "update")]
+    pub fn take_update_job(&mut self) -> Option<super::update::UpdateJob<'_>> {
+        if self.update.take_due() {
+            self.update.job()
+        } else {
+            None
+        }
+    }
+
+    /// The caller's result of the flash job handed out (feature `update`).
+    #[cfg(feature = "update")]
+    pub fn update_done(&mut self, result: Result<(), ()>) {
+        self.update.done(result);
     }
 
     /// The settings record a SAVE stores ([`SettingsRequest::Save`]): the settings in force with the

@@ -77,6 +77,10 @@ impl Gateway {
                 if let Some(value) = self.channel.read(a) {
                     return Ok(value);
                 }
+                #[cfg(feature = "update")]
+                if let Some(value) = self.update.read(a) {
+                    return Ok(value);
+                }
                 if let Some((axis, field)) = per_axis(a, G_AXIS_CONFIG, G_AXIS_CONFIG_LEN) {
                     return Ok(self.axis_config_read(axis, field));
                 }
@@ -170,6 +174,22 @@ impl Gateway {
                 .axes
                 .iter()
                 .all(|a| !self.engine.busy(a) && !self.engine.axis(a).moving())
+    }
+
+    /// Whether the firmware update may start flash work now: no axis moving or with a job
+    /// waiting, no synchronized start running, no SAVE pending.
+    #[cfg(feature = "update")]
+    fn update_gate(&self) -> super::update::Gate {
+        let moving = self.sync.status() == super::sync::SyncStatus::Running
+            || self
+                .config
+                .bus
+                .axes
+                .iter()
+                .any(|a| self.engine.busy(a) || self.engine.axis(a).moving());
+        let saving = self.persist.request.is_some()
+            || self.persist.status == super::persist::SaveStatus::Saving;
+        super::update::Gate { moving, saving }
     }
 
     /// The rules of a parsed write that depend on the gateway's state, checked before any
@@ -278,6 +298,13 @@ impl Gateway {
     /// order (parsed again: parsing is pure); the command channel's request block as a whole,
     /// and SYNCSTART last (with the mask the same write sets).
     pub(super) fn gateway_write(&mut self, address: u16, values: &[u16]) -> Result<(), Refused> {
+        #[cfg(feature = "update")]
+        {
+            let gate = self.update_gate();
+            if let Some(result) = self.update.write(address, values, gate) {
+                return result;
+            }
+        }
         // SYNCSTART, and the mask it starts with: the one this write sets, else the one held.
         let mut start_sync = false;
         let mut mask = self.sync.mask();

@@ -241,6 +241,20 @@ pub const G_PLC: u16 = 0x0510;
 /// Registers of the PLC-link counters.
 pub const G_PLC_LEN: u16 = 14;
 
+/// Firmware update (feature `update`, [`super::update`]): UPDCTL, BEGIN (with the image's size,
+/// CRC-32 and board id), FINISH, ABORT.
+pub const G_UPDATE: u16 = 0x0700;
+/// Registers of UPDCTL: the command and BEGIN's arguments.
+pub const G_UPDATE_LEN: u16 = 6;
+/// Firmware update: UPDSTAT, the transfer's state, progress and last error.
+pub const G_UPDATE_STATUS: u16 = 0x0710;
+/// Registers of UPDSTAT.
+pub const G_UPDATE_STATUS_LEN: u16 = 16;
+/// Firmware update: UPDCHUNK, one chunk of the image (header and up to 232 bytes).
+pub const G_UPDATE_CHUNK: u16 = 0x0720;
+/// Registers of UPDCHUNK: a 4-register header and 116 of data.
+pub const G_UPDATE_CHUNK_LEN: u16 = 120;
+
 use Support::{Full, Gateway, Partial};
 
 /// Axes, for the per-axis blocks' sizes.
@@ -448,6 +462,12 @@ pub const MAP: &[Entry] = &[
     e(Unit::Gateway, Status, G_DIAG, G_DIAG_LEN * AXES, "DIAG", "count", "", false, "Per axis n at 0x0400+16n: frames sent, replies, time-outs, BCC errors, bad replies, retries, rejections (u32 each), link, last error", Gateway),
     e(Unit::Gateway, Status, G_BUS, G_BUS_LEN, "BUS", "count", "", false, "Unsolicited frames, events lost, queue full, establishments, stops owed (a stop got no answer), broadcast refusals (u32 each)", Gateway),
     e(Unit::Gateway, Status, G_PLC, G_PLC_LEN, "PLCLINK", "count", "", false, "Modbus frames, CRC errors, exceptions, replies, other units, broadcasts, malformed (u32 each; RTU and TCP together)", Gateway),
+    #[cfg(feature = "update")]
+    e(Unit::Gateway, Holding, G_UPDATE, G_UPDATE_LEN, "UPDCTL", "", "1, 2, 3", true, "Firmware update (not on the F103): write 1 BEGIN with the image's size (u32, bytes), CRC-32 (u32) and board id in one FC10 of 6; 2 FINISH; 3 ABORT. Refused (04) while an axis moves or a SAVE is pending; 03 for another board or an image larger than the DFU partition", Gateway),
+    #[cfg(feature = "update")]
+    e(Unit::Gateway, Status, G_UPDATE_STATUS, G_UPDATE_STATUS_LEN, "UPDSTAT", "", "", false, "Firmware update: state (0 idle, 1 erasing, 2 receiving, 3 writing, 4 finishing, 5 ready, 6 failed), last error, bytes received, next offset, image size, image CRC-32, board id, DFU partition size, refusals (u32 each but the board id), largest chunk", Gateway),
+    #[cfg(feature = "update")]
+    e(Unit::Gateway, Holding, G_UPDATE_CHUNK, G_UPDATE_CHUNK_LEN, "UPDCHUNK", "bytes", "", true, "Firmware update: one chunk in one FC10: offset (u32, the next offset UPDSTAT shows), length (1-232, a multiple of 8 but for the last), CRC-16/MODBUS of its bytes, the bytes (two per register, high byte first)", Gateway),
     #[cfg(feature = "tcp")]
     e(Unit::Gateway, Holding, G_NET, 2, "IPADDR", "IPv4", "a.b, c.d", true, "Ethernet board: its address, high byte first (default 192.168.1.100); taken at the next start (SAVE, RESTART)", Gateway),
     #[cfg(feature = "tcp")]

@@ -25,6 +25,7 @@
 //! | [`map`], `registers`, [`table`] | The register map as data; status words; table rows |
 //! | `config`, `boot` | [`GatewayConfig`]; [`Boot`], what the firmware says about the start |
 //! | `refused` | [`Refused`]: why a request is refused, before any face says it its way |
+//! | `update` | A firmware image over the PLC link into the DFU partition (feature `update`) |
 
 mod axis_unit;
 mod boot;
@@ -44,6 +45,8 @@ pub mod settings;
 mod sync;
 pub mod table;
 mod teach;
+#[cfg(feature = "update")]
+pub mod update;
 pub mod write;
 
 pub use boot::{Boot, ConfigSource, ResetCause};

@@ -321,11 +321,103 @@ pub struct Rig {
     pub stores: Vec<(u64, protocol::plc::SettingsRequest)>,
     /// The records saved, as the firmware would write them, in order.
     pub saved: Vec<[u8; protocol::plc::settings::RECORD_LEN]>,
+    /// Do not report saves: each stays pending until the test calls `node.stored`.
+    pub hold_saves: bool,
     replies: Vec<Vec<u8>>,
     /// Modbus TCP replies, with their socket, in order.
     pub tcp_replies: Vec<(usize, Vec<u8>)>,
     /// Sockets the node closed, with the time.
     pub tcp_closes: Vec<(u64, usize)>,
+    /// The DFU partition the firmware update writes (feature `update`).
+    #[cfg(feature = "update")]
+    pub dfu: Dfu,
+}
+
+/// A flash job of the firmware update, kept (owned) while the test holds it.
+#[cfg(feature = "update")]
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Job {
+    Erase(u32),
+    Write(u32, Vec<u8>),
+    Finish(u32, u32),
+}
+
+/// A DFU partition in RAM, as NOR flash: a write must fall inside it, on erased bytes only
+/// (a test fails on the spot otherwise).
+#[cfg(feature = "update")]
+#[derive(Clone, Debug, Default)]
+pub struct Dfu {
+    pub flash: Vec<u8>,
+    /// Jobs carried out, in order, with their time.
+    pub jobs: Vec<(u64, Job)>,
+    /// The image marked for the bootloader: size and CRC-32.
+    pub marked: Option<(u32, u32)>,
+    /// Fail the next job.
+    pub fail_next: bool,
+    /// Keep jobs without carrying them out ([`Rig::release_job`] does).
+    pub hold: bool,
+    pub held: Option<Job>,
+}
+
+#[cfg(feature = "update")]
+impl Dfu {
+    /// The erase unit (an L475 page).
+    pub const PAGE: usize = 2048;
+
+    pub fn new(size: usize) -> Dfu {
+        Dfu {
+            // Not erased: whatever an earlier image left.
+            flash: vec![0x5A; size],
+            ..Dfu::default()
+        }
+    }
+
+    pub fn job(job: protocol::plc::update::UpdateJob<'_>) -> Job {
+        use protocol::plc::update::UpdateJob;
+        match job {
+            UpdateJob::Erase { len } => Job::Erase(len),
+            UpdateJob::Write { offset, bytes } => Job::Write(offset, bytes.to_vec()),
+            UpdateJob::Finish { len, crc32 } => Job::Finish(len, crc32),
+        }
+    }
+
+    /// Carries `job` out on the partition.
+    pub fn carry_out(&mut self, now: u64, job: Job) -> Result<(), ()> {
+        self.jobs.push((now, job.clone()));
+        if std::mem::take(&mut self.fail_next) {
+            return Err(());
+        }
+        match job {
+            Job::Erase(len) => {
+                let len = len as usize;
+                assert!(len <= self.flash.len(), "an erase past the partition");
+                let end = len.div_ceil(Self::PAGE) * Self::PAGE;
+                let end = end.min(self.flash.len());
+                self.flash[..end].fill(0xFF);
+                self.marked = None;
+            }
+            Job::Write(offset, bytes) => {
+                let start = offset as usize;
+                let end = start + bytes.len();
+                assert!(end <= self.flash.len(), "a write past the partition");
+                assert_eq!(start % 8, 0, "a write off a flash word");
+                assert!(
+                    self.flash[start..end].iter().all(|&b| b == 0xFF),
+                    "a write over bytes not erased"
+                );
+                self.flash[start..end].copy_from_slice(&bytes);
+            }
+            Job::Finish(len, crc) => {
+                let len = len as usize;
+                assert!(len <= self.flash.len(), "a check past the partition");
+                if protocol::plc::update::crc32(&self.flash[..len]) != crc {
+                    return Err(());
+                }
+                self.marked = Some((len as u32, crc));
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Rig {
@@ -344,9 +436,12 @@ impl Rig {
             plc_lines: Vec::new(),
             stores: Vec::new(),
             saved: Vec::new(),
+            hold_saves: false,
             replies: Vec::new(),
             tcp_replies: Vec::new(),
             tcp_closes: Vec::new(),
+            #[cfg(feature = "update")]
+            dfu: Dfu::default(),
         }
     }
 
@@ -404,6 +499,9 @@ impl Rig {
                 Some(Action::Settings(store)) => {
                     if let protocol::plc::SettingsRequest::Save = store {
                         self.saved.push(self.node.settings_record());
+                    }
+                    if let (protocol::plc::SettingsRequest::Save, false) = (store, self.hold_saves)
+                    {
                         let saves = self.stores.len() as u32 + 1;
                         self.node.stored(Ok(saves));
                     }
@@ -419,9 +517,31 @@ impl Rig {
                     self.tcp_closes.push((self.now, socket.index()));
                     self.node.tcp_closed(socket);
                 }
+                #[cfg(feature = "update")]
+                Some(Action::Update(job)) => {
+                    let job = Dfu::job(job);
+                    if self.dfu.hold {
+                        assert!(
+                            self.dfu.held.is_none(),
+                            "a second job before the first's report"
+                        );
+                        self.dfu.held = Some(job);
+                    } else {
+                        let result = self.dfu.carry_out(self.now, job);
+                        self.node.update_done(result);
+                    }
+                }
             }
         }
         panic!("the node never went idle");
+    }
+
+    /// Carries out the job held back (`dfu.hold`) and reports it.
+    #[cfg(feature = "update")]
+    pub fn release_job(&mut self) {
+        let job = self.dfu.held.take().expect("a job held");
+        let result = self.dfu.carry_out(self.now, job);
+        self.node.update_done(result);
     }
 
     /// Run until `until`, polling the node as the firmware does.

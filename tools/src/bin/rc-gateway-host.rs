@@ -168,6 +168,24 @@ struct Cli {
     /// Ignore standard input (the default with --bus).
     #[arg(long, overrides_with = "control")]
     no_control: bool,
+    /// A DFU partition in this file (created, or resized to --dfu-size): `rcgw update` may send
+    /// a firmware image into it; FINISH marks it in PATH.marked.
+    #[arg(long, value_name = "PATH")]
+    dfu: Option<PathBuf>,
+    /// --dfu: the partition's size, bytes (the largest image).
+    #[arg(long, default_value_t = 256 * 1024, value_name = "BYTES", requires = "dfu")]
+    dfu_size: u32,
+    /// --dfu: the board id an image must name (decimal, or hex with 0x).
+    #[arg(long, default_value = "0x0475", value_name = "ID", value_parser = parse_board, requires = "dfu")]
+    board_id: u16,
+}
+
+fn parse_board(text: &str) -> Result<u16, String> {
+    let parsed = match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
+        Some(hex) => u16::from_str_radix(hex, 16),
+        None => text.parse(),
+    };
+    parsed.map_err(|_| format!("{text:?}: a board id is 0-65535 (or 0x0000-0xFFFF)"))
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -345,6 +363,11 @@ fn options(cli: &Cli) -> Result<Options, String> {
             Level::Off
         },
         control,
+        dfu: cli.dfu.as_ref().map(|path| rc_tools::host::DfuOptions {
+            path: path.clone(),
+            size: cli.dfu_size,
+            board: cli.board_id,
+        }),
         ..Options::default()
     })
 }

@@ -29,6 +29,7 @@
 mod answers;
 mod config;
 mod control;
+pub mod dfu;
 pub mod log;
 pub mod port;
 mod run;
@@ -36,6 +37,7 @@ pub mod tcp;
 
 pub use config::{gateway_config, simulated_bus};
 pub use control::{Control, HELP};
+pub use dfu::DfuOptions;
 pub use log::Level;
 pub use port::{Parity, Port};
 
@@ -143,6 +145,8 @@ pub struct Options {
     pub control: bool,
     /// The longest sleep of the loop.
     pub max_sleep: StdDuration,
+    /// A DFU partition in a file: the PLC link may send a firmware image into it.
+    pub dfu: Option<DfuOptions>,
 }
 
 impl Default for Options {
@@ -168,6 +172,7 @@ impl Default for Options {
             log: Level::Off,
             control: true,
             max_sleep: StdDuration::from_millis(2),
+            dfu: None,
         }
     }
 }
@@ -208,17 +213,29 @@ pub struct Host {
     /// Standard input's partial line, when control lines are read.
     control: Option<Vec<u8>>,
     max_sleep: StdDuration,
+    /// The DFU partition, if there is one.
+    dfu: Option<dfu::DfuFile>,
 }
 
 impl Host {
     /// Open both lines and build the gateway.
     pub fn new(options: &Options) -> io::Result<Host> {
         let config = gateway_config(options)?;
-        let node = Box::new(Node::new(
+        let mut node = Box::new(Node::new(
             config,
             &protocol::plc::IDENTITY,
             protocol::plc::Boot::DEFAULT,
         ));
+        let dfu = match &options.dfu {
+            Some(dfu) => {
+                let file = dfu::DfuFile::open(dfu).map_err(|e| {
+                    io::Error::new(e.kind(), format!("{}: {e}", dfu.path.display()))
+                })?;
+                node.set_update_target(file.target());
+                Some(file)
+            }
+            None => None,
+        };
         let bus = match &options.bus {
             BusLine::Sim { axes, points } => {
                 BusSide::Sim(Box::new(simulated_bus(options, *axes, *points)?))
@@ -267,6 +284,7 @@ impl Host {
             last_bus_rx: 0,
             control: options.control.then(Vec::new),
             max_sleep: options.max_sleep,
+            dfu,
         })
     }
 

@@ -9,6 +9,7 @@ use std::time::Duration as StdDuration;
 use protocol::frame::COMM_CHANGE;
 use protocol::line::{LineAction, BREAK_MS};
 use protocol::node::{Action, TcpAction};
+use protocol::plc::update::UpdateJob;
 use protocol::time::Instant;
 use protocol::Request;
 use serde_json::json;
@@ -157,6 +158,24 @@ impl Host {
                         self.node.stored(Ok(self.saves));
                     }
                     self.log.note(now, &format!("store: {store:?}"));
+                }
+                Some(Action::Update(job)) => {
+                    // Only with a partition (`Node::set_update_target`) is the node asked.
+                    let result = match &mut self.dfu {
+                        Some(dfu) => dfu.carry_out(&job),
+                        None => Err(io::Error::other("no DFU partition")),
+                    };
+                    let what = match job {
+                        UpdateJob::Erase { len } => format!("erase {len} B"),
+                        UpdateJob::Write { offset, bytes } => {
+                            format!("write {} B at {offset}", bytes.len())
+                        }
+                        UpdateJob::Finish { len, crc32 } => {
+                            format!("finish {len} B, CRC-32 {crc32:08x}")
+                        }
+                    };
+                    self.log.note(now, &format!("update: {what}: {result:?}"));
+                    self.node.update_done(result.map_err(|_| ()));
                 }
                 None => {
                     if self.node.receiver_counters() != self.seen_receiver {

@@ -36,6 +36,7 @@ mod points;
 mod restore;
 mod settings;
 mod status;
+mod update;
 
 use std::io::IsTerminal;
 use std::process::ExitCode;
@@ -121,6 +122,28 @@ enum Cmd {
         #[arg(long)]
         yes: bool,
     },
+    /// Send a firmware image into the gateway's DFU partition (resumes a cut transfer), or show
+    /// what the gateway has (--status). Only the transfer so far: nothing starts the image yet.
+    Update {
+        /// The image (a raw binary).
+        #[arg(required_unless_present = "status", conflicts_with = "status")]
+        file: Option<String>,
+        /// The board the image is built for (decimal, or hex with 0x): the gateway refuses
+        /// another board's.
+        #[arg(long, value_parser = parse_board, required_unless_present = "status")]
+        board: Option<u16>,
+        /// Show the transfer's state, the image in the DFU partition and the last error.
+        #[arg(long)]
+        status: bool,
+    },
+}
+
+fn parse_board(text: &str) -> Result<u16, String> {
+    let parsed = match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
+        Some(hex) => u16::from_str_radix(hex, 16),
+        None => text.parse(),
+    };
+    parsed.map_err(|_| format!("{text:?}: a board id is 0-65535 (or 0x0000-0xFFFF)"))
 }
 
 #[derive(Subcommand, Debug)]
@@ -194,6 +217,15 @@ fn connect(cli: &Cli) -> Result<Gw, Fail> {
     Ok(gw)
 }
 
+/// A firmware image: bad input (exit 2) if it cannot be read or is empty.
+fn read_image(path: &str) -> Result<Vec<u8>, Fail> {
+    let image = std::fs::read(path).map_err(|e| Fail::Input(format!("{path}: {e}")))?;
+    if image.is_empty() {
+        return Err(Fail::Input(format!("{path}: empty")));
+    }
+    Ok(image)
+}
+
 /// A file read and parsed as TOML: bad input (exit 2) if not.
 fn read_toml(path: &str) -> Result<toml::Table, Fail> {
     let text = std::fs::read_to_string(path).map_err(|e| Fail::Input(format!("{path}: {e}")))?;
@@ -219,6 +251,7 @@ fn print_json(value: &impl serde::Serialize) {
 
 fn run(cli: &Cli) -> Result<(), Fail> {
     // Files are checked before the line is opened: a bad file writes nothing.
+    let mut image = None;
     match &cli.command {
         Cmd::Config {
             action: ConfigCmd::Diff { file } | ConfigCmd::Apply { file, .. },
@@ -228,6 +261,11 @@ fn run(cli: &Cli) -> Result<(), Fail> {
         }
         Cmd::Restore { file, .. } => {
             backup::load(file)?;
+        }
+        Cmd::Update {
+            file: Some(file), ..
+        } => {
+            image = Some(read_image(file)?);
         }
         Cmd::FactoryReset { yes: false } => {
             return Err(Fail::Input(
@@ -256,5 +294,12 @@ fn run(cli: &Cli) -> Result<(), Fail> {
         Cmd::Save => control::save(&mut gw, cli.json),
         Cmd::Restart => control::restart(&mut gw, cli.json),
         Cmd::FactoryReset { .. } => control::factory_reset(&mut gw, cli.json),
+        Cmd::Update { status: true, .. } => update::status(&mut gw, cli.json),
+        Cmd::Update { board, .. } => update::update(
+            &mut gw,
+            cli.json,
+            image.as_deref().unwrap_or_default(),
+            board.unwrap_or_default(),
+        ),
     }
 }

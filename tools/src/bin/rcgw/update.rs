@@ -1,0 +1,277 @@
+//! `rcgw update FILE`: a firmware image into the gateway's DFU partition over the PLC link
+//! (unit 63's UPDCTL, UPDSTAT and UPDCHUNK: `protocol::plc::update`), resumed where a cut
+//! transfer stopped; `rcgw update --status`: what the gateway has.
+//!
+//! Only the transfer: no signature yet, and nothing on the board starts the image (issue 37).
+
+use std::time::{Duration, Instant};
+
+use protocol::modbus::Exception;
+use protocol::plc::map::{G_UPDATE, G_UPDATE_CHUNK, G_UPDATE_STATUS, G_UPDATE_STATUS_LEN};
+use protocol::plc::update::{
+    begin_registers, chunk_registers, crc32, UpdateError, UpdateState, UpdateStatus, FINISH,
+    MAX_CHUNK,
+};
+use serde_json::json;
+
+use crate::backup::progress;
+use crate::link::{Fail, Gw};
+use crate::print_json;
+
+/// How long a refusal that says "not now" (an axis moves, a SAVE, the flash busy) is waited
+/// out, and a state that is the gateway's to leave (erasing, finishing).
+const PATIENCE: Duration = Duration::from_secs(60);
+
+/// UPDSTAT's state by name.
+fn state_name(state: u16) -> &'static str {
+    const NAMES: [(UpdateState, &str); 7] = [
+        (UpdateState::Idle, "idle"),
+        (UpdateState::Erasing, "erasing"),
+        (UpdateState::Receiving, "receiving"),
+        (UpdateState::Writing, "writing"),
+        (UpdateState::Finishing, "finishing"),
+        (UpdateState::Ready, "ready"),
+        (UpdateState::Failed, "failed"),
+    ];
+    NAMES
+        .iter()
+        .find(|(s, _)| *s as u16 == state)
+        .map_or("unknown", |(_, name)| name)
+}
+
+/// UPDSTAT's last error, in words.
+fn error_text(error: u16) -> &'static str {
+    const TEXTS: [(UpdateError, &str); 14] = [
+        (UpdateError::None, "none"),
+        (UpdateError::Moving, "an axis moves or has a job waiting"),
+        (UpdateError::SavePending, "a SAVE is pending"),
+        (UpdateError::Busy, "the gateway is still erasing or writing"),
+        (UpdateError::NotStarted, "no transfer under way"),
+        (UpdateError::WrongBoard, "the image is for another board"),
+        (
+            UpdateError::TooLarge,
+            "the image is larger than the DFU partition",
+        ),
+        (UpdateError::OutOfOrder, "a chunk not at the next offset"),
+        (UpdateError::ChunkCheck, "a chunk's CRC-16 did not match"),
+        (UpdateError::Malformed, "a malformed request"),
+        (UpdateError::Incomplete, "FINISH before the last byte"),
+        (
+            UpdateError::ImageCheck,
+            "the image's CRC-32 is not the one BEGIN declared",
+        ),
+        (
+            UpdateError::Flash,
+            "the flash could not be erased, written or checked",
+        ),
+        (
+            UpdateError::NoPartition,
+            "this gateway has no DFU partition",
+        ),
+    ];
+    TEXTS
+        .iter()
+        .find(|(e, _)| *e as u16 == error)
+        .map_or("unknown", |(_, text)| text)
+}
+
+fn read_status(gw: &mut Gw) -> Result<UpdateStatus, Fail> {
+    let unit = gw.unit;
+    let registers = gw.read(unit, G_UPDATE_STATUS, G_UPDATE_STATUS_LEN)?;
+    UpdateStatus::parse(&registers).ok_or_else(|| {
+        Fail::Device(format!(
+            "{}: not 16 registers",
+            gw.at(unit, G_UPDATE_STATUS)
+        ))
+    })
+}
+
+/// The gateway's status as JSON.
+fn status_json(s: &UpdateStatus) -> serde_json::Value {
+    json!({
+        "state": state_name(s.state),
+        "error": error_text(s.error),
+        "received": s.received,
+        "next": s.next,
+        "size": s.size,
+        "crc32": format!("{:08x}", s.crc32),
+        "board": s.board,
+        "partition": s.partition,
+        "refusals": s.refusals,
+        "max_chunk": s.max_chunk,
+    })
+}
+
+/// `rcgw update --status`.
+pub fn status(gw: &mut Gw, json: bool) -> Result<(), Fail> {
+    let s = read_status(gw)?;
+    if json {
+        print_json(&status_json(&s));
+        return Ok(());
+    }
+    if s.partition == 0 {
+        outln!("no DFU partition: this gateway takes no firmware image over the PLC link");
+        return Ok(());
+    }
+    outln!("state      {}", state_name(s.state));
+    outln!(
+        "image      {} of {} bytes written, CRC-32 {:08x}",
+        s.next,
+        s.size,
+        s.crc32
+    );
+    outln!(
+        "partition  {} bytes, board id {:#06x}, chunks of up to {} bytes",
+        s.partition,
+        s.board,
+        s.max_chunk
+    );
+    outln!(
+        "last error {} ({} refusals)",
+        error_text(s.error),
+        s.refusals
+    );
+    Ok(())
+}
+
+/// Waits while the gateway is in `state` (erasing, finishing): its status after.
+fn wait_out(gw: &mut Gw, state: UpdateState) -> Result<UpdateStatus, Fail> {
+    let deadline = Instant::now() + PATIENCE;
+    loop {
+        let s = read_status(gw)?;
+        if s.state != state as u16 {
+            return Ok(s);
+        }
+        if Instant::now() > deadline {
+            return Err(Fail::Device(format!(
+                "{}: still {} after {} s",
+                gw.at(gw.unit, G_UPDATE_STATUS),
+                state_name(s.state),
+                PATIENCE.as_secs()
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// Writes `values` at `address` of the gateway unit, waiting out "not now" (04) for at most
+/// [`PATIENCE`]: `Ok(Err(status))` when the gateway refused it for good (03, 02).
+fn write_patiently(
+    gw: &mut Gw,
+    address: u16,
+    values: &[u16],
+    show: bool,
+) -> Result<Result<(), UpdateStatus>, Fail> {
+    let deadline = Instant::now() + PATIENCE;
+    let unit = gw.unit;
+    loop {
+        match gw.try_write(unit, address, values)? {
+            Ok(()) => return Ok(Ok(())),
+            Err(Exception::ServerDeviceFailure) if Instant::now() < deadline => {
+                // The flash still busy with the last chunk is the common case, and short.
+                let s = read_status(gw)?;
+                if s.error == UpdateError::Busy as u16 {
+                    std::thread::sleep(Duration::from_millis(1));
+                } else {
+                    progress(show, &format!("waiting: {}", error_text(s.error)));
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+            }
+            Err(_) => return Ok(Err(read_status(gw)?)),
+        }
+    }
+}
+
+fn refused(gw: &Gw, address: u16, s: &UpdateStatus) -> Fail {
+    Fail::Device(format!(
+        "{}: refused: {} (state {})",
+        gw.at(gw.unit, address),
+        error_text(s.error),
+        state_name(s.state)
+    ))
+}
+
+/// `rcgw update FILE --board ID`: the image sent, from the next offset the gateway shows when
+/// it already has part of this image, then checked and marked.
+pub fn update(gw: &mut Gw, json: bool, image: &[u8], board: u16) -> Result<(), Fail> {
+    let show = !json && std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let size = u32::try_from(image.len()).unwrap_or(u32::MAX);
+    let crc = crc32(image);
+    let s = read_status(gw)?;
+    if s.partition == 0 {
+        return Err(Fail::Device(format!(
+            "{}: this gateway has no DFU partition",
+            gw.link.name
+        )));
+    }
+    if size > s.partition {
+        return Err(Fail::Input(format!(
+            "the image is {size} bytes, the gateway's DFU partition {}",
+            s.partition
+        )));
+    }
+    let resumed = s.state == UpdateState::Receiving as u16 && s.size == size && s.crc32 == crc;
+    let mut next = if resumed {
+        s.next
+    } else {
+        if let Err(s) = write_patiently(gw, G_UPDATE, &begin_registers(size, crc, board), show)? {
+            return Err(refused(gw, G_UPDATE, &s));
+        }
+        progress(show, "erasing");
+        let s = wait_out(gw, UpdateState::Erasing)?;
+        if s.state != UpdateState::Receiving as u16 {
+            return Err(refused(gw, G_UPDATE, &s));
+        }
+        0
+    };
+    let from = next;
+    let started = Instant::now();
+    while next < size {
+        let start = next as usize;
+        let end = (start + MAX_CHUNK).min(image.len());
+        let chunk = image.get(start..end).unwrap_or_default();
+        match write_patiently(gw, G_UPDATE_CHUNK, &chunk_registers(next, chunk), show)? {
+            Ok(()) => next = end as u32,
+            // Out of step (a reply lost before this run): go on from where the gateway is.
+            Err(s) if s.error == UpdateError::OutOfOrder as u16 && s.next > next => next = s.next,
+            Err(s) => return Err(refused(gw, G_UPDATE_CHUNK, &s)),
+        }
+        let done = f64::from(next - from);
+        let rate = done / started.elapsed().as_secs_f64().max(1e-3);
+        let left = f64::from(size - next) / rate.max(1.0);
+        progress(
+            show,
+            &format!(
+                "sent {next} of {size} bytes ({:.0} %), {:.1} KB/s, {left:.0} s left",
+                f64::from(next) * 100.0 / f64::from(size),
+                rate / 1000.0
+            ),
+        );
+    }
+    if let Err(s) = write_patiently(gw, G_UPDATE, &[FINISH], show)? {
+        return Err(refused(gw, G_UPDATE, &s));
+    }
+    progress(show, "checking");
+    let s = wait_out(gw, UpdateState::Finishing)?;
+    progress(show, "");
+    if s.state != UpdateState::Ready as u16 {
+        return Err(refused(gw, G_UPDATE, &s));
+    }
+    let seconds = started.elapsed().as_secs_f64();
+    if json {
+        let mut value = status_json(&s);
+        value["resumed_at"] = json!(resumed.then_some(from));
+        value["seconds"] = json!(seconds);
+        print_json(&value);
+    } else {
+        let resumed = if resumed {
+            format!(", resumed at {from}")
+        } else {
+            String::new()
+        };
+        outln!(
+            "image of {size} bytes (CRC-32 {crc:08x}) in the DFU partition, checked and marked, in {seconds:.1} s{resumed}"
+        );
+    }
+    Ok(())
+}
