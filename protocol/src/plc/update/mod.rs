@@ -78,6 +78,12 @@ use super::refused::Refused;
 use super::registers::{join, split};
 use crate::modbus::crc;
 
+mod crc32;
+mod tool;
+
+pub use crc32::{crc32, Crc32};
+pub use tool::{begin_registers, chunk_registers, UpdateStatus};
+
 /// The most bytes a chunk carries: 116 registers, with the 4 of its header 120 of FC16's 123,
 /// and a multiple of 8 (the flash words of the STM32L4 and F4).
 pub const MAX_CHUNK: usize = 232;
@@ -551,160 +557,5 @@ impl Update {
             UpdateState::Finishing => UpdateState::Ready,
             _ => UpdateState::Receiving,
         };
-    }
-}
-
-/// UPDCTL's BEGIN block for an image of `size` bytes with CRC-32 `crc32`, for board `board`:
-/// what a tool writes with FC16 at [`G_UPDATE`].
-pub fn begin_registers(size: u32, crc32: u32, board: u16) -> [u16; 6] {
-    let [size_hi, size_lo] = split(size);
-    let [crc_hi, crc_lo] = split(crc32);
-    [BEGIN, size_hi, size_lo, crc_hi, crc_lo, board]
-}
-
-/// UPDCHUNK's block for `bytes` at `offset` (at most [`MAX_CHUNK`] of them; more are cut):
-/// what a tool writes with FC16 at [`G_UPDATE_CHUNK`].
-pub fn chunk_registers(offset: u32, bytes: &[u8]) -> heapless::Vec<u16, 120> {
-    let bytes = bytes.get(..MAX_CHUNK).unwrap_or(bytes);
-    let [offset_hi, offset_lo] = split(offset);
-    let mut out = heapless::Vec::new();
-    let len = u16::try_from(bytes.len()).unwrap_or(0);
-    for word in [offset_hi, offset_lo, len, crc::checksum(bytes)] {
-        let _ = out.push(word);
-    }
-    for pair in bytes.chunks(2) {
-        let hi = pair.first().copied().unwrap_or(0);
-        let lo = pair.get(1).copied().unwrap_or(0);
-        let _ = out.push(u16::from_be_bytes([hi, lo]));
-    }
-    out
-}
-
-/// UPDSTAT as a tool reads it (16 registers from [`G_UPDATE_STATUS`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct UpdateStatus {
-    /// [`UpdateState`] as its number (an unknown one kept as read).
-    pub state: u16,
-    /// [`UpdateError`] as its number.
-    pub error: u16,
-    /// Bytes taken.
-    pub received: u32,
-    /// The offset the next chunk must have.
-    pub next: u32,
-    /// The image's size BEGIN declared.
-    pub size: u32,
-    /// The image's CRC-32 BEGIN declared.
-    pub crc32: u32,
-    /// The board's id.
-    pub board: u16,
-    /// The DFU partition's size.
-    pub partition: u32,
-    /// Refusals so far.
-    pub refusals: u32,
-    /// The largest chunk the gateway takes.
-    pub max_chunk: u16,
-}
-
-impl UpdateStatus {
-    /// UPDSTAT from its registers; `None` unless there are 16.
-    pub fn parse(registers: &[u16]) -> Option<UpdateStatus> {
-        let r = |i: u16| registers.get(usize::from(i)).copied();
-        let u32_at = |i: u16| Some(join(r(i)?, r(i + 1)?));
-        if registers.len() != usize::from(G_UPDATE_STATUS_LEN) {
-            return None;
-        }
-        Some(UpdateStatus {
-            state: r(status::STATE)?,
-            error: r(status::ERROR)?,
-            received: u32_at(status::RECEIVED)?,
-            next: u32_at(status::NEXT)?,
-            size: u32_at(status::SIZE)?,
-            crc32: u32_at(status::CRC)?,
-            board: r(status::BOARD)?,
-            partition: u32_at(status::PARTITION)?,
-            refusals: u32_at(status::REFUSALS)?,
-            max_chunk: r(status::MAX_CHUNK)?,
-        })
-    }
-}
-
-/// CRC-32 (IEEE 802.3: polynomial 0x04C11DB7 reflected, initial value and final XOR all ones),
-/// computed a byte at a time over a 16-entry table, as [`crc`] does CRC-16.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Crc32(u32);
-
-/// The reflected polynomial.
-const POLY32: u32 = 0xEDB8_8320;
-
-// Evaluated at compile time: an index out of range would be a build error, not a panic.
-#[allow(clippy::indexing_slicing)]
-const NIBBLE32: [u32; 16] = {
-    let mut table = [0u32; 16];
-    let mut i = 0;
-    while i < 16 {
-        let mut crc = i as u32;
-        let mut bit = 0;
-        while bit < 4 {
-            crc = if crc & 1 != 0 {
-                (crc >> 1) ^ POLY32
-            } else {
-                crc >> 1
-            };
-            bit += 1;
-        }
-        table[i] = crc;
-        i += 1;
-    }
-    table
-};
-
-impl Crc32 {
-    /// Nothing yet.
-    pub const fn new() -> Crc32 {
-        Crc32(0xFFFF_FFFF)
-    }
-
-    /// `bytes` next.
-    pub fn update(&mut self, bytes: &[u8]) {
-        let step = |crc: u32| {
-            let i = usize::from((crc & 0xF) as u8);
-            (crc >> 4) ^ NIBBLE32.get(i).copied().unwrap_or(0)
-        };
-        for &byte in bytes {
-            self.0 = step(step(self.0 ^ u32::from(byte)));
-        }
-    }
-
-    /// The CRC-32 of the bytes so far.
-    pub fn finish(&self) -> u32 {
-        !self.0
-    }
-}
-
-impl Default for Crc32 {
-    fn default() -> Self {
-        Crc32::new()
-    }
-}
-
-/// The CRC-32 of `bytes` (`crc32("123456789")` is 0xCBF43926).
-pub fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = Crc32::new();
-    crc.update(bytes);
-    crc.finish()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn crc32_is_the_common_one() {
-        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
-        assert_eq!(crc32(b""), 0);
-        let mut split = Crc32::new();
-        split.update(b"1234");
-        split.update(b"56789");
-        assert_eq!(split.finish(), 0xCBF4_3926);
     }
 }
