@@ -27,6 +27,8 @@
 //!   and is a whole MBAP frame (protocol id 0, a length that counts the rest, at most 260
 //!   bytes); a close names a socket that exists. (Bit 6 of the set-up byte, which also picks
 //!   the pattern, sets an allow-list of 10.0.0.1, two connections at most and 1 s idle.)
+//! - flash work for a firmware update (a DFU partition of [`PARTITION`] bytes, board 1) stays in
+//!   the partition, and each write starts on a flash word.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -34,13 +36,17 @@ use protocol::command::{Command, Request};
 use protocol::frame::Frame;
 use protocol::modbus::crc;
 use protocol::modbus::tcp::{SocketHandle, SOCKETS};
-use protocol::node::TcpAction;
 use protocol::net::Ipv4;
+use protocol::node::TcpAction;
 use protocol::node::{Action, Node};
 use protocol::pio::{Pattern, PioInputs};
+use protocol::plc::update::{Target, UpdateJob, CHUNK_ALIGN};
 use protocol::plc::{GatewayConfig, SettingsRequest};
 use protocol::time::Instant;
 use protocol::{Axis, AxisSet};
+
+/// The DFU partition's size: small, so that a fuzzed image can fill it.
+const PARTITION: u32 = 1024;
 
 /// The first `n` bytes of `rest` (fewer at its end), taken off it.
 fn take<'a>(rest: &mut &'a [u8], n: usize) -> &'a [u8] {
@@ -55,7 +61,11 @@ fuzz_target!(|data: &[u8]| {
     };
     let mut config = GatewayConfig::new(AxisSet(u16::from(setup & 0x0F) | 1));
     config.bus.establish = setup & 0x10 != 0;
-    config.pio_axis = if setup & 0x20 != 0 { Axis::new(0) } else { None };
+    config.pio_axis = if setup & 0x20 != 0 {
+        Axis::new(0)
+    } else {
+        None
+    };
     config.pio_pattern = [
         Pattern::Positioning,
         Pattern::Teaching,
@@ -67,7 +77,15 @@ fuzz_target!(|data: &[u8]| {
         config.net.policy.max_connections = 2;
         config.net.policy.idle_s = 1;
     }
-    let mut node = Node::new(config, &protocol::plc::IDENTITY, protocol::plc::Boot::DEFAULT);
+    let mut node = Node::new(
+        config,
+        &protocol::plc::IDENTITY,
+        protocol::plc::Boot::DEFAULT,
+    );
+    node.set_update_target(Target {
+        board: 1,
+        partition: PARTITION,
+    });
     // Per socket: a connection is open; it sent bytes since its last reply.
     let mut tcp = Tcp::default();
     let mut now = 0u64;
@@ -231,13 +249,34 @@ fn drain(
             }
             Action::Settings(SettingsRequest::Save) => node.stored(Ok(1)),
             // The board restarts.
-            Action::Settings(SettingsRequest::FactoryReset | SettingsRequest::Restart) => return false,
+            Action::Settings(SettingsRequest::FactoryReset | SettingsRequest::Restart) => {
+                return false
+            }
             Action::Line(_) | Action::PlcLine(_) => {}
-            // No DFU partition is set (`Node::set_update_target`): never asked.
-            Action::Update(_) => node.update_done(Err(())),
+            // Flash work stays in the partition, a write on its flash words; done at once.
+            Action::Update(job) => {
+                let (end, aligned) = match job {
+                    UpdateJob::Erase { len } | UpdateJob::Finish { len, .. } => {
+                        (u64::from(len), true)
+                    }
+                    UpdateJob::Write { offset, bytes } => (
+                        u64::from(offset) + bytes.len() as u64,
+                        offset % CHUNK_ALIGN == 0,
+                    ),
+                };
+                assert!(
+                    end <= u64::from(PARTITION),
+                    "flash work past the partition: {job:?}"
+                );
+                assert!(aligned, "a write off a flash word: {job:?}");
+                node.update_done(Ok(()));
+            }
             Action::Tcp(TcpAction::Reply(handle)) => {
                 let (socket, bytes) = (handle.index(), node.tcp_reply());
-                assert!(socket < SOCKETS && tcp.open[socket], "a reply to socket {socket}, not open");
+                assert!(
+                    socket < SOCKETS && tcp.open[socket],
+                    "a reply to socket {socket}, not open"
+                );
                 assert!(tcp.asked[socket], "a TCP reply nobody asked for");
                 assert!(bytes.len() >= 9 && bytes.len() <= 260, "TCP reply length");
                 assert_eq!(&bytes[2..4], &[0, 0], "protocol id");
