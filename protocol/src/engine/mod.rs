@@ -542,18 +542,23 @@ impl Engine {
         if self.job_turn(job.is_some()) {
             return job;
         }
-        // Polling's turn (or no job frame): the job frame waits, first in turn still.
-        self.job_cursor = cursor;
         // 4. A rejoining axis' next step, every other turn with polling (and whenever polling
-        //    has nothing to send).
-        if self.rejoin.take_turn() {
+        //    has nothing to send); not on a turn taken from a job frame, as it holds the bus up
+        //    to 300 ms.
+        if job.is_none() && self.rejoin.take_turn() {
             if let Some(next) = self.next_rejoin_frame() {
                 return Some(next);
             }
         }
-        // 5. Polling; the job frame whose turn it was when polling has nothing to send.
-        self.next_poll(now)
-            .or_else(|| self.next_rejoin_frame())
-            .or(job)
+        // 5. Polling. On its turn taken from a job frame, the frame waits, first in turn still,
+        //    and goes if polling has nothing to send.
+        let poll = self.next_poll(now);
+        if job.is_some() {
+            if poll.is_some() {
+                self.job_cursor = cursor;
+            }
+            return poll.or(job);
+        }
+        poll.or_else(|| self.next_rejoin_frame())
     }
 }
