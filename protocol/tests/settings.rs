@@ -453,3 +453,14 @@ fn each_setting_is_taken_when_its_map_row_says() {
     }
     assert!(checked >= 14, "only {checked} settings checked");
 }
+
+/// A configuration with more retries than the engine makes (it clamps them) stores what the
+/// engine uses: a record holding more would be refused whole at the next start.
+#[test]
+fn more_retries_than_the_engine_makes_are_stored_as_its_most() {
+    let mut c = config();
+    c.bus.retries = 9;
+    let record = Settings::of(&c).encode();
+    let stored = Settings::decode(&record).expect("a readable record");
+    assert_eq!(stored.retries, protocol::engine::MAX_RETRIES);
+}

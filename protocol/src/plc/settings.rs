@@ -195,7 +195,8 @@ impl Settings {
         w.u8(self.watchdog_action as u8);
         w.u8(self.baud.brsl());
         w.u8(self.rtim.get());
-        w.u8(self.retries);
+        // As the engine uses it (it clamps a larger one): a record holding more is refused.
+        w.u8(self.retries.min(MAX_RETRIES));
         w.u8(self.pio_axis.map_or(0xFF, Axis::get));
         w.bytes(&self.axes.0.to_le_bytes());
         for (_, c) in self.axis_config.iter() {
