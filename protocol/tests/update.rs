@@ -350,8 +350,8 @@ fn a_corrupted_chunk_is_refused_counted_and_taken_when_sent_again() {
 fn a_chunk_out_of_order_or_misshapen_is_refused() {
     let mut rig = rig();
     let image = image(2_000);
-    // Before BEGIN: not now.
-    assert_eq!(Link::Rtu.chunk(&mut rig, &image, 0), Err(4));
+    // Before BEGIN: no transfer under way, which asking again does not change.
+    assert_eq!(Link::Rtu.chunk(&mut rig, &image, 0), Err(3));
     Link::Rtu.begin(&mut rig, &image, BOARD).unwrap();
     Link::Rtu.chunk(&mut rig, &image, 0).unwrap();
     let jobs = rig.dfu.jobs.len();
@@ -590,7 +590,13 @@ fn a_flash_failure_fails_the_transfer_until_begin() {
         (status.state, status.error, status.next),
         (UpdateState::Failed as u16, UpdateError::Flash as u16, 0)
     );
-    assert_eq!(Link::Rtu.chunk(&mut rig, &image, 0), Err(4));
+    // A chunk now is refused for good (03), and the failure's cause stays in UPDSTAT.
+    assert_eq!(Link::Rtu.chunk(&mut rig, &image, 0), Err(3));
+    let status = Link::Rtu.status(&mut rig);
+    assert_eq!(
+        (status.state, status.error),
+        (UpdateState::Failed as u16, UpdateError::Flash as u16)
+    );
     // `send` begins again, since the gateway has no transfer under way.
     assert_eq!(
         Link::Rtu.send(&mut rig, &image).unwrap().state,

@@ -40,8 +40,8 @@
 //!
 //! | Reason ([`UpdateError`]) | Exception |
 //! |---|---|
-//! | an axis moves, has a job waiting, or a synchronized start runs (`Moving`); a SAVE is pending (`SavePending`); a flash job under way (`Busy`); no BEGIN (`NotStarted`) | 04, ask again |
-//! | a board id not this board's (`WrongBoard`); an image larger than the DFU partition or empty (`TooLarge`); a chunk not at the next offset (`OutOfOrder`); a chunk whose CRC-16 does not match its bytes (`ChunkCheck`); a block of the wrong shape, a length out of range or unaligned, a chunk past the image's end (`Malformed`); FINISH before the last byte (`Incomplete`) or with another CRC-32 than BEGIN's (`ImageCheck`: state 6, BEGIN again) | 03 |
+//! | an axis moves, has a job waiting, or a synchronized start runs (`Moving`); a SAVE is pending (`SavePending`); a flash job under way (`Busy`) | 04, ask again |
+//! | no transfer under way (`NotStarted`: none begun, or the last one failed, finished or was forgotten by a restart; BEGIN again); a board id not this board's (`WrongBoard`); an image larger than the DFU partition or empty (`TooLarge`); a chunk not at the next offset (`OutOfOrder`); a chunk whose CRC-16 does not match its bytes (`ChunkCheck`); a block of the wrong shape, a length out of range or unaligned, a chunk past the image's end (`Malformed`); FINISH before the last byte (`Incomplete`) or with another CRC-32 than BEGIN's (`ImageCheck`: state 6, BEGIN again) | 03 |
 //! | no DFU partition on this board (`NoPartition`) | 02 |
 //!
 //! # Why a register window, not FC 0x15
@@ -207,10 +207,8 @@ impl UpdateError {
     /// How a Modbus master sees the refusal.
     fn refused(self) -> Refused {
         match self {
-            UpdateError::Moving
-            | UpdateError::SavePending
-            | UpdateError::Busy
-            | UpdateError::NotStarted => Refused::Busy,
+            // What passes by itself: ask again. (No transfer under way does not: 03.)
+            UpdateError::Moving | UpdateError::SavePending | UpdateError::Busy => Refused::Busy,
             UpdateError::NoPartition => Refused::NoSuchAddress,
             _ => Refused::OutOfRange,
         }
@@ -340,7 +338,7 @@ impl Update {
         {
             let word = |value: u32, at: u16| {
                 split(value)
-                    .get(usize::from(offset - at))
+                    .get(usize::from(offset.saturating_sub(at)))
                     .copied()
                     .unwrap_or(0)
             };
@@ -398,7 +396,11 @@ impl Update {
             if error != UpdateError::Busy {
                 self.refusals = self.refusals.wrapping_add(1);
             }
-            self.error = error;
+            // A failed transfer keeps why it failed (the flash, the image's check) until a
+            // BEGIN: the tool's next chunk, refused as no transfer is under way, would hide it.
+            if self.state != UpdateState::Failed || address == G_UPDATE {
+                self.error = error;
+            }
             error.refused()
         }))
     }
@@ -539,7 +541,8 @@ impl Update {
 
     /// The caller's report of the job handed out; ignored when none is under way.
     pub(super) fn done(&mut self, result: Result<(), ()>) {
-        if !self.working() {
+        // Not a report of a job not yet handed out.
+        if !self.working() || self.due {
             return;
         }
         self.due = false;

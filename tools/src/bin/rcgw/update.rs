@@ -233,7 +233,16 @@ pub fn update(gw: &mut Gw, json: bool, image: &[u8], board: u16) -> Result<(), F
         match write_patiently(gw, G_UPDATE_CHUNK, &chunk_registers(next, chunk), show)? {
             Ok(()) => next = end as u32,
             // Out of step (a reply lost before this run): go on from where the gateway is.
-            Err(s) if s.error == UpdateError::OutOfOrder as u16 && s.next > next => next = s.next,
+            // Only while the transfer is still this image's: another master's BEGIN replaced it.
+            Err(s)
+                if s.error == UpdateError::OutOfOrder as u16
+                    && s.state == UpdateState::Receiving as u16
+                    && (s.size, s.crc32) == (size, crc)
+                    && s.next > next
+                    && s.next <= size =>
+            {
+                next = s.next
+            }
             Err(s) => return Err(refused(gw, G_UPDATE_CHUNK, &s)),
         }
         let done = f64::from(next - from);
