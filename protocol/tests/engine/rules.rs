@@ -549,3 +549,63 @@ fn a_move_that_fails_reads_its_position_first_and_reports_the_first_failure() {
     }
     assert_eq!(result, Some(Err(JobError::Alarm(AlarmCode(0xC8)))));
 }
+
+/// §5: a frame whose answer was lost is sent again with nothing else to its axis between its
+/// attempts, also when job frames have had their run (`JOB_RUN`) and polling would have a turn:
+/// two axes' point writes back to back, every seventh frame's answer lost.
+#[test]
+fn a_lost_job_frame_s_attempts_have_nothing_else_to_its_axis_between_them() {
+    let mut engine = Engine::new(config(2));
+    let mut now = Instant(0);
+    for _ in 0..2 {
+        let poll = next_frame(&mut engine, &mut now);
+        reply(&mut engine, &mut now, ready(&poll));
+    }
+    let mut address = 0;
+    let mut owed: [Option<Command>; 2] = [None, None];
+    let mut lost = 0;
+    let mut jobs = 0;
+    for i in 0..400 {
+        for a in 0..2 {
+            if engine.room(axis(a)) > 0 && jobs < 40 {
+                let point = PositionNo::new(1 + (jobs % 9) as u8).unwrap();
+                let field = [PointField::Velocity, PointField::Position][jobs % 2];
+                let job = Job {
+                    axis: axis(a),
+                    kind: JobKind::WriteField {
+                        point,
+                        field,
+                        value: 100 + jobs as u32,
+                    },
+                };
+                if engine.submit(job).is_ok() {
+                    jobs += 1;
+                }
+            }
+        }
+        let request = next_frame(&mut engine, &mut now);
+        let a = usize::from(request.axis.get());
+        // The resend (a W4's with its T4 first), not a poll of the axis.
+        let poll = match request.command {
+            Command::Status => true,
+            Command::ReadMemory { address } => address == protocol::memory::PNOW,
+            _ => false,
+        };
+        if let Some(lost) = owed[a].take() {
+            assert!(
+                !poll,
+                "frame {i}: axis {a} polled between the attempts of {lost:?}"
+            );
+        }
+        if i % 7 == 3 && !matches!(request.command, Command::Status | Command::CancelMotion) {
+            owed[a] = Some(request.command);
+            lost += 1;
+            continue; // its answer lost: the next frame to this axis is its resend
+        }
+        reply(&mut engine, &mut now, answer(&request, &mut address));
+    }
+    assert!(
+        jobs >= 10 && lost >= 20,
+        "only {jobs} jobs, {lost} lost answers"
+    );
+}
