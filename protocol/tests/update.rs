@@ -366,7 +366,7 @@ fn a_chunk_out_of_order_or_misshapen_is_refused() {
         UpdateError::OutOfOrder as u16
     );
     // A length that leaves the next offset off a flash word; a length its data does not fill;
-    // past the image's end; status registers written.
+    // status registers written (past the image's end: below).
     let at = MAX_CHUNK as u32;
     let mut odd = chunk_registers(at, &image[MAX_CHUNK..MAX_CHUNK + 13]);
     assert_eq!(Link::Rtu.write(&mut rig, G_UPDATE_CHUNK, &odd), Err(3));
@@ -392,6 +392,16 @@ fn a_chunk_out_of_order_or_misshapen_is_refused() {
         UpdateState::Ready as u16
     );
     assert_in_partition(&rig, &image);
+    // Past the image's end: 24 bytes at 0 for an image of 20.
+    let mut small = self::rig();
+    let twenty = self::image(20);
+    Link::Rtu.begin(&mut small, &twenty, BOARD).unwrap();
+    let long = chunk_registers(0, &self::image(24));
+    assert_eq!(Link::Rtu.write(&mut small, G_UPDATE_CHUNK, &long), Err(3));
+    assert_eq!(
+        Link::Rtu.status(&mut small).error,
+        UpdateError::Malformed as u16
+    );
 }
 
 #[test]
