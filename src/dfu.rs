@@ -3,12 +3,12 @@
 //! [`Action::Update`](crate::node::Action::Update) jobs here and reports each with
 //! `Node::update_done` once it is whole.
 //!
-//! **In bounded steps.** A job is taken ([`Dfu::start`]) and then done one step per pass of the
-//! gateway task's loop ([`Dfu::step`]), between the node's other actions: the lines are read,
-//! the stop input served and the watchdog fed between two steps. A step is at most one 2 KiB
-//! page erased (the L475's page erase: 25 ms at most, datasheet), one chunk written (at most
-//! 232 bytes, 29 double words of 90 µs at most: 2.6 ms), or [`VERIFY_STEP`] bytes read back into
-//! the CRC-32. The partition is in bank 2 and the program runs from bank 1, so the CPU is not
+//! **In bounded steps.** A chunk is written as its job is handed out ([`Dfu::start`]: at most
+//! 232 bytes, 29 double words of 90 µs at most, 2.6 ms); an erase or a verification is taken
+//! there and then done one step per pass of the gateway task's loop ([`Dfu::step`]), between the
+//! node's other actions: the lines are read, the stop input served and the watchdog fed between
+//! two steps. A step is one 2 KiB page erased (the L475's page erase: 25 ms at most, datasheet)
+//! or [`VERIFY_STEP`] bytes read back into the CRC-32. The partition is in bank 2 and the program runs from bank 1, so the CPU is not
 //! stalled while the flash works (read-while-write), and embassy-stm32's blocking erase and write
 //! leave the interrupts on (the UARTs keep filling their buffers), but the driver waits for the
 //! flash: a stop that falls due during an erase step goes out after it, up to 25 ms late. (The
@@ -28,7 +28,7 @@
 //! embassy-boot). FINISH checks the image's CRC-32 as read back and reports it ready; nothing
 //! boots it.
 
-use protocol::plc::update::{Crc32, Target, UpdateJob, MAX_CHUNK};
+use protocol::plc::update::{Crc32, Target, UpdateJob};
 
 /// The board id an image must declare (BEGIN): the L475's, on the board and in the emulator
 /// (the same firmware; `rcgw update --board 0x0475`).
@@ -41,6 +41,7 @@ const PAGE: u32 = 2048;
 const VERIFY_STEP: u32 = 2048;
 
 /// The flash's write unit: every write is whole double words.
+#[cfg(feature = "hw")]
 const WORD: usize = 8;
 
 /// The emulator's partition, in RAM: 32 KiB of the 96 KiB the build links into (the node, the
@@ -67,11 +68,6 @@ enum Job {
         next: u32,
         end: u32,
     },
-    /// Writing `len` bytes of the chunk buffer at `offset`.
-    Write {
-        offset: u32,
-        len: usize,
-    },
     /// Reading back from `next` up to `len`, into `crc`; `want` is the image's CRC-32.
     Verify {
         next: u32,
@@ -84,22 +80,16 @@ enum Job {
 /// The partition and the job under way.
 pub struct Dfu {
     job: Job,
-    /// A chunk to write (a job's bytes borrow the node: copied here), padded to whole words.
-    chunk: [u8; MAX_CHUNK],
     /// The partition's bytes (the emulator's RAM).
     #[cfg(feature = "emulator")]
     ram: &'static mut [u8],
 }
-
-// A chunk padded to whole words still fits the buffer.
-const _: () = assert!(MAX_CHUNK.is_multiple_of(WORD));
 
 impl Dfu {
     /// No job; the emulator's RAM partition taken (once: the gateway task's).
     pub fn new() -> Dfu {
         Dfu {
             job: Job::None,
-            chunk: [0xFF; MAX_CHUNK],
             #[cfg(feature = "emulator")]
             ram: EMU_RAM.take().as_mut_slice(),
         }
@@ -126,8 +116,14 @@ impl Dfu {
     }
 
     /// Takes `job` (the node hands out one at a time: a job under way is replaced, which the
-    /// node never asks).
-    pub fn start(&mut self, job: &UpdateJob<'_>) {
+    /// node never asks). A chunk is written at once (its bytes are the node's, lent for this
+    /// call only): its result; an erase or a verification goes on in [`Dfu::step`]: `None`.
+    #[inline(never)]
+    pub fn start(
+        &mut self,
+        job: &UpdateJob<'_>,
+        settings: &mut crate::settings::SavedSettings,
+    ) -> Option<Result<(), ()>> {
         let partition = Dfu::target().partition;
         self.job = match *job {
             UpdateJob::Erase { len } => Job::Erase {
@@ -135,14 +131,13 @@ impl Dfu {
                 end: len.div_ceil(PAGE).saturating_mul(PAGE).min(partition),
             },
             UpdateJob::Write { offset, bytes } => {
-                self.chunk = [0xFF; MAX_CHUNK];
-                let len = bytes.len().min(MAX_CHUNK);
-                if let (Some(to), Some(from)) = (self.chunk.get_mut(..len), bytes.get(..len)) {
-                    to.copy_from_slice(from);
-                }
-                Job::Write {
-                    offset,
-                    len: len.div_ceil(WORD) * WORD,
+                self.job = Job::None;
+                #[cfg(feature = "hw")]
+                return Some(write(&mut settings.flash(), offset, bytes));
+                #[cfg(feature = "emulator")]
+                {
+                    let _ = settings;
+                    return Some(write(&mut &mut *self.ram, offset, bytes));
                 }
             }
             UpdateJob::Finish { len, crc32 } => Job::Verify {
@@ -152,6 +147,7 @@ impl Dfu {
                 want: crc32,
             },
         };
+        None
     }
 
     /// One step of the job under way, on the board's flash (the settings store's driver); its
@@ -179,7 +175,7 @@ impl Dfu {
         if !self.busy() {
             return None;
         }
-        // Out of `self` while the step borrows the chunk buffer.
+        // Out of `self` while the step changes the job.
         let ram = core::mem::take(&mut self.ram);
         let result = self.step_on(&mut *ram);
         self.ram = ram;
@@ -205,10 +201,6 @@ impl Dfu {
                     }
                 }
             }
-            Job::Write { offset, len } => {
-                let bytes = self.chunk.get(..len).unwrap_or(&[]);
-                (Job::None, Some(write(&mut medium, offset, bytes)))
-            }
             Job::Verify {
                 next,
                 len,
@@ -225,7 +217,7 @@ impl Dfu {
                     (Job::None, Some(result))
                 } else {
                     let end = (next + VERIFY_STEP).min(len);
-                    match read_into(&mut medium, next, end, &mut crc, &mut self.chunk) {
+                    match read_into(&mut medium, next, end, &mut crc) {
                         Ok(()) => (
                             Job::Verify {
                                 next: end,
@@ -266,36 +258,42 @@ fn erase(flash: &mut Medium<'_>, from: u32, to: u32) -> Result<(), ()> {
     })
 }
 
-/// Writes `bytes` (whole words) at `offset` of the partition.
+/// Writes `bytes` at `offset` of the partition (a multiple of the word): the whole words, then
+/// the rest padded with 0xFF to one.
 #[cfg(feature = "hw")]
 fn write(flash: &mut Medium<'_>, offset: u32, bytes: &[u8]) -> Result<(), ()> {
     use embedded_storage::nor_flash::NorFlash;
     let base = crate::board::DFU_RANGE.start;
-    let end = offset as usize + bytes.len();
+    let end = offset as usize + bytes.len().div_ceil(WORD) * WORD;
     if end > (crate::board::DFU_RANGE.end - base) as usize {
         return Err(());
     }
     let flash = flash.as_deref_mut().ok_or(())?;
-    flash.write(base + offset, bytes).map_err(|_| {
+    let whole = bytes.len() / WORD * WORD;
+    let (words, rest) = bytes.split_at(whole);
+    let mut result = flash.write(base + offset, words);
+    if result.is_ok() && !rest.is_empty() {
+        let mut word = [0xFF; WORD];
+        if let Some(to) = word.get_mut(..rest.len()) {
+            to.copy_from_slice(rest);
+        }
+        result = flash.write(base + offset + whole as u32, &word);
+    }
+    result.map_err(|_| {
         warn!("update: write at {:#x} failed", base + offset);
     })
 }
 
-/// Reads the partition's `from..to` into `crc`, through `buf`.
+/// Reads the partition's `from..to` into `crc`, a few words at a time.
 #[cfg(feature = "hw")]
-fn read_into(
-    flash: &mut Medium<'_>,
-    from: u32,
-    to: u32,
-    crc: &mut Crc32,
-    buf: &mut [u8; MAX_CHUNK],
-) -> Result<(), ()> {
+fn read_into(flash: &mut Medium<'_>, from: u32, to: u32, crc: &mut Crc32) -> Result<(), ()> {
     use embedded_storage::nor_flash::ReadNorFlash;
     let base = crate::board::DFU_RANGE.start;
     let flash = flash.as_deref_mut().ok_or(())?;
+    let mut buf = [0u8; 64];
     let mut at = from;
     while at < to {
-        let n = (to - at).min(MAX_CHUNK as u32);
+        let n = (to - at).min(buf.len() as u32);
         let part = buf.get_mut(..n as usize).ok_or(())?;
         flash.read(base + at, part).map_err(|_| ())?;
         crc.update(part);
@@ -323,13 +321,7 @@ fn write(ram: &mut Medium<'_>, offset: u32, bytes: &[u8]) -> Result<(), ()> {
 }
 
 #[cfg(feature = "emulator")]
-fn read_into(
-    ram: &mut Medium<'_>,
-    from: u32,
-    to: u32,
-    crc: &mut Crc32,
-    _buf: &mut [u8; MAX_CHUNK],
-) -> Result<(), ()> {
+fn read_into(ram: &mut Medium<'_>, from: u32, to: u32, crc: &mut Crc32) -> Result<(), ()> {
     crc.update(ram.get(from as usize..to as usize).ok_or(())?);
     Ok(())
 }

@@ -284,9 +284,14 @@ pub async fn run(
                 }
                 #[cfg(feature = "net")]
                 Action::Tcp(tcp) => PORT.act(tcp, node, clock),
-                // Taken here, carried out in steps below, one per pass.
+                // A chunk written here; an erase or a check taken here and carried out in
+                // steps below, one per pass.
                 #[cfg(feature = "update")]
-                Action::Update(job) => dfu.start(&job),
+                Action::Update(job) => {
+                    if let Some(result) = dfu.start(&job, settings) {
+                        node.update_done(result);
+                    }
+                }
             }
         }
 
