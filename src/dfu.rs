@@ -44,8 +44,8 @@ const VERIFY_STEP: u32 = 2048;
 #[cfg(feature = "hw")]
 const WORD: usize = 8;
 
-/// The emulator's partition, in RAM: 32 KiB of the 96 KiB the build links into (the node, the
-/// UART buffers and the stack take about 30 KiB; `scripts/size-report.sh`).
+/// The emulator's partition, in RAM: 32 KiB of the 96 KiB the build links into (the other
+/// statics and the deepest stack, the node in it, take about 16 KiB: `scripts/size-report.sh`).
 #[cfg(feature = "emulator")]
 pub const EMU_PARTITION: usize = 32 * 1024;
 
