@@ -127,6 +127,18 @@ pub async fn run(
         .await;
     // The harness waits for this line: both UARTs receive at their settings from now on.
     info!("ready");
+    // The DFU partition, if the board has one (feature `update`): until the node is told, an
+    // image is refused (02).
+    #[cfg(feature = "update")]
+    let mut dfu = crate::dfu::Dfu::new();
+    #[cfg(all(feature = "update", feature = "hw"))]
+    let partition = settings.flash().is_some();
+    #[cfg(all(feature = "update", feature = "emulator"))]
+    let partition = true;
+    #[cfg(feature = "update")]
+    if partition {
+        node.set_update_target(crate::dfu::Dfu::target());
+    }
     let mut stop = boot.stop;
     node.set_stop_input(now(), stop);
     node.sample_inputs(now(), boot.inputs);
@@ -138,13 +150,22 @@ pub async fn run(
 
     loop {
         let hold = node.bus_frame_due();
+        // With a DFU job under way the wait is only a look at the lines: its next step follows.
+        #[cfg(feature = "update")]
+        let heartbeat = if dfu.busy() {
+            protocol::time::Duration(0)
+        } else {
+            HEARTBEAT
+        };
+        #[cfg(not(feature = "update"))]
+        let heartbeat = HEARTBEAT;
         let lines = select4(
             bus_read(&mut board.bus, &mut bus_buf, hold),
             plc_read(&mut board.plc, &mut plc_buf),
             SAMPLED.wait(),
             deadline(protocol::time::earliest(
                 node.poll_at(),
-                Some(clock + HEARTBEAT),
+                Some(clock + heartbeat),
             )),
         );
         #[cfg(not(feature = "net"))]
@@ -263,7 +284,23 @@ pub async fn run(
                 }
                 #[cfg(feature = "net")]
                 Action::Tcp(tcp) => PORT.act(tcp, node, clock),
+                // A chunk written here; an erase or a check taken here and carried out in
+                // steps below, one per pass.
+                #[cfg(feature = "update")]
+                Action::Update(job) => {
+                    if let Some(result) = dfu.start(&job, settings) {
+                        node.update_done(result);
+                    }
+                }
             }
+        }
+
+        // One bounded step of the DFU job under way (a page erased, a chunk written, 2 KiB
+        // read back: `dfu`), once the node has nothing due: the lines, the stop input and the
+        // watchdog are served between two steps. Its result goes to the node when it is whole.
+        #[cfg(feature = "update")]
+        if let Some(result) = dfu.step(settings) {
+            node.update_done(result);
         }
 
         // The I/O task shows them when it next wakes (1 ms with a PIO axis, else up to 20 ms:

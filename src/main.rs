@@ -18,6 +18,7 @@
 //! | `net` | Modbus TCP over Ethernet: the network stack and its socket tasks (feature `net`) |
 //! | [`io`] | The task that samples the inputs and drives the outputs and LEDs |
 //! | [`settings`] | The settings at start-up and on SAVE, factory reset, reset cause |
+//! | `dfu` | The DFU partition a firmware image sent over the PLC link goes to (feature `update`: the L475) |
 //! | [`rt`] | Executor loop, panic and HardFault handlers (the `unsafe`, but the emulator's fault requests) |
 //! | [`emu`] | The emulator build's hooks (time driver, watchdog model, pacing, the harness' requests): no-ops on the board |
 //!
@@ -47,6 +48,8 @@ compile_error!("the emulator build is the L475's: QEMU has no STM32 with Etherne
 #[macro_use]
 mod log;
 mod board;
+#[cfg(feature = "update")]
+mod dfu;
 mod discrete;
 mod emu;
 mod gateway;

@@ -170,7 +170,8 @@ const NMI: i16 = 2 - 16;
 /// after a HardFault or a panic.
 ///
 /// One exception returns, on the L475: an ECC double error in a settings page (a record torn by
-/// a power cut during a save), which fails the read that hit it instead (`l475::DcacheOff`).
+/// a power cut during a save) or in the DFU partition (a chunk's write torn), which fails the
+/// read that hit it instead (`l475::DcacheOff`).
 #[cortex_m_rt::exception]
 unsafe fn DefaultHandler(irqn: i16) {
     #[cfg(all(feature = "hw", feature = "board-l475"))]

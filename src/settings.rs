@@ -115,6 +115,13 @@ impl SavedSettings {
         Err(())
     }
 
+    /// The store's flash, for the DFU partition (`dfu`), which lies outside the store's pages;
+    /// `None` without a store.
+    #[cfg(all(feature = "hw", feature = "update"))]
+    pub fn flash(&mut self) -> Option<&mut SettingsFlash> {
+        self.store.as_mut().map(|store| store.flash_mut())
+    }
+
     /// FACTORY: forget the stored settings (the caller restarts).
     #[inline(never)]
     pub fn factory_reset(&mut self) {

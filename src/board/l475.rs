@@ -105,6 +105,12 @@ pub const LED_ON: embassy_stm32::gpio::Level = embassy_stm32::gpio::Level::High;
 #[cfg(feature = "hw")]
 pub const SETTINGS_RANGE: core::ops::Range<u32> = 0x000F_E000..0x0010_0000;
 
+/// The DFU partition (offsets from the start of flash): bank 2 up to the settings pages, 504 KiB,
+/// 252 pages of 2 KiB (`memory/l475vg.x` keeps the program in bank 1). Provisional: the
+/// bootloader (issue 37) owns the layout.
+#[cfg(feature = "hw")]
+pub const DFU_RANGE: core::ops::Range<u32> = BANK_2..SETTINGS_RANGE.start;
+
 /// The flash with the data cache off while it is read, written or erased, and a read that hit an
 /// ECC double error failing.
 ///
@@ -118,15 +124,16 @@ pub const SETTINGS_RANGE: core::ops::Range<u32> = 0x000F_E000..0x0010_0000;
 /// ECC: a double word whose programming a power cut interrupted (a save torn midway) can hold
 /// two bad bits; reading it sets FLASH_ECCR.ECCD, which raises an NMI. The NMI handler
 /// (`rt::DefaultHandler`, through [`settings_ecc_error`]) records the address when it lies in the
-/// settings pages, clears the flag and returns; the read then fails here ([`FlashError::Ecc`]),
-/// which the settings store takes for a torn record. (Without the handler the NMI spun in
+/// settings pages or the DFU partition, clears the flag and returns; the read then fails here
+/// ([`FlashError::Ecc`]), which the settings store takes for a torn record (and the DFU's
+/// read-back for a failed check). (Without the handler the NMI spun in
 /// cortex-m-rt's default handler until the watchdog reset the chip, whose next start read the
 /// same word: a boot loop.)
 #[cfg(feature = "hw")]
 pub struct DcacheOff<F>(pub F);
 
 /// The flash offset (from the start of flash) of the ECC double error the NMI handler took in
-/// the settings pages since the last read began, [`NO_ECC_ERROR`] if none.
+/// the settings pages or the DFU partition since the last read began, [`NO_ECC_ERROR`] if none.
 #[cfg(feature = "hw")]
 static SETTINGS_ECC_ERROR: AtomicU32 = AtomicU32::new(NO_ECC_ERROR);
 /// No error: offset 0 is the program's first word, never a settings page (and 0 keeps the static
@@ -141,7 +148,8 @@ const _: () = assert!(SETTINGS_RANGE.start > NO_ECC_ERROR);
 const BANK_2: u32 = 0x8_0000;
 
 /// For the NMI handler: whether the NMI is an ECC double error (FLASH_ECCR.ECCD) in the settings
-/// pages, which this records and clears (the handler then returns, and the read that hit it
+/// pages or the DFU partition ([`DFU_RANGE`]: a chunk's write a power cut tore), which this
+/// records and clears (the handler then returns, and the read that hit it
 /// fails). Anything else (an error in the program or the system flash, any other NMI) is left
 /// to the handler: outputs safe, then a reset.
 #[cfg(feature = "hw")]
@@ -152,7 +160,7 @@ pub fn settings_ecc_error() -> bool {
         return false;
     }
     let offset = ecc.addr_ecc() + if ecc.bk_ecc() { BANK_2 } else { 0 };
-    if !SETTINGS_RANGE.contains(&offset) {
+    if !SETTINGS_RANGE.contains(&offset) && !DFU_RANGE.contains(&offset) {
         return false;
     }
     SETTINGS_ECC_ERROR.store(offset, Ordering::Relaxed);
@@ -214,7 +222,7 @@ impl<F: ReadNorFlash> ReadNorFlash for DcacheOff<F> {
         cortex_m::asm::isb();
         let at = SETTINGS_ECC_ERROR.swap(NO_ECC_ERROR, Ordering::Relaxed);
         if at != NO_ECC_ERROR {
-            warn!("settings: flash ECC error at {:#x}: a torn record", at);
+            warn!("flash ECC error at {:#x}: a torn write", at);
             return Err(FlashError::Ecc);
         }
         Ok(())

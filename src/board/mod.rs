@@ -28,13 +28,13 @@ pub use f429::{
     board, clock_config, reset_cause, uart_config, Ethernet, EthernetDevice, BUS_UART_HZ, LED_ON,
     MODEL_NAME, PLC_UART_HZ, SETTINGS_RANGE,
 };
-/// The emulator has no settings store.
-#[cfg(all(feature = "board-l475", feature = "hw"))]
-pub use l475::SETTINGS_RANGE;
 #[cfg(feature = "board-l475")]
 pub use l475::{
     board, clock_config, reset_cause, uart_config, BUS_UART_HZ, LED_ON, MODEL_NAME, PLC_UART_HZ,
 };
+/// The emulator has no settings store.
+#[cfg(all(feature = "board-l475", feature = "hw"))]
+pub use l475::{DFU_RANGE, SETTINGS_RANGE};
 
 use embassy_stm32::gpio::{AnyPin, Input, Level, Output, Pin, Pull, Speed};
 use embassy_stm32::usart;

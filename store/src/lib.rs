@@ -283,6 +283,12 @@ impl<F: NorFlash> Store<F> {
         &self.flash
     }
 
+    /// The flash, for a caller that shares it with the store outside the store's range (the
+    /// firmware's DFU partition): whatever it writes there, the store never reads.
+    pub fn flash_mut(&mut self) -> &mut F {
+        &mut self.flash
+    }
+
     /// A record's length, with an item of `len` bytes, in this layout or (`!headers`) the one
     /// before: the head, the item, the CRC-32 (CRC-16) and at least one byte of padding.
     const fn size(len: usize, headers: bool) -> usize {

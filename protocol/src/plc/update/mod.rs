@@ -474,7 +474,9 @@ impl Update {
         }
     }
 
-    /// UPDCHUNK: the chunk at the next offset, checked whole before it is taken.
+    /// UPDCHUNK: the chunk at the next offset, checked whole before it is taken. Not inlined:
+    /// its frame is on the stack only while a chunk is taken, not under every register write.
+    #[inline(never)]
     fn take_chunk(&mut self, values: &[u16], gate: Gate) -> Result<(), UpdateError> {
         self.target.ok_or(UpdateError::NoPartition)?;
         self.admit(gate)?;
@@ -499,18 +501,21 @@ impl Update {
         if u32::from(len) % CHUNK_ALIGN != 0 && end != self.size {
             return Err(UpdateError::Malformed);
         }
-        let mut chunk = heapless::Vec::<u8, MAX_CHUNK>::new();
+        // Straight into the chunk buffer, not through a copy on the stack: this runs under the
+        // gateway unit's register write, the deepest stack of a PLC write (232 bytes more of it
+        // put the emulator build's stack high-water mark 512 B up). The buffer is read only in
+        // state Writing, which a chunk refused below does not reach.
+        self.chunk.clear();
         for byte in data
             .iter()
             .flat_map(|word| word.to_be_bytes())
             .take(len_bytes)
         {
-            chunk.push(byte).map_err(|_| UpdateError::Malformed)?;
+            self.chunk.push(byte).map_err(|_| UpdateError::Malformed)?;
         }
-        if crc::checksum(&chunk) != check {
+        if crc::checksum(&self.chunk) != check {
             return Err(UpdateError::ChunkCheck);
         }
-        self.chunk = chunk;
         self.received = end;
         self.state = UpdateState::Writing;
         self.error = UpdateError::None;

@@ -1,0 +1,130 @@
+"""`rcgw update` against the real firmware in QEMU (issue 37): an image over the PLC line into the
+emulator build's DFU partition (32 KiB of RAM: QEMU's b-l475e-iot01a cannot write its flash, so
+the flash driver is not exercised here; src/dfu.rs), erased, written and read back in the gateway
+task's bounded steps, and reported ready (UPDSTAT state 5); meanwhile the bus keeps being polled
+and the stop input still stops. Then the refusals rcgw explains: another board's image (exit 1)
+and an image larger than the partition (exit 2)."""
+
+import json
+import os
+import random
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "tests" / "pyshared"))
+
+from emu import STOP_INPUT, Emulator  # noqa: E402
+from plc import wait_for  # noqa: E402
+
+TARGET = Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
+RCGW = TARGET / "debug" / "rcgw"
+
+# The emulator build's partition (`dfu::EMU_PARTITION`) and the L475's board id (`dfu::BOARD_ID`).
+PARTITION = 32 * 1024
+BOARD = "0x0475"
+# The longest the bus may go without a frame to the axis while the image goes in: an idle axis is
+# polled every few tens of ms; a DFU step holds the gateway task for far less than this.
+MAX_BUS_GAP_S = 0.5
+
+
+@pytest.fixture(scope="module", autouse=True)
+def rcgw_built():
+    result = subprocess.run(["cargo", "build", "--locked", "--quiet", "-p", "rc-tools", "--bin", "rcgw"],
+                            cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert result.returncode == 0, result.stderr[-3000:]
+
+
+def rcgw(pty, *args, timeout=180):
+    return subprocess.run([str(RCGW), "--rtu", pty, *args], capture_output=True, text=True, timeout=timeout)
+
+
+def rcgw_json(pty, *args):
+    result = rcgw(pty, "--json", *args)
+    assert result.returncode == 0, f"rcgw {' '.join(args)}: {result.returncode}\n{result.stdout}\n{result.stderr}"
+    return json.loads(result.stdout)
+
+
+def crc32(data):
+    import zlib
+    return zlib.crc32(data) & 0xFFFFFFFF
+
+
+def test_rcgw_update_fills_the_partition_while_the_bus_is_served(elf, tmp_path):
+    emu = Emulator(elf, tmp_path, "1", plc=False)
+    try:
+        emu.start(stop_closed=True)
+        pty = emu.plc_pty()
+        idle = rcgw_json(pty, "update", "--status")
+        assert (idle["state"], idle["partition"], idle["board"]) == ("idle", PARTITION, int(BOARD, 16)), idle
+
+        # Not a multiple of 8: the last chunk is padded to the flash word. Most of the partition.
+        # A stretch without a transfer, to compare the bus' gaps with.
+        quiet_from = time.monotonic() - emu.sim_started
+        time.sleep(3.0)
+        quiet = [c[0] for c in emu.bus_commands(0) if c[0] >= quiet_from]
+        quiet_gaps = [b - a for a, b in zip(quiet, quiet[1:])]
+
+        image = random.Random(37).randbytes(PARTITION - 4093)
+        path = tmp_path / "image.bin"
+        path.write_bytes(image)
+        started = time.monotonic() - emu.sim_started
+        update = subprocess.Popen([str(RCGW), "--rtu", pty, "--json", "update", str(path), "--board", BOARD],
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        # The stop chain opens while the image goes in: the axis gets its stop at once.
+        time.sleep(1.0)
+        assert update.poll() is None, "the transfer ended before the stop: make the image larger"
+        opened = time.monotonic() - emu.sim_started
+        emu.set_pin(STOP_INPUT, False)
+        wait_for(lambda: any(c[2] == "CancelMotion" and c[0] >= opened for c in emu.bus_commands(0)), 5,
+                 "the stop on the bus during the transfer")
+        stop_at = next(c[0] for c in emu.bus_commands(0) if c[2] == "CancelMotion" and c[0] >= opened)
+        out, err = update.communicate(timeout=180)
+        ended = time.monotonic() - emu.sim_started
+        assert update.returncode == 0, f"rcgw update: {update.returncode}\n{out}\n{err}"
+        done = json.loads(out)
+        assert update.poll() is not None and stop_at < ended, "the stop came after the transfer"
+
+        # The bus was polled all along: no long gap between the frames to the axis.
+        during = [c[0] for c in emu.bus_commands(0) if started <= c[0] <= ended]
+        gaps = [b - a for a, b in zip(during, during[1:])]
+        assert len(during) > 20 and max(gaps) < MAX_BUS_GAP_S, (len(during), max(gaps, default=None))
+        print(f"transfer {ended - started:.1f} s, {len(during)} frames to the axis, largest gap "
+              f"{max(gaps) * 1000:.0f} ms (without a transfer {max(quiet_gaps) * 1000:.0f} ms), "
+              f"stop {1000 * (stop_at - opened):.0f} ms after the input opened")
+
+        # UPDSTAT: state 5 (ready), every byte written, the image's CRC-32 checked on what the
+        # firmware read back from its partition.
+        s = rcgw_json(pty, "update", "--status")
+        assert (s["state"], s["next"], s["size"]) == ("ready", len(image), len(image)), s
+        assert s["crc32"] == f"{crc32(image):08x}" == done.get("crc32", s["crc32"]), (s, done)
+        shown = rcgw(pty, "update", "--status")
+        assert shown.returncode == 0, shown.stderr
+        assert "state      ready" in shown.stdout, shown.stdout
+        assert f"{len(image)} of {len(image)} bytes written" in shown.stdout, shown.stdout
+
+        # Another board's image: refused by the gateway (UPDCTL, 03), rcgw says why, exit 1.
+        other = rcgw(pty, "update", str(path), "--board", "0x0429")
+        assert other.returncode == 1, (other.returncode, other.stdout, other.stderr)
+        assert "UPDCTL" in other.stderr and "another board" in other.stderr, other.stderr
+        # Larger than the partition: refused by rcgw before anything is sent, exit 2.
+        large = tmp_path / "large.bin"
+        large.write_bytes(bytes(PARTITION + 1))
+        too_large = rcgw(pty, "update", str(large), "--board", BOARD)
+        assert too_large.returncode == 2, (too_large.returncode, too_large.stdout, too_large.stderr)
+        assert str(PARTITION + 1) in too_large.stderr and str(PARTITION) in too_large.stderr, too_large.stderr
+        # Neither touched the image that is there.
+        after = rcgw_json(pty, "update", "--status")
+        assert (after["state"], after["crc32"]) == ("ready", s["crc32"]), after
+        assert "panicked" not in "\n".join(emu.log()), emu.log()[-20:]
+    except BaseException:
+        if emu.process is not None:
+            print("firmware log:\n" + "\n".join(emu.log()[-80:]))
+            print("rc-sim:\n" + "\n".join(emu.sim_log()[-40:]))
+        raise
+    finally:
+        emu.stop()
