@@ -11,8 +11,10 @@
 //! or [`VERIFY_STEP`] bytes read back into the CRC-32. The partition is in bank 2 and the program runs from bank 1, so the CPU is not
 //! stalled while the flash works (read-while-write), and embassy-stm32's blocking erase and write
 //! leave the interrupts on (the UARTs keep filling their buffers), but the driver waits for the
-//! flash: a stop that falls due during an erase step goes out after it, up to 25 ms late. (The
-//! settings' SAVE waits as long.)
+//! flash: the gateway task does nothing else for up to 25 ms. So a job is handed out, and a step
+//! taken, only while the bus is quiet (`Node::quiet_for_flash`: no axis moves or waits for a
+//! job, no stop is owed): a move started during a transfer pauses it, and a stop that falls due
+//! during a step is for an axis that stands. (The settings' SAVE waits as long.)
 //!
 //! **The board** (`hw`): bank 2 of the L475's flash up to the settings pages
 //! (`board::l475::DFU_RANGE`, 504 KiB), written through the settings store's flash driver

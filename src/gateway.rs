@@ -150,9 +150,10 @@ pub async fn run(
 
     loop {
         let hold = node.bus_frame_due();
-        // With a DFU job under way the wait is only a look at the lines: its next step follows.
+        // With a DFU job under way the wait is only a look at the lines: its next step follows
+        // (unless the bus is not quiet: then the job waits, and the loop with it).
         #[cfg(feature = "update")]
-        let heartbeat = if dfu.busy() {
+        let heartbeat = if dfu.busy() && node.quiet_for_flash() {
             protocol::time::Duration(0)
         } else {
             HEARTBEAT
@@ -297,10 +298,14 @@ pub async fn run(
 
         // One bounded step of the DFU job under way (a page erased, a chunk written, 2 KiB
         // read back: `dfu`), once the node has nothing due: the lines, the stop input and the
-        // watchdog are served between two steps. Its result goes to the node when it is whole.
+        // watchdog are served between two steps. Only while the bus is quiet (nothing moves or
+        // is owed a stop): a stop never waits behind a step. Its result goes to the node when
+        // it is whole.
         #[cfg(feature = "update")]
-        if let Some(result) = dfu.step(settings) {
-            node.update_done(result);
+        if node.quiet_for_flash() {
+            if let Some(result) = dfu.step(settings) {
+                node.update_done(result);
+            }
         }
 
         // The I/O task shows them when it next wakes (1 ms with a PIO axis, else up to 20 ms:

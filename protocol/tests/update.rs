@@ -525,6 +525,52 @@ fn the_bus_and_the_stop_input_are_served_while_a_flash_job_is_under_way() {
     assert_in_partition(&rig, &image);
 }
 
+#[test]
+fn flash_work_waits_while_an_axis_moves_or_is_owed_a_stop() {
+    let mut rig = rig();
+    let image = image(1_000);
+    // The erase handed out: the firmware takes it in steps while the bus is quiet.
+    rig.dfu.hold = true;
+    Link::Rtu.begin(&mut rig, &image, BOARD).unwrap();
+    assert!(rig.node.quiet_for_flash());
+    // A move the PLC starts meanwhile is carried out; the steps wait for its end.
+    rig.write(2, DIRECT, &[0, 10_00, 0, 10, 0, 50_00, 30])
+        .unwrap();
+    rig.run_for(5 * MS);
+    assert!(!rig.node.quiet_for_flash(), "an axis moves");
+    rig.run_for(200 * MS);
+    assert!(rig.node.quiet_for_flash(), "the move is over");
+    rig.release_job();
+    rig.dfu.hold = false;
+    // Axis 0's wire cut, the stop input on: a stop is owed to it.
+    rig.bus.fake(0).silent = true;
+    rig.node.set_stop_input(Instant(rig.now), true);
+    rig.run_for(300 * MS);
+    assert!(!rig.node.quiet_for_flash(), "a stop is owed");
+    // A chunk taken now is not written while the stop is owed.
+    let jobs = rig.dfu.jobs.len();
+    Link::Rtu.chunk(&mut rig, &image, 0).unwrap();
+    rig.run_for(100 * MS);
+    assert_eq!(rig.dfu.jobs.len(), jobs, "a flash job while a stop is owed");
+    assert_eq!(
+        Link::Rtu.status(&mut rig).state,
+        UpdateState::Writing as u16
+    );
+    // The wire mended, the stop taken: the write goes on.
+    rig.bus.fake(0).silent = false;
+    rig.run_for(300 * MS);
+    assert!(rig.node.quiet_for_flash());
+    assert_eq!(rig.dfu.jobs.len(), jobs + 1);
+    rig.node.set_stop_input(Instant(rig.now), false);
+    rig.run_for(20 * MS);
+    rig.write(GW, G_FAILSAFE, &[0]).unwrap();
+    assert_eq!(
+        Link::Rtu.send(&mut rig, &image).unwrap().state,
+        UpdateState::Ready as u16
+    );
+    assert_in_partition(&rig, &image);
+}
+
 /// From the stop input to the first stop of the last axis, µs.
 fn stop_latency(rig: &mut Rig) -> u64 {
     let at = rig.now;

@@ -400,6 +400,15 @@ impl Node {
         self.dirty = true;
     }
 
+    /// Whether the caller may take a step of the update's flash work now (feature `update`):
+    /// nothing moves, waits or is owed a stop on the bus. A step stalls the caller (a page
+    /// erase), so the stop rule holds only if the caller steps when this says so; the node
+    /// hands out [`Action::Update`] under the same rule.
+    #[cfg(feature = "update")]
+    pub fn quiet_for_flash(&self) -> bool {
+        self.gateway.quiet_for_flash()
+    }
+
     /// The firmware update's transfer (feature `update`): its state, last error, progress.
     #[cfg(feature = "update")]
     pub fn update(&self) -> &crate::plc::update::Update {

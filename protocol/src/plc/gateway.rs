@@ -178,10 +178,11 @@ impl Gateway {
         self.update.set_target(target);
     }
 
-    /// The flash job of the transfer, if one is due: handed out once (feature `update`).
+    /// The flash job of the transfer, if one is due and the bus is quiet
+    /// ([`quiet_for_flash`](Self::quiet_for_flash)): handed out once (feature `update`).
     #[cfg(feature = "update")]
     pub fn take_update_job(&mut self) -> Option<super::update::UpdateJob<'_>> {
-        if self.update.take_due() {
+        if self.quiet_for_flash() && self.update.take_due() {
             self.update.job()
         } else {
             None

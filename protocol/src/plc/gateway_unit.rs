@@ -192,6 +192,23 @@ impl Gateway {
         super::update::Gate { moving, saving }
     }
 
+    /// Whether the caller may stall on the update's flash work now (feature `update`): no
+    /// axis moves or has a job waiting, no synchronized start runs, no stop is owed. A flash
+    /// step blocks the gateway's loop (an L475 page erase up to 25 ms), and a stop must never
+    /// wait behind it: while this is false the transfer's work waits instead (a move started
+    /// during a transfer pauses it), and a stop that falls due during a step can only be for
+    /// an axis that stands.
+    #[cfg(feature = "update")]
+    pub fn quiet_for_flash(&self) -> bool {
+        !self.update_gate().moving
+            && !self
+                .config
+                .bus
+                .axes
+                .iter()
+                .any(|a| self.engine.stop_owed(a))
+    }
+
     /// The rules of a parsed write that depend on the gateway's state, checked before any
     /// register of the write is carried out: APPLY only while nothing moves, runs or waits;
     /// FAILSAFE's acknowledgement only once its cause is gone (the stop input inactive); a

@@ -65,10 +65,13 @@
 //! # While the transfer runs
 //!
 //! The gateway keeps serving the bus and the PLC: a job is handed out only when the bus has
-//! nothing to send at once (a stop goes first), and the node does not wait for its result: the
-//! caller reports it when it is done, and until then a chunk is refused with 04 (`Busy`). How
-//! long a job may stall the caller (an erase of a 128 KiB sector takes seconds on an F4) is the
-//! firmware's to bound.
+//! nothing to send at once and is quiet ([`Node::quiet_for_flash`](crate::node::Node::quiet_for_flash):
+//! no axis moves or has a job waiting, no synchronized start runs, no stop is owed), and the
+//! node does not wait for its result: the caller reports it when it is done, and until then a
+//! chunk is refused with 04 (`Busy`). A move the PLC starts during a transfer is carried out at
+//! once; the transfer waits until it ends. The caller takes the job's steps under the same rule,
+//! so a stop never waits behind flash work. How long one step may stall the caller (an erase of
+//! a 128 KiB sector takes seconds on an F4) is the firmware's to bound.
 
 use super::map::{
     G_UPDATE, G_UPDATE_CHUNK, G_UPDATE_CHUNK_LEN, G_UPDATE_LEN, G_UPDATE_STATUS,
