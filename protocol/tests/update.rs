@@ -812,3 +812,29 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn updstat_codes_decode_to_their_states_and_errors() {
+    for (code, state) in UpdateState::ALL.into_iter().enumerate() {
+        assert_eq!(state as usize, code);
+        assert_eq!(UpdateState::from_code(code as u16), Some(state));
+    }
+    for (code, error) in UpdateError::ALL.into_iter().enumerate() {
+        assert_eq!(error as usize, code);
+        assert_eq!(UpdateError::from_code(code as u16), Some(error));
+    }
+    assert_eq!(UpdateState::from_code(UpdateState::ALL.len() as u16), None);
+    assert_eq!(UpdateError::from_code(UpdateError::ALL.len() as u16), None);
+    let names: std::collections::BTreeSet<_> = UpdateState::ALL.iter().map(|s| s.name()).collect();
+    let texts: std::collections::BTreeSet<_> = UpdateError::ALL.iter().map(|e| e.text()).collect();
+    assert_eq!(
+        names.len(),
+        UpdateState::ALL.len(),
+        "names tell states apart"
+    );
+    assert_eq!(
+        texts.len(),
+        UpdateError::ALL.len(),
+        "texts tell errors apart"
+    );
+}

@@ -12,27 +12,42 @@
 /// The reflected polynomial.
 const POLY: u16 = 0xA001;
 
-/// The CRC step of each 4-bit value: half a byte at a time, a 32-byte table instead of the
-/// usual 256-entry one, at two look-ups per byte. Modbus frames are short and come at the
-/// PLC's pace, so the extra look-up is not measurable.
-// The usual table is 512 bytes: 1 % of the F103's flash.
+/// The 16-entry table of a reflected CRC with polynomial `poly` (reflected): entry `i` is `i`
+/// shifted through 4 bits. CRC-16/MODBUS here and the update's CRC-32 both take theirs from it.
 // Evaluated at compile time: an index out of range would be a build error, not a panic.
 #[allow(clippy::indexing_slicing)]
-const NIBBLE: [u16; 16] = {
-    let mut table = [0u16; 16];
+pub(crate) const fn nibble_table(poly: u32) -> [u32; 16] {
+    let mut table = [0u32; 16];
     let mut i = 0;
     while i < 16 {
-        let mut crc = i as u16;
+        let mut crc = i as u32;
         let mut bit = 0;
         while bit < 4 {
             crc = if crc & 1 != 0 {
-                (crc >> 1) ^ POLY
+                (crc >> 1) ^ poly
             } else {
                 crc >> 1
             };
             bit += 1;
         }
         table[i] = crc;
+        i += 1;
+    }
+    table
+}
+
+/// The CRC step of each 4-bit value: half a byte at a time, a 32-byte table instead of the
+/// usual 256-entry one, at two look-ups per byte. Modbus frames are short and come at the
+/// PLC's pace, so the extra look-up is not measurable.
+// The usual table is 512 bytes: 1 % of the F103's flash.
+// Evaluated at compile time, narrowed to 16 bits (a 16-bit polynomial keeps every entry there).
+#[allow(clippy::indexing_slicing)]
+const NIBBLE: [u16; 16] = {
+    let wide = nibble_table(POLY as u32);
+    let mut table = [0u16; 16];
+    let mut i = 0;
+    while i < 16 {
+        table[i] = wide[i] as u16;
         i += 1;
     }
     table

@@ -9,27 +9,7 @@ pub struct Crc32(u32);
 /// The reflected polynomial.
 const POLY32: u32 = 0xEDB8_8320;
 
-// Evaluated at compile time: an index out of range would be a build error, not a panic.
-#[allow(clippy::indexing_slicing)]
-const NIBBLE32: [u32; 16] = {
-    let mut table = [0u32; 16];
-    let mut i = 0;
-    while i < 16 {
-        let mut crc = i as u32;
-        let mut bit = 0;
-        while bit < 4 {
-            crc = if crc & 1 != 0 {
-                (crc >> 1) ^ POLY32
-            } else {
-                crc >> 1
-            };
-            bit += 1;
-        }
-        table[i] = crc;
-        i += 1;
-    }
-    table
-};
+const NIBBLE32: [u32; 16] = crate::modbus::crc::nibble_table(POLY32);
 
 impl Crc32 {
     /// Nothing yet.

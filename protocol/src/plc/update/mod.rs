@@ -206,7 +206,81 @@ pub enum UpdateError {
     NoPartition = 13,
 }
 
+impl UpdateState {
+    /// Every state, in the order of its code (0 to 6): for tools that decode UPDSTAT.
+    pub const ALL: [UpdateState; 7] = [
+        UpdateState::Idle,
+        UpdateState::Erasing,
+        UpdateState::Receiving,
+        UpdateState::Writing,
+        UpdateState::Finishing,
+        UpdateState::Ready,
+        UpdateState::Failed,
+    ];
+
+    /// The state of UPDSTAT's STATE register, if it is one.
+    pub fn from_code(code: u16) -> Option<UpdateState> {
+        UpdateState::ALL.get(usize::from(code)).copied()
+    }
+
+    /// Its name, one word, as a tool shows it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            UpdateState::Idle => "idle",
+            UpdateState::Erasing => "erasing",
+            UpdateState::Receiving => "receiving",
+            UpdateState::Writing => "writing",
+            UpdateState::Finishing => "finishing",
+            UpdateState::Ready => "ready",
+            UpdateState::Failed => "failed",
+        }
+    }
+}
+
 impl UpdateError {
+    /// Every error, in the order of its code (0 to 13): for tools that decode UPDSTAT.
+    pub const ALL: [UpdateError; 14] = [
+        UpdateError::None,
+        UpdateError::Moving,
+        UpdateError::SavePending,
+        UpdateError::Busy,
+        UpdateError::NotStarted,
+        UpdateError::WrongBoard,
+        UpdateError::TooLarge,
+        UpdateError::OutOfOrder,
+        UpdateError::ChunkCheck,
+        UpdateError::Malformed,
+        UpdateError::Incomplete,
+        UpdateError::ImageCheck,
+        UpdateError::Flash,
+        UpdateError::NoPartition,
+    ];
+
+    /// The error of UPDSTAT's ERROR register, if it is one.
+    pub fn from_code(code: u16) -> Option<UpdateError> {
+        UpdateError::ALL.get(usize::from(code)).copied()
+    }
+
+    /// What it means, in a few words, for a tool's message.
+    pub const fn text(self) -> &'static str {
+        match self {
+            UpdateError::None => "none",
+            UpdateError::Moving => "an axis moves or has a job waiting",
+            UpdateError::SavePending => "a SAVE is pending",
+            UpdateError::Busy => "the gateway is still erasing or writing",
+            UpdateError::NotStarted => "no transfer under way",
+            UpdateError::WrongBoard => "the image is for another board",
+            UpdateError::TooLarge => "the image is larger than the DFU partition",
+            UpdateError::OutOfOrder => "a chunk not at the next offset",
+            UpdateError::ChunkCheck => "a chunk's CRC-16 did not match",
+            UpdateError::Malformed => "a malformed request",
+            UpdateError::Incomplete => "FINISH before the last byte",
+            UpdateError::ImageCheck => "the image's CRC-32 is not the one BEGIN declared",
+            UpdateError::Flash => "the flash could not be erased, written or checked",
+            UpdateError::NoPartition => "this gateway has no DFU partition",
+        }
+    }
+
     /// How a Modbus master sees the refusal.
     fn refused(self) -> Refused {
         match self {

@@ -24,55 +24,12 @@ const PATIENCE: Duration = Duration::from_secs(60);
 
 /// UPDSTAT's state by name.
 fn state_name(state: u16) -> &'static str {
-    const NAMES: [(UpdateState, &str); 7] = [
-        (UpdateState::Idle, "idle"),
-        (UpdateState::Erasing, "erasing"),
-        (UpdateState::Receiving, "receiving"),
-        (UpdateState::Writing, "writing"),
-        (UpdateState::Finishing, "finishing"),
-        (UpdateState::Ready, "ready"),
-        (UpdateState::Failed, "failed"),
-    ];
-    NAMES
-        .iter()
-        .find(|(s, _)| *s as u16 == state)
-        .map_or("unknown", |(_, name)| name)
+    UpdateState::from_code(state).map_or("unknown", UpdateState::name)
 }
 
 /// UPDSTAT's last error, in words.
-fn error_text(error: u16) -> &'static str {
-    const TEXTS: [(UpdateError, &str); 14] = [
-        (UpdateError::None, "none"),
-        (UpdateError::Moving, "an axis moves or has a job waiting"),
-        (UpdateError::SavePending, "a SAVE is pending"),
-        (UpdateError::Busy, "the gateway is still erasing or writing"),
-        (UpdateError::NotStarted, "no transfer under way"),
-        (UpdateError::WrongBoard, "the image is for another board"),
-        (
-            UpdateError::TooLarge,
-            "the image is larger than the DFU partition",
-        ),
-        (UpdateError::OutOfOrder, "a chunk not at the next offset"),
-        (UpdateError::ChunkCheck, "a chunk's CRC-16 did not match"),
-        (UpdateError::Malformed, "a malformed request"),
-        (UpdateError::Incomplete, "FINISH before the last byte"),
-        (
-            UpdateError::ImageCheck,
-            "the image's CRC-32 is not the one BEGIN declared",
-        ),
-        (
-            UpdateError::Flash,
-            "the flash could not be erased, written or checked",
-        ),
-        (
-            UpdateError::NoPartition,
-            "this gateway has no DFU partition",
-        ),
-    ];
-    TEXTS
-        .iter()
-        .find(|(e, _)| *e as u16 == error)
-        .map_or("unknown", |(_, text)| text)
+fn error_text(error: u16) -> String {
+    UpdateError::from_code(error).map_or_else(|| format!("error {error}"), |e| e.text().into())
 }
 
 fn read_status(gw: &mut Gw) -> Result<UpdateStatus, Fail> {
