@@ -806,13 +806,26 @@ fn update_sends_an_image_resumes_a_cut_transfer_and_refuses_another_board() {
         mark.trim(),
         format!("186a3 {}", done["crc32"].as_str().unwrap())
     );
-    // Another board's image, a missing file, an image larger than the partition.
+    // The same image again: it is there already, nothing is erased or sent.
+    let again = json(&gw.tcp(), &["update", &path, "--board", "0x0475"]);
+    assert_eq!(
+        (&again["already"], &again["state"], &again["refusals"]),
+        (
+            &serde_json::json!(true),
+            &serde_json::json!("ready"),
+            &done["refusals"]
+        ),
+        "{again}"
+    );
+    // Another board's image (told before anything is sent), a missing file, an image larger
+    // than the partition.
     fails(
         &gw.rtu(),
         &["update", &path, "--board", "0x0429"],
-        1,
-        &["UPDCTL", "another board"],
+        2,
+        &["board 0x0429", "board 0x0475"],
     );
+    assert_eq!(json(&gw.tcp(), &["update", "--status"])["state"], "ready");
     fails(
         &gw.tcp(),
         &["update", &gw.path("none.bin"), "--board", "1"],

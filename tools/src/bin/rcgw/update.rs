@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 use protocol::modbus::Exception;
 use protocol::plc::map::{G_UPDATE, G_UPDATE_CHUNK, G_UPDATE_STATUS, G_UPDATE_STATUS_LEN};
 use protocol::plc::update::{
-    begin_registers, chunk_registers, crc32, UpdateError, UpdateState, UpdateStatus, FINISH,
-    MAX_CHUNK,
+    begin_registers, chunk_registers, crc32, UpdateError, UpdateState, UpdateStatus, CHUNK_ALIGN,
+    FINISH, MAX_CHUNK,
 };
 use serde_json::json;
 
@@ -167,7 +167,36 @@ pub fn update(gw: &mut Gw, json: bool, image: &[u8], board: u16) -> Result<(), F
             s.partition
         )));
     }
-    let resumed = s.state == UpdateState::Receiving as u16 && s.size == size && s.crc32 == crc;
+    if board != s.board {
+        return Err(Fail::Input(format!(
+            "the image is for board {board:#06x}, this gateway is board {:#06x}",
+            s.board
+        )));
+    }
+    let same = s.size == size && s.crc32 == crc;
+    if s.state == UpdateState::Ready as u16 && same {
+        if json {
+            let mut value = status_json(&s);
+            value["already"] = json!(true);
+            print_json(&value);
+        } else {
+            outln!(
+                "image of {size} bytes (CRC-32 {crc:08x}) already in the DFU partition, checked and marked: nothing sent"
+            );
+        }
+        return Ok(());
+    }
+    // The gateway's largest chunk, if smaller than ours (another firmware's), kept aligned.
+    let most =
+        MAX_CHUNK.min(usize::from(s.max_chunk)) / CHUNK_ALIGN as usize * CHUNK_ALIGN as usize;
+    if most == 0 {
+        return Err(Fail::Device(format!(
+            "{}: the gateway takes chunks of {} bytes",
+            gw.at(gw.unit, G_UPDATE_STATUS),
+            s.max_chunk
+        )));
+    }
+    let resumed = s.state == UpdateState::Receiving as u16 && same;
     let mut next = if resumed {
         s.next
     } else {
@@ -185,7 +214,7 @@ pub fn update(gw: &mut Gw, json: bool, image: &[u8], board: u16) -> Result<(), F
     let started = Instant::now();
     while next < size {
         let start = next as usize;
-        let end = (start + MAX_CHUNK).min(image.len());
+        let end = (start + most).min(image.len());
         let chunk = image.get(start..end).unwrap_or_default();
         match write_patiently(gw, G_UPDATE_CHUNK, &chunk_registers(next, chunk), show)? {
             Ok(()) => next = end as u32,
