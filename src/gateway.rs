@@ -290,7 +290,9 @@ pub async fn run(
                 #[cfg(feature = "update")]
                 Action::Update(job) => {
                     if let Some(result) = dfu.start(&job, settings) {
-                        node.update_done(result);
+                        node.update_done(
+                            result.map_err(|()| protocol::plc::update::UpdateError::Flash),
+                        );
                     }
                 }
             }
@@ -304,7 +306,7 @@ pub async fn run(
         #[cfg(feature = "update")]
         if node.quiet_for_flash() {
             if let Some(result) = dfu.step(settings) {
-                node.update_done(result);
+                node.update_done(result.map_err(|()| protocol::plc::update::UpdateError::Flash));
             }
         }
 

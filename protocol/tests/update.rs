@@ -12,8 +12,8 @@ use protocol::modbus::Request as Modbus;
 use protocol::net::Ipv4;
 use protocol::plc::map::*;
 use protocol::plc::update::{
-    begin_registers, chunk_registers, crc32, Target, UpdateError, UpdateState, UpdateStatus, ABORT,
-    FINISH, MAX_CHUNK,
+    begin_registers, chunk_registers, crc32, BootState, Target, UpdateError, UpdateState,
+    UpdateStatus, ABORT, FINISH, MAX_CHUNK,
 };
 use protocol::time::Instant;
 use protocol::Command;
@@ -639,7 +639,7 @@ fn a_flash_failure_fails_the_transfer_until_begin() {
     let mut rig = rig();
     let image = image(1_000);
     Link::Rtu.begin(&mut rig, &image, BOARD).unwrap();
-    rig.dfu.fail_next = true;
+    rig.dfu.fail_next = Some(UpdateError::Flash);
     Link::Rtu.chunk(&mut rig, &image, 0).unwrap();
     let status = Link::Rtu.status(&mut rig);
     assert_eq!(
@@ -797,7 +797,7 @@ proptest! {
                 Op::Abort => {
                     let _ = Link::Rtu.write(&mut rig, G_UPDATE, &[ABORT]);
                 }
-                Op::FailNext => rig.dfu.fail_next = true,
+                Op::FailNext => rig.dfu.fail_next = Some(UpdateError::Flash),
                 Op::Wait(ms) => rig.run_for(u64::from(ms) * MS),
             }
             let status = Link::Rtu.status(&mut rig);
@@ -837,4 +837,62 @@ fn updstat_codes_decode_to_their_states_and_errors() {
         UpdateError::ALL.len(),
         "texts tell errors apart"
     );
+}
+
+#[test]
+fn a_finish_the_caller_refuses_keeps_its_reason_and_bootstat_tells_what_runs() {
+    let mut rig = rig();
+    // Not told: no bootloader.
+    assert_eq!(
+        rig.read(GW, G_BOOT_STATUS, G_BOOT_STATUS_LEN),
+        Ok(vec![0, 0, 0])
+    );
+    rig.node.set_boot_state(BootState::Trial);
+    assert_eq!(
+        rig.read(GW, G_BOOT_STATUS, 1),
+        Ok(vec![BootState::Trial as u16])
+    );
+    // An unsigned image: the chunks go in, FINISH's check of the trailer or the signature fails.
+    let image = image(3_000);
+    Link::Rtu.begin(&mut rig, &image, BOARD).unwrap();
+    for offset in (0..image.len()).step_by(MAX_CHUNK) {
+        Link::Rtu.chunk(&mut rig, &image, offset as u32).unwrap();
+    }
+    for refusal in [
+        UpdateError::Signature,
+        UpdateError::NotAnImage,
+        UpdateError::OnTrial,
+    ] {
+        rig.dfu.fail_next = Some(refusal);
+        Link::Rtu.write(&mut rig, G_UPDATE, &[FINISH]).unwrap();
+        let status = Link::Rtu.status(&mut rig);
+        assert_eq!(
+            (status.state, status.error),
+            (UpdateState::Failed as u16, refusal as u16)
+        );
+        assert_eq!(rig.dfu.marked, None);
+        // BEGIN again and send it whole, for the next refusal.
+        Link::Rtu.begin(&mut rig, &image, BOARD).unwrap();
+        for offset in (0..image.len()).step_by(MAX_CHUNK) {
+            Link::Rtu.chunk(&mut rig, &image, offset as u32).unwrap();
+        }
+    }
+    // Signed: marked, and its version in BOOTSTAT.
+    Link::Rtu.write(&mut rig, G_UPDATE, &[FINISH]).unwrap();
+    rig.node.set_image_version(0x0102_0003);
+    assert_eq!(Link::Rtu.status(&mut rig).state, UpdateState::Ready as u16);
+    assert_eq!(
+        rig.read(GW, G_BOOT_STATUS, G_BOOT_STATUS_LEN),
+        Ok(vec![BootState::Trial as u16, 0x0102, 0x0003])
+    );
+    // Read-only.
+    assert_eq!(
+        Link::Rtu.write(&mut rig, G_BOOT_STATUS, &[1]),
+        Err(3),
+        "BOOTSTAT written"
+    );
+    for code in 0..4u16 {
+        assert_eq!(BootState::from_code(code).map(|s| s as u16), Some(code));
+    }
+    assert_eq!(BootState::from_code(4), None);
 }

@@ -124,7 +124,9 @@ impl NodeHarness {
                     self.stores.push((self.now, store));
                 }
                 // No DFU partition is set here (`Node::set_update_target`): never asked.
-                Some(Action::Update(_)) => self.node.update_done(Err(())),
+                Some(Action::Update(_)) => self
+                    .node
+                    .update_done(Err(protocol::plc::update::UpdateError::Flash)),
             }
         }
         panic!("the node never went idle at {} µs", self.now);

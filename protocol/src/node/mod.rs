@@ -42,8 +42,9 @@
 //!   job says, never outside it, then report with `Node::update_done`. The node is polled
 //!   meanwhile: a long job (an erase of many pages) is carried out in steps between the node's
 //!   other actions, or by another task, and reported once it is whole. It is handed out only
-//!   when no frame is due on the bus, but a step that stalls the CPU (a flash erase on the bank
-//!   the code runs from) delays whatever falls due during it, stops included.
+//!   when no frame is due on the bus and the bus is quiet (`Node::quiet_for_flash`: nothing
+//!   moves, waits or is owed a stop), and a step that stalls the caller must be taken only
+//!   then too: a stop never waits behind one.
 //! - **Inputs** are sampled every millisecond or so ([`sample_inputs`](Node::sample_inputs));
 //!   the PIO's debounce and settle times count in the samples' times. The outputs are valid at
 //!   any time ([`outputs`](Node::outputs)), and all OFF (the safe state: *ALM OFF shows an
@@ -391,11 +392,27 @@ impl Node {
         self.gateway.set_update_target(target);
     }
 
+    /// What the bootloader did at this start (feature `update`; BOOTSTAT): the running
+    /// firmware confirmed, on trial, or the old one back after a trial that never confirmed. The
+    /// caller tells it at the start and again once it confirms a trial.
+    #[cfg(feature = "update")]
+    pub fn set_boot_state(&mut self, state: crate::plc::update::BootState) {
+        self.gateway.set_boot_state(state);
+    }
+
+    /// The version of the image a FINISH checked and marked for the next start (feature
+    /// `update`; BOOTSTAT): `major << 24 | minor << 16 | patch`, from the image's signed
+    /// trailer. Told with the report of the FINISH job.
+    #[cfg(feature = "update")]
+    pub fn set_image_version(&mut self, version: u32) {
+        self.gateway.set_image_version(version);
+    }
+
     /// How the job of [`Action::Update`] went (feature `update`). Reported once the job is
     /// done, at any later call: the node goes on meanwhile, and refuses the next chunk (04)
     /// until it hears.
     #[cfg(feature = "update")]
-    pub fn update_done(&mut self, result: Result<(), ()>) {
+    pub fn update_done(&mut self, result: Result<(), crate::plc::update::UpdateError>) {
         self.gateway.update_done(result);
         self.dirty = true;
     }

@@ -171,6 +171,20 @@ impl Gateway {
         &self.update
     }
 
+    /// The bootloader's part of BOOTSTAT (feature `update`): see
+    /// [`Node::set_boot_state`](crate::node::Node::set_boot_state).
+    #[cfg(feature = "update")]
+    pub fn set_boot_state(&mut self, state: super::update::BootState) {
+        self.update.set_boot(state);
+    }
+
+    /// The version of the image marked (feature `update`): see
+    /// [`Node::set_image_version`](crate::node::Node::set_image_version).
+    #[cfg(feature = "update")]
+    pub fn set_image_version(&mut self, version: u32) {
+        self.update.set_image_version(version);
+    }
+
     /// The board and its DFU partition: from now on the PLC link may send an image (feature
     /// `update`).
     #[cfg(feature = "update")]
@@ -191,7 +205,7 @@ impl Gateway {
 
     /// The caller's result of the flash job handed out (feature `update`).
     #[cfg(feature = "update")]
-    pub fn update_done(&mut self, result: Result<(), ()>) {
+    pub fn update_done(&mut self, result: Result<(), super::update::UpdateError>) {
         self.update.done(result);
     }
 

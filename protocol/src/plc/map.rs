@@ -246,6 +246,11 @@ pub const G_PLC_LEN: u16 = 14;
 pub const G_UPDATE: u16 = 0x0700;
 /// Registers of UPDCTL: the command and BEGIN's arguments.
 pub const G_UPDATE_LEN: u16 = 6;
+/// Firmware update: BOOTSTAT, what the bootloader did at this start (confirmed, on trial,
+/// rolled back) and the version of the image marked for the next start.
+pub const G_BOOT_STATUS: u16 = 0x0708;
+/// Registers of BOOTSTAT: the state and a u32 version.
+pub const G_BOOT_STATUS_LEN: u16 = 3;
 /// Firmware update: UPDSTAT, the transfer's state, progress and last error.
 pub const G_UPDATE_STATUS: u16 = 0x0710;
 /// Registers of UPDSTAT.
@@ -465,6 +470,7 @@ pub const MAP: &[Entry] = &[
     #[cfg(feature = "update")]
     e(Unit::Gateway, Holding, G_UPDATE, G_UPDATE_LEN, "UPDCTL", "", "1, 2, 3", true, "Firmware update (not on the F103): write 1 BEGIN with the image's size (u32, bytes), CRC-32 (u32) and board id in one FC10 of 6; 2 FINISH; 3 ABORT. Refused (04) while an axis moves or a SAVE is pending; 03 for another board or an image larger than the DFU partition", Gateway),
     #[cfg(feature = "update")]
+    e(Unit::Gateway, Status, G_BOOT_STATUS, G_BOOT_STATUS_LEN, "BOOTSTAT", "", "", false, "Firmware update: what the bootloader did at this start (0 no bootloader, 1 confirmed, 2 a new image on trial, 3 a new image rolled back), the version of the signed image checked and marked for the next start (u32 major<<24|minor<<16|patch, 0 none)", Gateway),
     e(Unit::Gateway, Status, G_UPDATE_STATUS, G_UPDATE_STATUS_LEN, "UPDSTAT", "", "", false, "Firmware update: state (0 idle, 1 erasing, 2 receiving, 3 writing, 4 finishing, 5 ready, 6 failed), last error, bytes received, next offset, image size, image CRC-32, board id, DFU partition size, refusals (u32 each but the board id), largest chunk", Gateway),
     #[cfg(feature = "update")]
     e(Unit::Gateway, Holding, G_UPDATE_CHUNK, G_UPDATE_CHUNK_LEN, "UPDCHUNK", "bytes", "", true, "Firmware update: one chunk in one FC10: offset (u32, the next offset UPDSTAT shows), length (1-232, a multiple of 8 but for the last), CRC-16/MODBUS of its bytes, the bytes (two per register, high byte first)", Gateway),

@@ -12,6 +12,8 @@ use protocol::line::{Baud, LineAction};
 use protocol::memory::{PointField, PNOW};
 use protocol::modbus::{client, Adu, Exception, Request as Modbus};
 use protocol::node::{Action, Node};
+#[cfg(feature = "update")]
+use protocol::plc::update::UpdateError;
 use protocol::plc::GatewayConfig;
 use protocol::time::Instant;
 use protocol::{
@@ -352,8 +354,8 @@ pub struct Dfu {
     pub jobs: Vec<(u64, Job)>,
     /// The image marked for the bootloader: size and CRC-32.
     pub marked: Option<(u32, u32)>,
-    /// Fail the next job.
-    pub fail_next: bool,
+    /// Fail the next job, with this reason.
+    pub fail_next: Option<UpdateError>,
     /// Keep jobs without carrying them out ([`Rig::release_job`] does).
     pub hold: bool,
     pub held: Option<Job>,
@@ -382,10 +384,10 @@ impl Dfu {
     }
 
     /// Carries `job` out on the partition.
-    pub fn carry_out(&mut self, now: u64, job: Job) -> Result<(), ()> {
+    pub fn carry_out(&mut self, now: u64, job: Job) -> Result<(), UpdateError> {
         self.jobs.push((now, job.clone()));
-        if std::mem::take(&mut self.fail_next) {
-            return Err(());
+        if let Some(error) = self.fail_next.take() {
+            return Err(error);
         }
         match job {
             Job::Erase(len) => {
@@ -411,7 +413,7 @@ impl Dfu {
                 let len = len as usize;
                 assert!(len <= self.flash.len(), "a check past the partition");
                 if protocol::plc::update::crc32(&self.flash[..len]) != crc {
-                    return Err(());
+                    return Err(UpdateError::Flash);
                 }
                 self.marked = Some((len as u32, crc));
             }

@@ -9,7 +9,7 @@ use std::time::Duration as StdDuration;
 use protocol::frame::COMM_CHANGE;
 use protocol::line::{LineAction, BREAK_MS};
 use protocol::node::{Action, TcpAction};
-use protocol::plc::update::UpdateJob;
+use protocol::plc::update::{UpdateError, UpdateJob};
 use protocol::time::Instant;
 use protocol::Request;
 use serde_json::json;
@@ -175,7 +175,8 @@ impl Host {
                         }
                     };
                     self.log.note(now, &format!("update: {what}: {result:?}"));
-                    self.node.update_done(result.map_err(|_| ()));
+                    self.node
+                        .update_done(result.map_err(|_| UpdateError::Flash));
                 }
                 None => {
                     if self.node.receiver_counters() != self.seen_receiver {

@@ -24,8 +24,9 @@
 //! bytes; UPDSTAT shows state 1 until that is done, then 2); chunks in order, each starting at
 //! the next offset UPDSTAT shows (state 3 while the caller writes one, then 2 again with the
 //! next offset moved on); FINISH (once every byte is written and the CRC-32 of what was written
-//! is the one BEGIN declared: the caller reads the image back, checks its CRC-32 and marks it
-//! for the bootloader; state 4, then 5 ready or 6 failed). Each chunk is 8-byte aligned: its
+//! is the one BEGIN declared: the caller reads the image back, checks its CRC-32, its signed
+//! trailer and its signature, and marks it for the bootloader; state 4, then 5 ready or 6
+//! failed with the reason: `Flash`, `NotAnImage`, `Signature`, `OnTrial`). Each chunk is 8-byte aligned: its
 //! length a multiple of 8 unless it is the image's last, so every write starts on a flash word
 //! of every STM32 the gateway runs on.
 //!
@@ -43,6 +44,7 @@
 //! | an axis moves, has a job waiting, or a synchronized start runs (`Moving`); a SAVE is pending (`SavePending`); a flash job under way (`Busy`) | 04, ask again |
 //! | no transfer under way (`NotStarted`: none begun, or the last one failed, finished or was forgotten by a restart; BEGIN again); a board id not this board's (`WrongBoard`); an image larger than the DFU partition or empty (`TooLarge`); a chunk not at the next offset (`OutOfOrder`); a chunk whose CRC-16 does not match its bytes (`ChunkCheck`); a block of the wrong shape, a length out of range or unaligned, a chunk past the image's end (`Malformed`); FINISH before the last byte (`Incomplete`) or with another CRC-32 than BEGIN's (`ImageCheck`: state 6, BEGIN again) | 03 |
 //! | no DFU partition on this board (`NoPartition`) | 02 |
+//! | after FINISH was taken, the caller's checks failed: the flash (`Flash`), the signed trailer (`NotAnImage`), the signature (`Signature`), the running firmware on trial (`OnTrial`) | none: FINISH was answered; UPDSTAT shows state 6 and the reason |
 //!
 //! # Why a register window, not FC 0x15
 //!
@@ -74,8 +76,8 @@
 //! a 128 KiB sector takes seconds on an F4) is the firmware's to bound.
 
 use super::map::{
-    G_UPDATE, G_UPDATE_CHUNK, G_UPDATE_CHUNK_LEN, G_UPDATE_LEN, G_UPDATE_STATUS,
-    G_UPDATE_STATUS_LEN,
+    G_BOOT_STATUS, G_BOOT_STATUS_LEN, G_UPDATE, G_UPDATE_CHUNK, G_UPDATE_CHUNK_LEN, G_UPDATE_LEN,
+    G_UPDATE_STATUS, G_UPDATE_STATUS_LEN,
 };
 use super::refused::Refused;
 use super::registers::{join, split};
@@ -204,6 +206,17 @@ pub enum UpdateError {
     Flash = 12,
     /// This board has no DFU partition (02).
     NoPartition = 13,
+    /// FINISH: the image carries no valid trailer, or one for another board, or it is larger
+    /// than the application's partition (the caller's check, before the signature's): state
+    /// [`Failed`](UpdateState::Failed).
+    NotAnImage = 14,
+    /// FINISH: the image's signature is not one of this firmware's key (unsigned, signed with
+    /// another key, or altered after signing): state [`Failed`](UpdateState::Failed).
+    Signature = 15,
+    /// FINISH: the firmware that runs is itself on trial (a new image not yet confirmed, or
+    /// just rolled back): the bootloader takes no second image until it is confirmed. State
+    /// [`Failed`](UpdateState::Failed); restart or wait for the confirmation, then BEGIN again.
+    OnTrial = 16,
 }
 
 impl UpdateState {
@@ -238,8 +251,8 @@ impl UpdateState {
 }
 
 impl UpdateError {
-    /// Every error, in the order of its code (0 to 13): for tools that decode UPDSTAT.
-    pub const ALL: [UpdateError; 14] = [
+    /// Every error, in the order of its code (0 to 16): for tools that decode UPDSTAT.
+    pub const ALL: [UpdateError; 17] = [
         UpdateError::None,
         UpdateError::Moving,
         UpdateError::SavePending,
@@ -254,6 +267,9 @@ impl UpdateError {
         UpdateError::ImageCheck,
         UpdateError::Flash,
         UpdateError::NoPartition,
+        UpdateError::NotAnImage,
+        UpdateError::Signature,
+        UpdateError::OnTrial,
     ];
 
     /// The error of UPDSTAT's ERROR register, if it is one.
@@ -278,6 +294,13 @@ impl UpdateError {
             UpdateError::ImageCheck => "the image's CRC-32 is not the one BEGIN declared",
             UpdateError::Flash => "the flash could not be erased, written or checked",
             UpdateError::NoPartition => "this gateway has no DFU partition",
+            UpdateError::NotAnImage => {
+                "not a signed image for this board (no valid trailer, another board, or too large)"
+            }
+            UpdateError::Signature => "the image's signature does not match this firmware's key",
+            UpdateError::OnTrial => {
+                "the running firmware is on trial: restart or wait for its confirmation"
+            }
         }
     }
 
@@ -296,7 +319,9 @@ impl UpdateError {
 /// [`Node::update_done`](crate::node::Node::update_done).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum UpdateJob<'a> {
-    /// Erase the partition from its start over at least `len` bytes (whole pages or sectors).
+    /// Erase the partition from its start over at least `len` bytes (whole pages or sectors),
+    /// after unmarking the image marked for the bootloader before, if any: a mark must never
+    /// point at a partition being rewritten.
     Erase {
         /// Bytes to erase, at most the partition's size.
         len: u32,
@@ -310,7 +335,10 @@ pub enum UpdateJob<'a> {
         bytes: &'a [u8],
     },
     /// Read the partition's first `len` bytes back, check that their CRC-32 ([`crc32`]) is
-    /// `crc32`, and mark the image for the bootloader; report an error if it is not.
+    /// `crc32` ([`UpdateError::Flash`] if not), check the image's signed trailer
+    /// ([`UpdateError::NotAnImage`]) and signature ([`UpdateError::Signature`]), and mark the image
+    /// for the bootloader ([`UpdateError::OnTrial`] if it takes none now); tell its version
+    /// ([`Node::set_image_version`](crate::node::Node::set_image_version)).
     Finish {
         /// The image's size.
         len: u32,
@@ -326,6 +354,60 @@ pub(super) struct Gate {
     pub(super) moving: bool,
     /// A SAVE is pending.
     pub(super) saving: bool,
+}
+
+/// What the bootloader did at the last start (BOOTSTAT's first register): the firmware's to
+/// tell ([`Node::set_boot_state`](crate::node::Node::set_boot_state)).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u16)]
+pub enum BootState {
+    /// Not told: no bootloader (the board has none, or the firmware was flashed alone).
+    #[default]
+    Unknown = 0,
+    /// The running firmware is confirmed: it stays at the next start.
+    Confirmed = 1,
+    /// The running firmware is a new image on trial: it is confirmed once it has started, found
+    /// its bus and answered the PLC link; a start without that confirmation swaps the old one
+    /// back.
+    Trial = 2,
+    /// The last new image never confirmed and was swapped back: the old firmware runs (and is
+    /// confirmed again once it has started). Until the next start.
+    RolledBack = 3,
+}
+
+impl BootState {
+    /// Every state, in the order of its code.
+    pub const ALL: [BootState; 4] = [
+        BootState::Unknown,
+        BootState::Confirmed,
+        BootState::Trial,
+        BootState::RolledBack,
+    ];
+
+    /// The state of BOOTSTAT's first register, if it is one.
+    pub fn from_code(code: u16) -> Option<BootState> {
+        BootState::ALL.get(usize::from(code)).copied()
+    }
+
+    /// Its name, as a tool shows it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            BootState::Unknown => "no bootloader",
+            BootState::Confirmed => "confirmed",
+            BootState::Trial => "on trial",
+            BootState::RolledBack => "rolled back",
+        }
+    }
+}
+
+/// BOOTSTAT's registers, as offsets from [`G_BOOT_STATUS`].
+pub mod boot_status {
+    /// [`BootState`](super::BootState).
+    pub const STATE: u16 = 0;
+    /// The version of the signed image checked into DFU since the start and marked for the
+    /// next one (u32, `major << 24 | minor << 16 | patch`; 0: none).
+    pub const IMAGE: u16 = 1;
 }
 
 /// The transfer's state; see the [module documentation](self).
@@ -347,6 +429,9 @@ pub struct Update {
     chunk: heapless::Vec<u8, MAX_CHUNK>,
     /// A job made and not yet handed out.
     due: bool,
+    /// BOOTSTAT: what the bootloader did, the version of the image marked.
+    boot: BootState,
+    image: u32,
 }
 
 impl Default for Update {
@@ -370,7 +455,25 @@ impl Update {
             refusals: 0,
             chunk: heapless::Vec::new(),
             due: false,
+            boot: BootState::Unknown,
+            image: 0,
         }
+    }
+
+    /// What the bootloader did at this start (BOOTSTAT).
+    pub fn set_boot(&mut self, boot: BootState) {
+        self.boot = boot;
+    }
+
+    /// What the bootloader did at this start.
+    pub fn boot(&self) -> BootState {
+        self.boot
+    }
+
+    /// The version of the image FINISH checked and marked (BOOTSTAT), given by the caller with
+    /// its report of the job: `major << 24 | minor << 16 | patch`.
+    pub fn set_image_version(&mut self, version: u32) {
+        self.image = version;
     }
 
     /// The board and its DFU partition; until then every transfer is refused (02).
@@ -436,6 +539,19 @@ impl Update {
                 _ => MAX_CHUNK as u16,
             });
         }
+        if let Some(offset) = address
+            .checked_sub(G_BOOT_STATUS)
+            .filter(|&o| o < G_BOOT_STATUS_LEN)
+        {
+            let image = split(self.image);
+            return Some(match offset {
+                boot_status::STATE => self.boot as u16,
+                o => image
+                    .get(usize::from(o.wrapping_sub(boot_status::IMAGE)))
+                    .copied()
+                    .unwrap_or(0),
+            });
+        }
         let in_block = |first: u16, len: u16| address.checked_sub(first).is_some_and(|o| o < len);
         (in_block(G_UPDATE, G_UPDATE_LEN) || in_block(G_UPDATE_CHUNK, G_UPDATE_CHUNK_LEN))
             .then_some(0)
@@ -458,6 +574,7 @@ impl Update {
                 let inside =
                     |first: u16, len: u16| address.checked_sub(first).is_some_and(|o| o < len);
                 if inside(G_UPDATE, G_UPDATE_LEN)
+                    || inside(G_BOOT_STATUS, G_BOOT_STATUS_LEN)
                     || inside(G_UPDATE_STATUS, G_UPDATE_STATUS_LEN)
                     || inside(G_UPDATE_CHUNK, G_UPDATE_CHUNK_LEN)
                 {
@@ -515,6 +632,9 @@ impl Update {
                     crc: join(crc_hi, crc_lo),
                     refusals: self.refusals,
                     due: true,
+                    // The image marked before, if any, is being erased: the caller unmarks it
+                    // first (UpdateJob::Erase).
+                    boot: self.boot,
                     ..Update::new()
                 };
                 Ok(())
@@ -543,6 +663,9 @@ impl Update {
                 *self = Update {
                     target: Some(target),
                     refusals: self.refusals,
+                    // What is marked stays marked.
+                    boot: self.boot,
+                    image: self.image,
                     ..Update::new()
                 };
                 Ok(())
@@ -622,15 +745,15 @@ impl Update {
     }
 
     /// The caller's report of the job handed out; ignored when none is under way.
-    pub(super) fn done(&mut self, result: Result<(), ()>) {
+    pub(super) fn done(&mut self, result: Result<(), UpdateError>) {
         // Not a report of a job not yet handed out.
         if !self.working() || self.due {
             return;
         }
         self.due = false;
-        if result.is_err() {
+        if let Err(error) = result {
             self.state = UpdateState::Failed;
-            self.error = UpdateError::Flash;
+            self.error = error;
             return;
         }
         self.state = match self.state {
