@@ -107,10 +107,11 @@ def test_rcgw_update_fills_the_partition_while_the_bus_is_served(elf, tmp_path):
         assert "state      ready" in shown.stdout, shown.stdout
         assert f"{len(image)} of {len(image)} bytes written" in shown.stdout, shown.stdout
 
-        # Another board's image: refused by the gateway (UPDCTL, 03), rcgw says why, exit 1.
+        # Another board's image: rcgw reads the gateway's board id (UPDSTAT) and refuses it
+        # before anything is sent, naming both, exit 2.
         other = rcgw(pty, "update", str(path), "--board", "0x0429")
-        assert other.returncode == 1, (other.returncode, other.stdout, other.stderr)
-        assert "UPDCTL" in other.stderr and "another board" in other.stderr, other.stderr
+        assert other.returncode == 2, (other.returncode, other.stdout, other.stderr)
+        assert "0x0429" in other.stderr and "0x0475" in other.stderr, other.stderr
         # Larger than the partition: refused by rcgw before anything is sent, exit 2.
         large = tmp_path / "large.bin"
         large.write_bytes(bytes(PARTITION + 1))
