@@ -55,6 +55,11 @@ cd "$ws"
 CARGO_TARGET_DIR=$emu/target cargo build --quiet --profile "$profile" -p rc-gateway --target "$target" \
     --no-default-features --features emulator \
     --config "patch.crates-io.embassy-stm32.path=\"$patched\""
+# The bootloader the application starts behind (the same binary as the board's: it only reads
+# the flash when nothing is to be swapped, which QEMU's model allows), beside it in the same
+# folder: the harness loads both (tests/pyshared/emu.py).
+CARGO_TARGET_DIR=$emu/target cargo build --quiet --profile "$profile" -p rc-bootloader --target "$target" \
+    --config "patch.crates-io.embassy-stm32.path=\"$patched\""
 cd "$root"
 if [[ $(sha256sum Cargo.lock) != "$lock_before" ]]; then
     echo "emu-build: Cargo.lock changed; the emulator build must leave it alone" >&2

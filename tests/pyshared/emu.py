@@ -245,6 +245,15 @@ class Emulator:
         self.qmp = None
         self.symbols = elf_symbols(elf)
 
+    def bootloader_args(self):
+        """QEMU's arguments that load the bootloader (rc-bootloader, which scripts/emu-build.sh
+        builds beside the application) at the start of the flash, where the chip starts: the
+        application is linked behind it (ACTIVE) and runs only through it, as on the board."""
+        boot = self.elf.with_name("rc-bootloader")
+        if not boot.is_file():
+            raise EmulatorError(f"no bootloader beside {self.elf}: run scripts/emu-build.sh")
+        return ["-device", f"loader,file={boot}"]
+
     # ------------------------------------------------------------------ lifecycle
 
     def start(self, stop_closed=False):
@@ -277,6 +286,7 @@ class Emulator:
             QEMU, "-M", "b-l475e-iot01a", "-accel", self.accel,
             "-nographic", "-monitor", "none", "-S",
             "-kernel", str(self.elf),
+        ] + self.bootloader_args() + [
             "-semihosting-config", "enable=on,target=native",
             "-chardev", f"socket,id=plc,host=127.0.0.1,port={plc_port},server=on,wait=off,nodelay=on",
             "-chardev", f"serial,id=bus,path={bus_path}",

@@ -1,0 +1,165 @@
+//! The bootloader of the L475 gateway: embassy-boot's swap, then the application.
+//!
+//! At every reset it reads the state partition (rc-boot's layout): **Boot**, the application in
+//! ACTIVE runs; **Swap**, an image the application checked and marked (its signature through
+//! embassy-boot's `verify_and_mark_updated`) is swapped into ACTIVE page by page, the old one
+//! kept in DFU, and the new one runs on trial; a trial the application never confirmed
+//! (`mark_booted`) is swapped back at the next reset (a hang ends in the IWDG's reset, which
+//! comes here). embassy-boot records the swap's progress in the state partition, so a power cut
+//! at any instant resumes where it stopped (rc-boot's tests cut it at every flash operation).
+//!
+//! What this adds to embassy-boot, for a board in a cabinet:
+//! - **The IWDG**, once the application started it, runs across resets and cannot be stopped: a
+//!   swap of the whole ACTIVE partition erases and writes about 480 pages (25 ms each to erase),
+//!   far past its second. Every flash operation is one page and pets it first ([`Watched`]).
+//! - **The flash's data cache** is off while the bootloader runs, so that a page read after its
+//!   erase or write is read from the flash, not from a stale line; the caches are reset before the
+//!   application starts, as it must not execute stale instructions of the old image.
+//! - **ECC errors**: a word a power cut tore reads with an ECC double error, which the flash
+//!   raises as an NMI. One in the partitions is cleared and the read goes on (its data is
+//!   whatever the torn word holds; embassy-boot rewrites every page it resumes), instead of the
+//!   default handler's spin until the IWDG resets into the same read: a boot loop.
+//! - **A failure** (a flash operation that reports an error) resets the chip to try again; the
+//!   swap resumes from its recorded progress.
+#![no_std]
+#![no_main]
+
+use core::cell::RefCell;
+
+use cortex_m::peripheral::SCB;
+use cortex_m_rt::{entry, exception};
+use embassy_boot_stm32::{BootLoader, BootLoaderConfig};
+use embassy_embedded_hal::flash::partition::BlockingPartition;
+use embassy_stm32::flash::{Blocking, Flash};
+use embassy_stm32::pac;
+use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+use embassy_sync::blocking_mutex::Mutex;
+use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
+
+mod layout;
+
+use layout::{ACTIVE, BOOTLOADER, DFU, FLASH_BASE, PAGE, STATE};
+
+#[entry]
+fn main() -> ! {
+    data_cache(false);
+    pet();
+    // SAFETY: the bootloader is the only code running, and the flash is its only peripheral.
+    let flash = Flash::new_blocking(unsafe { embassy_stm32::peripherals::FLASH::steal() });
+    let flash = Mutex::<NoopRawMutex, _>::new(RefCell::new(Watched(flash)));
+    let part = |range: &core::ops::Range<u32>| {
+        BlockingPartition::new(&flash, range.start - FLASH_BASE, range.end - range.start)
+    };
+    let config = BootLoaderConfig {
+        active: part(&ACTIVE),
+        dfu: part(&DFU),
+        state: part(&STATE),
+    };
+    let Ok(loader) = BootLoader::try_prepare::<_, _, _, { PAGE as usize }>(config) else {
+        // A flash operation failed: from the top, where the swap's progress says.
+        SCB::sys_reset();
+    };
+    // The caches emptied: the application may have been rewritten under them.
+    data_cache(true);
+    instruction_cache_reset();
+    // SAFETY: ACTIVE holds an application linked there (its vector table first), whole: the
+    // swap is done or was never started.
+    unsafe { loader.load(ACTIVE.start) }
+}
+
+/// The flash, one page at a time, the IWDG petted before each operation.
+struct Watched(Flash<'static, Blocking>);
+
+impl ErrorType for Watched {
+    type Error = embassy_stm32::flash::Error;
+}
+
+impl ReadNorFlash for Watched {
+    const READ_SIZE: usize = <Flash<'static, Blocking> as ReadNorFlash>::READ_SIZE;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        self.0.blocking_read(offset, bytes)
+    }
+
+    fn capacity(&self) -> usize {
+        self.0.capacity()
+    }
+}
+
+impl NorFlash for Watched {
+    const WRITE_SIZE: usize = <Flash<'static, Blocking> as NorFlash>::WRITE_SIZE;
+    const ERASE_SIZE: usize = <Flash<'static, Blocking> as NorFlash>::ERASE_SIZE;
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        let mut at = offset;
+        for page in bytes.chunks(PAGE as usize) {
+            pet();
+            self.0.blocking_write(at, page)?;
+            at += PAGE;
+        }
+        Ok(())
+    }
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        let mut at = from;
+        while at < to {
+            pet();
+            self.0.blocking_erase(at, at + PAGE)?;
+            at += PAGE;
+        }
+        Ok(())
+    }
+}
+
+/// Restarts the IWDG's count (nothing if the application never started it).
+fn pet() {
+    pac::IWDG
+        .kr()
+        .write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
+}
+
+/// The flash's data cache on (emptied first) or off.
+fn data_cache(on: bool) {
+    let acr = pac::FLASH.acr();
+    acr.modify(|w| w.set_dcen(false));
+    if on {
+        acr.modify(|w| w.set_dcrst(true));
+        acr.modify(|w| w.set_dcrst(false));
+        acr.modify(|w| w.set_dcen(true));
+    }
+}
+
+/// The flash's instruction cache emptied.
+fn instruction_cache_reset() {
+    let acr = pac::FLASH.acr();
+    acr.modify(|w| w.set_icen(false));
+    acr.modify(|w| w.set_icrst(true));
+    acr.modify(|w| w.set_icrst(false));
+    acr.modify(|w| w.set_icen(true));
+}
+
+/// An ECC double error in the partitions (a torn word) is cleared and the read goes on; any
+/// other NMI (an error in the bootloader's own pages or the system flash, the clock security
+/// system) resets the chip.
+#[exception]
+unsafe fn NonMaskableInt() {
+    let eccr = pac::FLASH.eccr();
+    let ecc = eccr.read();
+    // FLASH_ECCR gives the address within the bank.
+    let offset = ecc.addr_ecc() + if ecc.bk_ecc() { layout::BANK_SIZE } else { 0 };
+    if ecc.eccd() && !ecc.sysf_ecc() && offset >= BOOTLOADER.end - FLASH_BASE {
+        eccr.modify(|w| w.set_eccd(true));
+        return;
+    }
+    SCB::sys_reset();
+}
+
+#[exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    SCB::sys_reset()
+}
+
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo) -> ! {
+    SCB::sys_reset()
+}
