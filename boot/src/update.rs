@@ -12,7 +12,7 @@
 //! confirms itself with embassy-boot's `mark_booted` once it runs well; a reset before that
 //! makes the bootloader put the old application back.
 
-use embassy_boot::{BlockingFirmwareUpdater, FirmwareUpdaterError};
+use embassy_boot::{BlockingFirmwareUpdater, FirmwareUpdaterError, State};
 use embedded_storage::nor_flash::NorFlash;
 
 use crate::image::{trailer_offset, ImageError, Trailer, TRAILER_LEN};
@@ -43,6 +43,9 @@ impl From<FirmwareUpdaterError> for UpdateError {
 /// `public_key`, marks it for the bootloader's swap. `max_image` is ACTIVE's size
 /// ([`Layout::max_image`](crate::layout::Layout::max_image)), which is also below DFU's, so
 /// embassy-boot's own length assertion cannot fire.
+///
+/// Refuses with `BadState` during a trial boot (the swap mark still set: the new application
+/// has not confirmed itself with `mark_booted`), before reading DFU.
 pub fn verify_and_mark<DFU: NorFlash, STATE: NorFlash>(
     updater: &mut BlockingFirmwareUpdater<'_, DFU, STATE>,
     image_len: u32,
@@ -50,6 +53,10 @@ pub fn verify_and_mark<DFU: NorFlash, STATE: NorFlash>(
     max_image: u32,
     public_key: &[u8; 32],
 ) -> Result<Trailer, UpdateError> {
+    // During a trial boot DFU holds the previous application, not an image: say so first.
+    if updater.get_state()? == State::Swap {
+        return Err(FirmwareUpdaterError::BadState.into());
+    }
     if image_len > max_image {
         return Err(ImageError::TooLarge.into());
     }
