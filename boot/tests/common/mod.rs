@@ -16,6 +16,8 @@ use embedded_storage::nor_flash::{
 };
 use rc_boot::image::{sign, SecretKey, Version};
 use rc_boot::layout::{Layout, Region, ERASED, PAGE, WORD};
+use rc_boot::update::verify_and_mark;
+use rc_boot::BOARD_L475;
 
 /// How an operation hit by the power cut is left.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -409,4 +411,21 @@ pub fn small_layout() -> Layout {
         state: r(30, 31),
         settings: r(31, 32),
     }
+}
+
+/// A board running `old` with a new image marked; returns the rig, `old` as ACTIVE holds it
+/// and the new ACTIVE the swap must produce (DFU's first ACTIVE-size bytes).
+pub fn marked(layout: Layout, buf: usize, old_seed: u8, new_seed: u8) -> (Rig, Vec<u8>, Vec<u8>) {
+    let mut rig = Rig::new(layout, buf);
+    let max = layout.max_image() as usize;
+    rig.flash_active(&app_bytes(max - 100, old_seed));
+    let image = signed(&app_bytes(max - 96 - 13, new_seed), BOARD_L475, &test_key());
+    rig.transfer(&image).unwrap();
+    let key = test_key().public_key();
+    rig.app(|u| verify_and_mark(u, image.len() as u32, BOARD_L475, max as u32, &key))
+        .unwrap();
+    let old = rig.active();
+    let new = rig.dfu()[..layout.active.len() as usize].to_vec();
+    assert_ne!(old, new);
+    (rig, old, new)
 }
