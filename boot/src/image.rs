@@ -48,8 +48,11 @@ pub const PAD: u8 = 0xFF;
 const SIG_AT: usize = HEADER_LEN;
 const CRC_AT: usize = SIG_AT + 64;
 
-const _: () =
-    assert!(CRC_AT + 8 == TRAILER_LEN && TRAILER_LEN % ALIGN == 0 && HEADER_LEN % ALIGN == 0);
+const _: () = assert!(
+    CRC_AT + 8 == TRAILER_LEN
+        && TRAILER_LEN.is_multiple_of(ALIGN)
+        && HEADER_LEN.is_multiple_of(ALIGN)
+);
 
 /// The CRC-32 of the trailer (IEEE 802.3, reflected: zip's, and the transfer's).
 const CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);

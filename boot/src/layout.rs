@@ -144,13 +144,13 @@ impl Layout {
     const fn pages(&self, r: &Region) -> bool {
         r.start < r.end
             && self.flash.contains(r)
-            && r.start % self.page == 0
-            && r.end % self.page == 0
+            && r.start.is_multiple_of(self.page)
+            && r.end.is_multiple_of(self.page)
     }
 
     /// Checks embassy-boot's rules and ours; `Ok` if the layout is usable.
     pub const fn check(&self) -> Result<(), LayoutError> {
-        if self.word == 0 || self.page == 0 || self.page % self.word != 0 {
+        if self.word == 0 || self.page == 0 || !self.page.is_multiple_of(self.word) {
             return Err(LayoutError::Units);
         }
         let regions = [
@@ -160,19 +160,19 @@ impl Layout {
             self.state,
             self.settings,
         ];
-        let mut i = 0;
-        while i < regions.len() {
-            if !self.pages(&regions[i]) {
+        let mut rest: &[Region] = &regions;
+        while let [r, others @ ..] = rest {
+            if !self.pages(r) {
                 return Err(LayoutError::NotPages);
             }
-            let mut j = i + 1;
-            while j < regions.len() {
-                if regions[i].overlaps(&regions[j]) {
+            let mut after = others;
+            while let [o, more @ ..] = after {
+                if r.overlaps(o) {
                     return Err(LayoutError::Overlap);
                 }
-                j += 1;
+                after = more;
             }
-            i += 1;
+            rest = others;
         }
         if self.bootloader.start != self.flash.start || self.active.start != self.bootloader.end {
             return Err(LayoutError::Order);

@@ -25,6 +25,19 @@ pub mod image;
 pub mod layout;
 pub mod update;
 
+/// The TEST key's seed: public, in the repository, for the tests and the emulator only. An
+/// image signed with it must never be accepted by a board in the field: a board build verifies
+/// with the project's real public key, whose secret half is kept offline (see the README).
+#[cfg(feature = "test-key")]
+pub const TEST_KEY_SEED: [u8; 32] = *b"rc-gateway TEST KEY: never ship!";
+
+/// The TEST key's public half ([`TEST_KEY_SEED`]'s): for the emulator build only.
+#[cfg(feature = "test-key")]
+pub const TEST_PUBLIC_KEY: [u8; 32] = [
+    0x90, 0xc2, 0x18, 0x35, 0x48, 0x19, 0x00, 0xac, 0xcf, 0x37, 0x2f, 0xf4, 0x01, 0xd7, 0xaf, 0x31,
+    0x43, 0xcd, 0x41, 0x93, 0xf2, 0xc7, 0xc5, 0xff, 0xc9, 0x2c, 0x86, 0x0d, 0xf6, 0x22, 0x5b, 0x86,
+];
+
 /// The gateway's board id for the L475 (the transfer's BEGIN and the image's trailer).
 pub const BOARD_L475: u16 = 0x0475;
 

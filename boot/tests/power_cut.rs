@@ -102,7 +102,7 @@ fn swap_and_revert(layout: Layout, buf: usize, follow_every: usize) -> Counts {
                 update_again(&mut rig, &what);
                 continue;
             }
-            if counts.cut_points % follow_every == 0 || n == counts.swap_ops {
+            if counts.cut_points.is_multiple_of(follow_every) || n == counts.swap_ops {
                 // Confirmed: kept.
                 let mut ok = rig.clone();
                 ok.app(|u| u.mark_booted().unwrap());
@@ -153,7 +153,7 @@ fn swap_and_revert(layout: Layout, buf: usize, follow_every: usize) -> Counts {
             );
             assert_eq!(holds(&rig, &old, &new, &what), Holds::Old, "{what}");
             counts.cut_points += 1;
-            if counts.cut_points % follow_every == 0 || n == counts.revert_ops {
+            if counts.cut_points.is_multiple_of(follow_every) || n == counts.revert_ops {
                 update_again(&mut rig, &what);
             }
         }

@@ -167,7 +167,7 @@ impl NorFlash for SimFlash {
         if from > to || to > self.mem.len() {
             return Err(SimError::OutOfBounds);
         }
-        if from % PAGE as usize != 0 || to % PAGE as usize != 0 {
+        if !from.is_multiple_of(PAGE as usize) || !to.is_multiple_of(PAGE as usize) {
             return Err(SimError::NotAligned);
         }
         match self.gate()? {
@@ -197,7 +197,7 @@ impl NorFlash for SimFlash {
         if at + bytes.len() > self.mem.len() {
             return Err(SimError::OutOfBounds);
         }
-        if at % WORD as usize != 0 || bytes.len() % WORD as usize != 0 {
+        if !at.is_multiple_of(WORD as usize) || !bytes.len().is_multiple_of(WORD as usize) {
             return Err(SimError::NotAligned);
         }
         let words = bytes.len() / WORD as usize;
@@ -368,9 +368,9 @@ pub fn app_bytes(len: usize, seed: u8) -> Vec<u8> {
         .collect()
 }
 
-/// The key the tests sign with. A TEST KEY: it signs nothing but test images.
+/// The key the tests sign with: the crate's public TEST key.
 pub fn test_key() -> SecretKey {
-    SecretKey([0x42; 32])
+    SecretKey(rc_boot::TEST_KEY_SEED)
 }
 
 /// Another key, whose signatures the board must refuse.
