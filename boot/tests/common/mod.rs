@@ -429,3 +429,17 @@ pub fn marked(layout: Layout, buf: usize, old_seed: u8, new_seed: u8) -> (Rig, V
     assert_ne!(old, new);
     (rig, old, new)
 }
+
+/// Panics unless ACTIVE holds exactly `old` or exactly `new`; true for `new`.
+pub fn holds_one_of(rig: &Rig, old: &[u8], new: &[u8]) -> bool {
+    let a = rig.active();
+    if a == old {
+        false
+    } else if a == new {
+        true
+    } else {
+        let off_old = a.iter().zip(old).filter(|(x, y)| x != y).count();
+        let off_new = a.iter().zip(new).filter(|(x, y)| x != y).count();
+        panic!("ACTIVE is a mix ({off_old} bytes off the old, {off_new} off the new)");
+    }
+}
