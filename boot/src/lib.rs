@@ -7,7 +7,7 @@
 //!   the version, the length and an Ed25519 signature that embassy-boot verifies. With the
 //!   `sign` feature (std): signing and key generation for the host tools.
 //! * [`update`]: reading the trailer back from DFU and calling embassy-boot's
-//!   `verify_and_mark_updated` with it.
+//!   `verify_and_mark_updated` with it; or the same check in steps ([`update::Verifier`]).
 //!
 //! The bootloader binary and the application's use of this crate are built elsewhere; the
 //! host tests (`boot/tests/`) drive embassy-boot's own `BootLoader` and

@@ -68,3 +68,67 @@ pub fn verify_and_mark<DFU: NorFlash, STATE: NorFlash>(
     updater.verify_and_mark_updated(public_key, &trailer.signature, signed)?;
     Ok(trailer)
 }
+
+/// Why [`Verifier::finish`] refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VerifyError {
+    /// Fewer bytes were fed than the signature covers.
+    Incomplete,
+    /// The public key is not a valid Ed25519 point.
+    BadKey,
+    /// The signature does not verify.
+    BadSignature,
+}
+
+/// The same check as embassy-boot's `verify_and_mark_updated`, in steps: for an application
+/// that must not stop for the whole image's SHA-512 in one call (`src/dfu.rs` reads the image
+/// back a page per pass of its loop). Feed the image's first [`Trailer::signed_len`] bytes in
+/// order with [`Verifier::update`], then [`Verifier::finish`]; on `Ok`, mark the image with
+/// embassy-boot's `BlockingFirmwareState::mark_updated`. The scheme is the one
+/// `verify_and_mark_updated` checks (the tests hold the two to the same answers). Unlike
+/// `verify_and_mark_updated`, `BlockingFirmwareState::mark_updated` does not refuse during a
+/// trial boot: check that the state is not `Swap` before starting.
+pub struct Verifier {
+    hash: salty::Sha512,
+    fed: u32,
+    signed_len: u32,
+    signature: [u8; 64],
+}
+
+impl Verifier {
+    /// A verifier for the image `trailer` describes (already parsed and checked).
+    pub fn new(trailer: &Trailer) -> Result<Self, ImageError> {
+        Ok(Verifier {
+            hash: salty::Sha512::new(),
+            fed: 0,
+            signed_len: trailer.signed_len().ok_or(ImageError::TooLarge)?,
+            signature: trailer.signature,
+        })
+    }
+
+    /// The next bytes of the image, from its start. Bytes past the signed part are ignored.
+    pub fn update(&mut self, bytes: &[u8]) {
+        let room = (self.signed_len - self.fed) as usize;
+        let take = bytes.get(..room.min(bytes.len())).unwrap_or_default();
+        self.hash.update(take);
+        // `take` is at most `room`, a u32.
+        self.fed += take.len() as u32;
+    }
+
+    /// The signed bytes still to feed.
+    pub fn remaining(&self) -> u32 {
+        self.signed_len - self.fed
+    }
+
+    /// Verifies the signature with `public_key`.
+    pub fn finish(self, public_key: &[u8; 32]) -> Result<(), VerifyError> {
+        if self.fed != self.signed_len {
+            return Err(VerifyError::Incomplete);
+        }
+        let key = salty::PublicKey::try_from(public_key).map_err(|_| VerifyError::BadKey)?;
+        let sig = salty::Signature::from(&self.signature);
+        let digest = self.hash.finalize();
+        key.verify(&digest, &sig)
+            .map_err(|_| VerifyError::BadSignature)
+    }
+}

@@ -7,7 +7,7 @@ use common::*;
 use embassy_boot::{FirmwareUpdaterError, State};
 use rc_boot::image::{split, ImageError, Trailer, TRAILER_LEN};
 use rc_boot::layout::{Layout, L475};
-use rc_boot::update::{verify_and_mark, UpdateError};
+use rc_boot::update::{verify_and_mark, UpdateError, Verifier, VerifyError};
 use rc_boot::BOARD_L475;
 
 /// A board running `old`, with `image` transferred into DFU.
@@ -184,4 +184,66 @@ fn no_new_mark_during_a_trial_boot() {
         rig.transfer(&image),
         Err(FirmwareUpdaterError::BadState)
     ));
+}
+
+/// The stepwise verifier reads the image back from DFU a page at a time.
+fn step_verify(rig: &mut Rig, image_len: usize, key: &[u8; 32]) -> Result<(), VerifyError> {
+    let raw = rig.dfu()[image_len - TRAILER_LEN..image_len].to_vec();
+    let t = Trailer::parse(&raw).unwrap();
+    let mut v = Verifier::new(&t).unwrap();
+    let mut at = 0;
+    while v.remaining() > 0 {
+        let mut page = vec![0; 2048];
+        rig.app(|u| u.read_dfu(at as u32, &mut page)).unwrap();
+        v.update(&page);
+        at += page.len();
+    }
+    v.finish(key)
+}
+
+#[test]
+fn stepwise_verifier_agrees_with_embassy_boot() {
+    let app = app_bytes(9000, 1);
+    let good = signed(&app, BOARD_L475, &test_key());
+    let foreign = signed(&app, BOARD_L475, &other_key());
+    let mut flipped = good.clone();
+    flipped[4321] ^= 0x20;
+    let mut cases = 0;
+    for (image, key, ok) in [
+        (&good, test_key(), true),
+        (&good, other_key(), false),
+        (&foreign, test_key(), false),
+        (&flipped, test_key(), false),
+    ] {
+        let pk = key.public_key();
+        let mut rig = board(small_layout(), &app_bytes(1000, 2), image);
+        let stepwise = step_verify(&mut rig, image.len(), &pk);
+        assert_eq!(stepwise.is_ok(), ok);
+        if !ok {
+            assert_eq!(stepwise, Err(VerifyError::BadSignature));
+        }
+        let embassy = mark(&mut rig, image.len(), &pk);
+        assert_eq!(embassy.is_ok(), ok, "{embassy:?}");
+        cases += 1;
+    }
+    assert_eq!(cases, 4);
+    // Fed short, it refuses.
+    let t = Trailer::parse(&good[good.len() - TRAILER_LEN..]).unwrap();
+    let mut v = Verifier::new(&t).unwrap();
+    v.update(&good[..100]);
+    assert_eq!(
+        v.finish(&test_key().public_key()),
+        Err(VerifyError::Incomplete)
+    );
+}
+
+#[test]
+fn stepwise_verified_image_marked_directly_swaps_in() {
+    let app = app_bytes(7000, 3);
+    let image = signed(&app, BOARD_L475, &test_key());
+    let mut rig = board(small_layout(), &app_bytes(1000, 2), &image);
+    step_verify(&mut rig, image.len(), &test_key().public_key()).unwrap();
+    rig.mark_updated_unchecked();
+    assert_eq!(rig.boot(), Ok(State::Swap));
+    assert_eq!(&rig.active()[..app.len()], &app[..]);
 }

@@ -313,6 +313,16 @@ impl Rig {
         })
     }
 
+    /// embassy-boot's swap mark written directly (`BlockingFirmwareState::mark_updated`), as
+    /// an application does after `rc_boot::update::Verifier` approved the image.
+    pub fn mark_updated_unchecked(&mut self) {
+        self.shared(|m, l| {
+            let mut aligned = [0; WORD as usize];
+            let mut s = embassy_boot::BlockingFirmwareState::new(part(m, l, l.state), &mut aligned);
+            s.mark_updated().unwrap();
+        })
+    }
+
     pub fn active(&self) -> Vec<u8> {
         self.flash
             .region(self.layout.active, self.layout.flash.start)
