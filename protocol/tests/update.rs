@@ -896,3 +896,26 @@ fn a_finish_the_caller_refuses_keeps_its_reason_and_bootstat_tells_what_runs() {
     }
     assert_eq!(BootState::from_code(4), None);
 }
+
+#[test]
+fn a_trial_passes_once_the_bus_is_established_and_the_plc_answered() {
+    let config = protocol::plc::GatewayConfig::new(protocol::AxisSet::first(2));
+    assert!(config.bus.establish, "this test needs the establishment");
+    let mut rig = Rig::started(config, protocol::plc::Boot::DEFAULT, &[0, 1]);
+    rig.drain();
+    assert!(rig.node.gateway().engine().establishing());
+    // The PLC answered while the bus is still being established: not yet.
+    rig.read(GW, G_UPDATE_STATUS, 1).unwrap();
+    assert!(!rig.node.trial_passed(), "passed during the establishment");
+    rig.run_for(10_000 * MS);
+    assert!(!rig.node.gateway().engine().establishing());
+    assert!(rig.node.trial_passed());
+    // Established, but nobody on the PLC link yet: not yet.
+    let mut quiet = Rig::ready(2, |_| {});
+    assert!(
+        !quiet.node.trial_passed(),
+        "passed with no PLC request answered"
+    );
+    quiet.read(GW, G_BOOT_STATUS, 1).unwrap();
+    assert!(quiet.node.trial_passed());
+}

@@ -400,6 +400,20 @@ impl Node {
         self.gateway.set_boot_state(state);
     }
 
+    /// Whether a firmware on trial has shown it works (feature `update`): the bus's
+    /// establishment is over (the axes found, or none answered) and the PLC link has had an
+    /// answer from it (any Modbus reply, RTU or TCP: a tool that reads the version after the
+    /// restart is enough). The caller then confirms the trial to the bootloader; until then a
+    /// restart, a hang (the watchdog) or a power cut brings the old firmware back.
+    #[cfg(feature = "update")]
+    pub fn trial_passed(&self) -> bool {
+        #[cfg(feature = "tcp")]
+        let tcp = self.tcp_slave_counters().replies;
+        #[cfg(not(feature = "tcp"))]
+        let tcp = 0;
+        !self.gateway.engine().establishing() && (self.plc_counters().replies > 0 || tcp > 0)
+    }
+
     /// The version of the image a FINISH checked and marked for the next start (feature
     /// `update`; BOOTSTAT): `major << 24 | minor << 16 | patch`, from the image's signed
     /// trailer. Told with the report of the FINISH job.
