@@ -12,6 +12,8 @@ cd "$(dirname "$0")/.."
 PYTEST_VERSION=8.4.2
 PYELFTOOLS_VERSION=0.32
 PYMODBUS_VERSION=3.16.1
+# Ed25519 of OpenSSL: signed firmware images made without our code (tests/pyshared/signed_image.py).
+CRYPTOGRAPHY_VERSION=44.0.0
 
 venv=${1:-target/emu-venv}
 [[ $venv == /* ]] || venv=$PWD/$venv
@@ -31,7 +33,8 @@ fi
 if (($# > 1)); then
     want=("${@:2}")
 else
-    want=("pytest==$PYTEST_VERSION" "pyelftools==$PYELFTOOLS_VERSION" "pymodbus==$PYMODBUS_VERSION")
+    want=("pytest==$PYTEST_VERSION" "pyelftools==$PYELFTOOLS_VERSION" "pymodbus==$PYMODBUS_VERSION"
+          "cryptography==$CRYPTOGRAPHY_VERSION")
 fi
 if ! "$python" - "${want[@]}" <<'PY'
 import sys

@@ -28,6 +28,9 @@ cargo clippy -p rc-gateway --target thumbv7em-none-eabihf --locked -- -D warning
 step "clippy: firmware for the STM32F103C8 board (thumbv7m-none-eabi), warnings denied"
 cargo clippy -p rc-gateway --target thumbv7m-none-eabi --no-default-features --features hw,board-f103 --locked -- -D warnings
 
+step "clippy: the L475's bootloader (rc-bootloader) for thumbv7em-none-eabihf, warnings denied"
+cargo clippy -p rc-bootloader --target thumbv7em-none-eabihf --locked -- -D warnings
+
 step "clippy: the network side for thumbv7em-none-eabihf (rc-net, the LAN9118 driver, the mps2-an386 build, the emulators' SysTick time driver), warnings denied"
 cargo clippy -p rc-net -p lan9118 -p rc-gateway-mps2 -p systick-time --target thumbv7em-none-eabihf --locked -- -D warnings
 
@@ -38,7 +41,7 @@ step "protocol: no_std build (with defmt) for the firmware target"
 cargo clippy -p protocol --target thumbv7em-none-eabihf --features defmt --locked -- -D warnings
 
 step "docs: host crates' API documentation, broken or private links denied"
-RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked -p protocol -p rc-tools -p rc-host -p settings-store -p small-mem
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked -p protocol -p rc-tools -p rc-host -p settings-store -p small-mem -p rc-boot
 
 step "tests: protocol (codec, engine, Modbus, PIO, properties) and host (simulator, gateway, soak)"
 cargo test --locked

@@ -1,52 +1,85 @@
-//! The DFU partition: where a firmware image sent over the PLC link goes (feature `update`;
-//! the transfer itself is `protocol::plc::update`'s). The gateway task carries out the node's
+//! The firmware update on the board (feature `update`): the DFU partition an image sent over the
+//! PLC link goes into, its check, and the marks for the bootloader (the transfer itself is
+//! `protocol::plc::update`'s; the layout, the image's signed trailer and the swap are
+//! `rc_boot`'s and embassy-boot's). The gateway task carries out the node's
 //! [`Action::Update`](crate::node::Action::Update) jobs here and reports each with
-//! `Node::update_done` once it is whole.
+//! [`report`] once it is whole.
 //!
-//! **In bounded steps.** A chunk is written as its job is handed out ([`Dfu::start`]: at most
-//! 232 bytes, 29 double words of 90 µs at most, 2.6 ms); an erase or a verification is taken
-//! there and then done one step per pass of the gateway task's loop ([`Dfu::step`]), between the
-//! node's other actions: the lines are read, the stop input served and the watchdog fed between
-//! two steps. A step is one 2 KiB page erased (the L475's page erase: 25 ms at most, datasheet)
-//! or [`VERIFY_STEP`] bytes read back into the CRC-32. The partition is in bank 2 and the program runs from bank 1, so the CPU is not
-//! stalled while the flash works (read-while-write), and embassy-stm32's blocking erase and write
-//! leave the interrupts on (the UARTs keep filling their buffers), but the driver waits for the
-//! flash: the gateway task does nothing else for up to 25 ms. So a job is handed out, and a step
-//! taken, only while the bus is quiet (`Node::quiet_for_flash`: no axis moves or waits for a
-//! job, no stop is owed): a move started during a transfer pauses it, and a stop that falls due
-//! during a step is for an axis that stands. (The settings' SAVE waits as long.)
+//! **The jobs.** *Erase*: first, if an image is marked from earlier in this run, the mark is
+//! taken back (embassy-boot's `mark_booted`: a mark must never point at a partition being
+//! rewritten), then the pages the image needs, one per step. *Write*: a chunk, at once.
+//! *Finish*: the image's trailer read and checked (`rc_boot::image::Trailer`: magic, CRC, this
+//! board, the length the transfer declared, no larger than ACTIVE: else `NotAnImage`), then the
+//! image read back 2 KiB a step into its CRC-32 (the transfer's, else `Flash`) and into the
+//! SHA-512 of its signed part (`rc_boot::update::Verifier`, embassy-boot's scheme in steps), the
+//! Ed25519 signature checked with the key built in (else `Signature`), and the image marked for
+//! a swap at the next start (embassy-boot's `mark_updated`). Its version goes to BOOTSTAT.
 //!
-//! **The board** (`hw`): bank 2 of the L475's flash up to the settings pages
-//! (`board::l475::DFU_RANGE`, 504 KiB), written through the settings store's flash driver
-//! (embassy-stm32's blocking one, with the data cache off around it: `l475::DcacheOff`): the
-//! store never reads outside its own pages. A chunk whose length is not a multiple of the
-//! flash's 8-byte word (an image's last) is padded with 0xFF, the erased value.
+//! **A trial.** At the start the state partition tells what the bootloader did
+//! ([`Dfu::start_up`]): a new image swapped in runs on trial, until [`Dfu::confirm`] sees the
+//! node's `trial_passed` (the bus established, the PLC link answered) and confirms it
+//! (`mark_booted`); a start before that, a hang (the IWDG) or a power cut brings the old one
+//! back. While a trial runs, DFU holds the old firmware the bootloader would swap back: no
+//! transfer may erase it (`OnTrial`), nor may another image be marked.
+//!
+//! **In bounded steps.** A chunk is written as its job is handed out (at most 232 bytes, 29
+//! double words of 90 µs at most, 2.6 ms); an erase or a check is done one step per pass of the
+//! gateway task's loop ([`Dfu::step`]), between the node's other actions: the lines are read,
+//! the stop input served and the watchdog fed between two steps. A step is one 2 KiB page erased
+//! (the L475's page erase: 25 ms at most, datasheet), [`VERIFY_STEP`] bytes read back into the
+//! CRC-32 and the SHA-512, the signature checked, or a mark written (embassy-boot erases the four
+//! STATE pages and writes a word: 100 ms at most). DFU and STATE are in bank 2 and the program
+//! runs from bank 1, so the CPU is not stalled while the flash works (read-while-write), and
+//! embassy-stm32's blocking erase and write leave the interrupts on (the UARTs keep filling
+//! their buffers), but the driver waits for the flash: the gateway task does nothing else
+//! meanwhile. So a job is handed out, a step taken and a trial confirmed only while the bus is
+//! quiet (`Node::quiet_for_flash`: no axis moves or waits for a job, no stop is owed): a move
+//! started during a transfer pauses it, and a stop that falls due during a step is for an axis
+//! that stands.
+//!
+//! **The key.** The board build verifies with the public key named at build time
+//! (`RC_GATEWAY_UPDATE_KEY`, build.rs); built without one, it refuses every image
+//! (`Signature`). The emulator build verifies with rc-boot's public TEST key.
+//!
+//! **The board** (`hw`): DFU and STATE are windows on the settings store's flash driver
+//! (embassy-stm32's blocking one, with the data cache off around it: `l475::DcacheOff`), which
+//! never reads outside its own pages.
 //!
 //! **The emulator** (`emulator`): QEMU's `b-l475e-iot01a` models no flash interface (its flash
-//! cannot be written), so the partition is [`EMU_PARTITION`] bytes of RAM: the transfer, the
-//! steps and the verification run on the real ELF, the flash driver does not.
-//!
-//! **The mark** for the bootloader is not written yet: there is no bootloader (issue 37's
-//! embassy-boot). FINISH checks the image's CRC-32 as read back and reports it ready; nothing
-//! boots it.
+//! cannot be written), so DFU is [`EMU_PARTITION`] bytes of RAM and STATE four pages of RAM: the
+//! transfer, the steps, the signature check and embassy-boot's marks run on the real ELF; the
+//! flash driver does not, and no swap follows (the bootloader reads the real, unwritten flash).
 
-use protocol::plc::update::{Crc32, Target, UpdateJob};
+use embedded_storage::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
+use protocol::plc::update::{BootState, Crc32, Target, UpdateError, UpdateJob};
+use rc_boot::image::{trailer_offset, Trailer, TRAILER_LEN};
+use rc_boot::layout::L475;
+use rc_boot::update::{BlockingFirmwareState, State, Verifier};
 
-/// The board id an image must declare (BEGIN): the L475's, on the board and in the emulator
-/// (the same firmware; `rcgw update --board 0x0475`).
-pub const BOARD_ID: u16 = 0x0475;
+use crate::node::Node;
+
+/// The board id an image must declare (BEGIN and its trailer): the L475's, on the board and in
+/// the emulator (the same firmware).
+pub const BOARD_ID: u16 = rc_boot::BOARD_L475;
 
 /// The erase unit: a 2 KiB page of the L475 (the emulator erases its RAM in the same steps).
-const PAGE: u32 = 2048;
+const PAGE: u32 = rc_boot::layout::PAGE;
 
-/// Bytes read back into the CRC-32 per step (a few hundred µs on the board).
+/// Bytes read back into the CRC-32 and the SHA-512 per step (a few ms on the board).
 const VERIFY_STEP: u32 = 2048;
 
 /// The flash's write unit: every write is whole double words.
-#[cfg(feature = "hw")]
-const WORD: usize = 8;
+const WORD: usize = rc_boot::layout::WORD as usize;
 
-/// The emulator's partition, in RAM: 32 KiB of the 96 KiB the build links into (the other
+/// The public key images are verified with.
+#[cfg(feature = "hw")]
+const UPDATE_KEY: Option<[u8; 32]> = include!(concat!(env!("OUT_DIR"), "/update_key.rs"));
+#[cfg(feature = "emulator")]
+const UPDATE_KEY: Option<[u8; 32]> = Some(rc_boot::TEST_PUBLIC_KEY);
+
+/// The emulator's DFU partition, in RAM: 32 KiB of the 96 KiB the build links into (the other
 /// statics and the deepest stack, the node in it, take about 16 KiB: `scripts/size-report.sh`).
 #[cfg(feature = "emulator")]
 pub const EMU_PARTITION: usize = 32 * 1024;
@@ -55,60 +88,152 @@ pub const EMU_PARTITION: usize = 32 * 1024;
 static EMU_RAM: static_cell::ConstStaticCell<[u8; EMU_PARTITION]> =
     static_cell::ConstStaticCell::new([0; EMU_PARTITION]);
 
-/// Where the partition's bytes are, for one step.
-#[cfg(feature = "hw")]
-type Medium<'a> = Option<&'a mut crate::board::SettingsFlash>;
+/// The emulator's STATE pages, in RAM: as large as the board's.
 #[cfg(feature = "emulator")]
-type Medium<'a> = &'a mut [u8];
+static EMU_STATE: static_cell::ConstStaticCell<[u8; rc_boot::layout::STATE_SIZE as usize]> =
+    static_cell::ConstStaticCell::new([0xFF; rc_boot::layout::STATE_SIZE as usize]);
+
+/// How a job went, for [`report`].
+pub struct Outcome {
+    result: Result<(), UpdateError>,
+    /// The version of the image marked, with a Finish that marked one.
+    marked: Option<u32>,
+}
+
+impl Outcome {
+    fn failed(error: UpdateError) -> Outcome {
+        Outcome {
+            result: Err(error),
+            marked: None,
+        }
+    }
+}
+
+impl From<Result<(), UpdateError>> for Outcome {
+    fn from(result: Result<(), UpdateError>) -> Outcome {
+        Outcome {
+            result,
+            marked: None,
+        }
+    }
+}
+
+/// Tells the node how a job went.
+pub fn report(node: &mut Node, outcome: Outcome) {
+    if let Some(version) = outcome.marked {
+        node.set_image_version(version);
+    }
+    node.update_done(outcome.result);
+}
 
 /// The job under way.
-#[derive(Clone, Copy)]
+// One job, held once in the gateway task's Dfu (no heap to box the verifier's 200-byte hash
+// into): the size of the largest variant is the size of the one value there is.
+#[allow(clippy::large_enum_variant)]
 enum Job {
     None,
-    /// Erasing from `next` (an offset in the partition) up to `end`.
+    /// Erasing from `next` (an offset in DFU) up to `end`.
     Erase {
         next: u32,
         end: u32,
     },
-    /// Reading back from `next` up to `len`, into `crc`; `want` is the image's CRC-32.
+    /// Reading back from `next` up to `len` into `crc` (`want`: the transfer's CRC-32) and
+    /// `signed`; then the signature, then the mark.
     Verify {
         next: u32,
         len: u32,
         crc: Crc32,
         want: u32,
+        signed: Verifier,
+        version: u32,
     },
 }
 
-/// The partition and the job under way.
+/// DFU, STATE and the job under way.
 pub struct Dfu {
     job: Job,
-    /// The partition's bytes (the emulator's RAM).
+    /// What the bootloader did at this start.
+    boot: BootState,
+    /// A trial (or the old firmware after a rollback) not yet confirmed.
+    unconfirmed: bool,
     #[cfg(feature = "emulator")]
     ram: &'static mut [u8],
+    #[cfg(feature = "emulator")]
+    state: &'static mut [u8],
 }
 
 impl Dfu {
-    /// No job; the emulator's RAM partition taken (once: the gateway task's).
+    /// No job; the emulator's RAM partitions taken (once: the gateway task's).
     pub fn new() -> Dfu {
         Dfu {
             job: Job::None,
+            boot: BootState::Unknown,
+            unconfirmed: false,
             #[cfg(feature = "emulator")]
             ram: EMU_RAM.take().as_mut_slice(),
+            #[cfg(feature = "emulator")]
+            state: EMU_STATE.take().as_mut_slice(),
         }
     }
 
-    /// What the node is told: this board, and the partition's size.
+    /// What the node is told: this board, and the largest image (DFU's size, but no larger than
+    /// ACTIVE, where the bootloader swaps it).
     pub fn target() -> Target {
         #[cfg(feature = "hw")]
-        let partition = {
-            let range = crate::board::DFU_RANGE;
-            range.end - range.start
-        };
+        let partition = L475.max_image();
         #[cfg(feature = "emulator")]
         let partition = EMU_PARTITION as u32;
         Target {
             board: BOARD_ID,
             partition,
+        }
+    }
+
+    /// Reads what the bootloader did at this start from the state partition: a swap (the new
+    /// firmware on trial), a rollback, or nothing (confirmed). For BOOTSTAT.
+    pub fn start_up(&mut self, settings: &mut crate::settings::SavedSettings) -> BootState {
+        let state = self.parts(settings).state().and_then(|mut state| {
+            let mut word = [0; WORD];
+            BlockingFirmwareState::new(&mut state, &mut word)
+                .get_state()
+                .map_err(|_| ())
+        });
+        (self.boot, self.unconfirmed) = match state {
+            Ok(State::Swap) => (BootState::Trial, true),
+            Ok(State::Revert) => (BootState::RolledBack, true),
+            Ok(_) => (BootState::Confirmed, false),
+            Err(()) => (BootState::Unknown, false),
+        };
+        if self.unconfirmed {
+            info!("update: a trial (or a rollback) until the bus and the PLC link answer");
+        }
+        self.boot
+    }
+
+    /// Confirms a trial once the node says it passed and the bus is quiet: embassy-boot's
+    /// `mark_booted`, after which the bootloader keeps this firmware. (After a rollback the old
+    /// firmware is confirmed the same way, so that the next image may be marked.)
+    pub fn confirm(&mut self, node: &mut Node, settings: &mut crate::settings::SavedSettings) {
+        if !self.unconfirmed || !node.trial_passed() || !node.quiet_for_flash() {
+            return;
+        }
+        let confirmed = self.parts(settings).state().and_then(|mut state| {
+            let mut word = [0; WORD];
+            BlockingFirmwareState::new(&mut state, &mut word)
+                .mark_booted()
+                .map_err(|_| ())
+        });
+        match confirmed {
+            Ok(()) => {
+                info!("update: this firmware confirmed");
+                self.unconfirmed = false;
+                if self.boot == BootState::Trial {
+                    self.boot = BootState::Confirmed;
+                    node.set_boot_state(BootState::Confirmed);
+                }
+            }
+            // Tried again at the next quiet pass.
+            Err(()) => warn!("update: the confirmation could not be written"),
         }
     }
 
@@ -119,211 +244,419 @@ impl Dfu {
 
     /// Takes `job` (the node hands out one at a time: a job under way is replaced, which the
     /// node never asks). A chunk is written at once (its bytes are the node's, lent for this
-    /// call only): its result; an erase or a verification goes on in [`Dfu::step`]: `None`.
+    /// call only), a refusal given at once: the outcome; an erase or a check goes on in
+    /// [`Dfu::step`]: `None`.
     #[inline(never)]
     pub fn start(
         &mut self,
         job: &UpdateJob<'_>,
         settings: &mut crate::settings::SavedSettings,
-    ) -> Option<Result<(), ()>> {
-        let partition = Dfu::target().partition;
-        self.job = match *job {
-            UpdateJob::Erase { len } => Job::Erase {
-                next: 0,
-                end: len.div_ceil(PAGE).saturating_mul(PAGE).min(partition),
-            },
-            UpdateJob::Write { offset, bytes } => {
-                self.job = Job::None;
-                #[cfg(feature = "hw")]
-                return Some(write(&mut settings.flash(), offset, bytes));
-                #[cfg(feature = "emulator")]
-                {
-                    let _ = settings;
-                    return Some(write(&mut &mut *self.ram, offset, bytes));
-                }
-            }
-            UpdateJob::Finish { len, crc32 } => Job::Verify {
-                next: 0,
-                len: len.min(partition),
-                crc: Crc32::new(),
-                want: crc32,
-            },
-        };
-        None
-    }
-
-    /// One step of the job under way, on the board's flash (the settings store's driver); its
-    /// result once the job is whole (for `Node::update_done`), `None` while it goes on or when
-    /// there is none.
-    #[cfg(feature = "hw")]
-    #[inline(never)]
-    pub fn step(
-        &mut self,
-        settings: &mut crate::settings::SavedSettings,
-    ) -> Option<Result<(), ()>> {
-        if !self.busy() {
-            return None;
+    ) -> Option<Outcome> {
+        self.job = Job::None;
+        // DFU holds the firmware a trial would go back to, and no second image may be marked.
+        if self.unconfirmed && !matches!(job, UpdateJob::Write { .. }) {
+            return Some(Outcome::failed(UpdateError::OnTrial));
         }
-        self.step_on(settings.flash())
-    }
-
-    /// One step of the job under way, in the emulator's RAM partition.
-    #[cfg(feature = "emulator")]
-    #[inline(never)]
-    pub fn step(
-        &mut self,
-        _settings: &mut crate::settings::SavedSettings,
-    ) -> Option<Result<(), ()>> {
-        if !self.busy() {
-            return None;
-        }
-        // Out of `self` while the step changes the job.
-        let ram = core::mem::take(&mut self.ram);
-        let result = self.step_on(&mut *ram);
-        self.ram = ram;
-        result
-    }
-
-    fn step_on(&mut self, mut medium: Medium<'_>) -> Option<Result<(), ()>> {
-        let (next, result) = match self.job {
-            Job::None => return None,
-            Job::Erase { next, end } => {
-                if next >= end {
-                    (Job::None, Some(Ok(())))
-                } else {
-                    match erase(&mut medium, next, next + PAGE) {
-                        Ok(()) => (
-                            Job::Erase {
-                                next: next + PAGE,
-                                end,
-                            },
-                            None,
-                        ),
-                        Err(()) => (Job::None, Some(Err(()))),
+        let mut parts = self.parts(settings);
+        match *job {
+            UpdateJob::Erase { len } => {
+                // An image marked earlier in this run is unmarked before its pages go.
+                let unmarked = parts.state().and_then(|mut state| {
+                    let mut word = [0; WORD];
+                    let mut marks = BlockingFirmwareState::new(&mut state, &mut word);
+                    match marks.get_state() {
+                        Ok(State::Swap) => marks.mark_booted().map_err(|_| ()),
+                        Ok(_) => Ok(()),
+                        Err(_) => Err(()),
                     }
+                });
+                if unmarked.is_err() {
+                    return Some(Outcome::failed(UpdateError::Flash));
+                }
+                let partition = Dfu::target().partition;
+                self.job = Job::Erase {
+                    next: 0,
+                    end: len.div_ceil(PAGE).saturating_mul(PAGE).min(partition),
+                };
+                None
+            }
+            UpdateJob::Write { offset, bytes } => Some(
+                parts
+                    .dfu()
+                    .and_then(|mut dfu| write(&mut dfu, offset, bytes))
+                    .map_err(|()| UpdateError::Flash)
+                    .into(),
+            ),
+            UpdateJob::Finish { len, crc32 } => {
+                let read = parts.dfu().map_err(|()| UpdateError::Flash);
+                let trailer = match read.and_then(|mut dfu| read_trailer(&mut dfu, len)) {
+                    Ok(trailer) => trailer,
+                    Err(error) => return Some(Outcome::failed(error)),
+                };
+                let Ok(signed) = Verifier::new(&trailer) else {
+                    return Some(Outcome::failed(UpdateError::NotAnImage));
+                };
+                self.job = Job::Verify {
+                    next: 0,
+                    len,
+                    crc: Crc32::new(),
+                    want: crc32,
+                    signed,
+                    version: trailer.version.to_u32(),
+                };
+                None
+            }
+        }
+    }
+
+    /// One step of the job under way: its outcome once the job is whole, `None` while it goes
+    /// on or when there is none.
+    #[inline(never)]
+    pub fn step(&mut self, settings: &mut crate::settings::SavedSettings) -> Option<Outcome> {
+        let job = core::mem::replace(&mut self.job, Job::None);
+        let mut parts = self.parts(settings);
+        let (next, outcome) = match job {
+            Job::None => return None,
+            Job::Erase { next, end } if next >= end => (Job::None, Some(Ok(()).into())),
+            Job::Erase { next, end } => {
+                match parts
+                    .dfu()
+                    .and_then(|mut dfu| erase(&mut dfu, next, next + PAGE))
+                {
+                    Ok(()) => (
+                        Job::Erase {
+                            next: next + PAGE,
+                            end,
+                        },
+                        None,
+                    ),
+                    Err(()) => (Job::None, Some(Outcome::failed(UpdateError::Flash))),
                 }
             }
             Job::Verify {
                 next,
                 len,
+                crc,
+                want,
+                signed,
+                version,
+            } if next >= len => (
+                Job::None,
+                Some(finish(&mut parts, crc, want, signed, version)),
+            ),
+            Job::Verify {
+                next,
+                len,
                 mut crc,
                 want,
+                mut signed,
+                version,
             } => {
-                if next >= len {
-                    let result = if crc.finish() == want {
-                        mark(&mut medium, len, want)
-                    } else {
-                        warn!("update: the image read back has another CRC-32");
-                        Err(())
-                    };
-                    (Job::None, Some(result))
-                } else {
-                    let end = (next + VERIFY_STEP).min(len);
-                    match read_into(&mut medium, next, end, &mut crc) {
-                        Ok(()) => (
-                            Job::Verify {
-                                next: end,
-                                len,
-                                crc,
-                                want,
-                            },
-                            None,
-                        ),
-                        Err(()) => (Job::None, Some(Err(()))),
-                    }
+                let end = (next + VERIFY_STEP).min(len);
+                match parts
+                    .dfu()
+                    .and_then(|mut dfu| read_into(&mut dfu, next, end, &mut crc, &mut signed))
+                {
+                    Ok(()) => (
+                        Job::Verify {
+                            next: end,
+                            len,
+                            crc,
+                            want,
+                            signed,
+                            version,
+                        },
+                        None,
+                    ),
+                    Err(()) => (Job::None, Some(Outcome::failed(UpdateError::Flash))),
                 }
             }
         };
         self.job = next;
-        result
+        outcome
+    }
+
+    /// DFU and STATE, on the board's flash or in the emulator's RAM.
+    #[cfg(feature = "hw")]
+    fn parts<'a>(&'a mut self, settings: &'a mut crate::settings::SavedSettings) -> Parts<'a> {
+        Parts {
+            flash: settings.flash(),
+        }
+    }
+
+    #[cfg(feature = "emulator")]
+    fn parts<'a>(&'a mut self, _settings: &'a mut crate::settings::SavedSettings) -> Parts<'a> {
+        Parts {
+            dfu: &mut *self.ram,
+            state: &mut *self.state,
+        }
     }
 }
 
-/// "Mark the image for the bootloader": nothing yet. TODO(issue 37, the bootloader): write
-/// embassy-boot's state partition (its magic for a swap at the next start) here. Until then an
-/// image reported ready is only checked, never started.
-fn mark(_medium: &mut Medium<'_>, _len: u32, _crc32: u32) -> Result<(), ()> {
-    Ok(())
+/// The last check of a Finish, once the image is read back: its CRC-32, its signature, then
+/// the mark.
+fn finish(parts: &mut Parts<'_>, crc: Crc32, want: u32, signed: Verifier, version: u32) -> Outcome {
+    if crc.finish() != want {
+        warn!("update: the image read back has another CRC-32");
+        return Outcome::failed(UpdateError::Flash);
+    }
+    let Some(key) = UPDATE_KEY else {
+        warn!("update: built without a key (RC_GATEWAY_UPDATE_KEY): no image is taken");
+        return Outcome::failed(UpdateError::Signature);
+    };
+    if signed.finish(&key).is_err() {
+        warn!("update: the image's signature does not verify");
+        return Outcome::failed(UpdateError::Signature);
+    }
+    let marked = parts.state().and_then(|mut state| {
+        let mut word = [0; WORD];
+        BlockingFirmwareState::new(&mut state, &mut word)
+            .mark_updated()
+            .map_err(|_| ())
+    });
+    match marked {
+        Ok(()) => {
+            info!("update: image {:#x} marked for the next start", version);
+            Outcome {
+                result: Ok(()),
+                marked: Some(version),
+            }
+        }
+        Err(()) => Outcome::failed(UpdateError::Flash),
+    }
 }
 
-/// Erases the partition's page at `from..to` (whole pages inside the partition).
-#[cfg(feature = "hw")]
-fn erase(flash: &mut Medium<'_>, from: u32, to: u32) -> Result<(), ()> {
-    use embedded_storage::nor_flash::NorFlash;
-    let base = crate::board::DFU_RANGE.start;
-    if to > crate::board::DFU_RANGE.end - base {
+/// The image's trailer, read from the end of the `len` bytes in DFU and checked for this board
+/// and the length the transfer declared.
+fn read_trailer(dfu: &mut impl NorFlash, len: u32) -> Result<Trailer, UpdateError> {
+    let at = trailer_offset(len).map_err(|_| UpdateError::NotAnImage)?;
+    let mut raw = [0; TRAILER_LEN];
+    dfu.read(at, &mut raw).map_err(|_| UpdateError::Flash)?;
+    let trailer = Trailer::parse(&raw).map_err(|_| UpdateError::NotAnImage)?;
+    trailer
+        .check(BOARD_ID, len, L475.max_image())
+        .map_err(|_| UpdateError::NotAnImage)?;
+    Ok(trailer)
+}
+
+/// Erases DFU's page at `from..to`.
+fn erase(dfu: &mut impl NorFlash, from: u32, to: u32) -> Result<(), ()> {
+    if to as usize > dfu.capacity() {
         return Err(());
     }
-    let flash = flash.as_deref_mut().ok_or(())?;
-    flash.erase(base + from, base + to).map_err(|_| {
-        warn!("update: erase at {:#x} failed", base + from);
+    dfu.erase(from, to).map_err(|_| {
+        warn!("update: erase at {:#x} failed", from);
     })
 }
 
-/// Writes `bytes` at `offset` of the partition (a multiple of the word): the whole words, then
-/// the rest padded with 0xFF to one.
-#[cfg(feature = "hw")]
-fn write(flash: &mut Medium<'_>, offset: u32, bytes: &[u8]) -> Result<(), ()> {
-    use embedded_storage::nor_flash::NorFlash;
-    let base = crate::board::DFU_RANGE.start;
+/// Writes `bytes` at `offset` of DFU (a multiple of the word): the whole words, then the rest
+/// padded with 0xFF (the erased value) to one.
+fn write(dfu: &mut impl NorFlash, offset: u32, bytes: &[u8]) -> Result<(), ()> {
     let end = offset as usize + bytes.len().div_ceil(WORD) * WORD;
-    if end > (crate::board::DFU_RANGE.end - base) as usize {
+    if end > dfu.capacity() {
         return Err(());
     }
-    let flash = flash.as_deref_mut().ok_or(())?;
     let whole = bytes.len() / WORD * WORD;
     let (words, rest) = bytes.split_at(whole);
-    let mut result = flash.write(base + offset, words);
+    let mut result = dfu.write(offset, words);
     if result.is_ok() && !rest.is_empty() {
         let mut word = [0xFF; WORD];
         if let Some(to) = word.get_mut(..rest.len()) {
             to.copy_from_slice(rest);
         }
-        result = flash.write(base + offset + whole as u32, &word);
+        result = dfu.write(offset + whole as u32, &word);
     }
     result.map_err(|_| {
-        warn!("update: write at {:#x} failed", base + offset);
+        warn!("update: write at {:#x} failed", offset);
     })
 }
 
-/// Reads the partition's `from..to` into `crc`, a few words at a time.
-#[cfg(feature = "hw")]
-fn read_into(flash: &mut Medium<'_>, from: u32, to: u32, crc: &mut Crc32) -> Result<(), ()> {
-    use embedded_storage::nor_flash::ReadNorFlash;
-    let base = crate::board::DFU_RANGE.start;
-    let flash = flash.as_deref_mut().ok_or(())?;
+/// Reads DFU's `from..to` into `crc` and `signed`, a few words at a time.
+fn read_into(
+    dfu: &mut impl NorFlash,
+    from: u32,
+    to: u32,
+    crc: &mut Crc32,
+    signed: &mut Verifier,
+) -> Result<(), ()> {
     let mut buf = [0u8; 64];
     let mut at = from;
     while at < to {
         let n = (to - at).min(buf.len() as u32);
         let part = buf.get_mut(..n as usize).ok_or(())?;
-        flash.read(base + at, part).map_err(|_| ())?;
+        dfu.read(at, part).map_err(|_| ())?;
         crc.update(part);
+        signed.update(part);
         at += n;
     }
     Ok(())
 }
 
-/// Fills the RAM partition's `from..to` with the erased value.
+/// Where DFU and STATE are: windows on the board's flash.
+#[cfg(feature = "hw")]
+struct Parts<'a> {
+    flash: Option<&'a mut crate::board::SettingsFlash>,
+}
+
+#[cfg(feature = "hw")]
+impl Parts<'_> {
+    fn window(&mut self, range: core::ops::Range<u32>) -> Result<impl NorFlash + '_, ()> {
+        let flash = self.flash.as_deref_mut().ok_or(())?;
+        Ok(Window {
+            flash,
+            base: range.start,
+            len: range.end - range.start,
+        })
+    }
+
+    fn dfu(&mut self) -> Result<impl NorFlash + '_, ()> {
+        self.window(crate::board::DFU_RANGE)
+    }
+
+    fn state(&mut self) -> Result<impl NorFlash + '_, ()> {
+        self.window(crate::board::STATE_RANGE)
+    }
+}
+
+/// Where DFU and STATE are: the emulator's RAM.
 #[cfg(feature = "emulator")]
-fn erase(ram: &mut Medium<'_>, from: u32, to: u32) -> Result<(), ()> {
-    ram.get_mut(from as usize..to as usize)
-        .ok_or(())?
-        .fill(0xFF);
-    Ok(())
+struct Parts<'a> {
+    dfu: &'a mut [u8],
+    state: &'a mut [u8],
 }
 
 #[cfg(feature = "emulator")]
-fn write(ram: &mut Medium<'_>, offset: u32, bytes: &[u8]) -> Result<(), ()> {
-    let end = offset as usize + bytes.len();
-    ram.get_mut(offset as usize..end)
-        .ok_or(())?
-        .copy_from_slice(bytes);
-    Ok(())
+impl Parts<'_> {
+    fn dfu(&mut self) -> Result<impl NorFlash + '_, ()> {
+        Ok(Ram(&mut *self.dfu))
+    }
+
+    fn state(&mut self) -> Result<impl NorFlash + '_, ()> {
+        Ok(Ram(&mut *self.state))
+    }
+}
+
+/// A partition of the flash: offsets from its start, none past its end.
+#[cfg(feature = "hw")]
+struct Window<'a, F> {
+    flash: &'a mut F,
+    base: u32,
+    len: u32,
+}
+
+/// A partition's error: the flash's, or an offset outside the partition.
+#[derive(Debug)]
+enum PartError<E> {
+    Outside,
+    #[cfg_attr(feature = "emulator", allow(dead_code))]
+    Flash(E),
+}
+
+impl<E: NorFlashError> NorFlashError for PartError<E> {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            PartError::Outside => NorFlashErrorKind::OutOfBounds,
+            PartError::Flash(e) => e.kind(),
+        }
+    }
+}
+
+#[cfg(feature = "hw")]
+impl<F: ErrorType> ErrorType for Window<'_, F> {
+    type Error = PartError<F::Error>;
+}
+
+#[cfg(feature = "hw")]
+impl<F: ReadNorFlash> Window<'_, F> {
+    /// The flash's offset of `offset..offset + len` in the window, if it is inside.
+    fn at(&self, offset: u32, len: usize) -> Result<u32, PartError<F::Error>> {
+        let end = (offset as usize)
+            .checked_add(len)
+            .ok_or(PartError::Outside)?;
+        if end > self.len as usize {
+            return Err(PartError::Outside);
+        }
+        Ok(self.base + offset)
+    }
+}
+
+#[cfg(feature = "hw")]
+impl<F: ReadNorFlash> ReadNorFlash for Window<'_, F> {
+    const READ_SIZE: usize = F::READ_SIZE;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        let at = self.at(offset, bytes.len())?;
+        self.flash.read(at, bytes).map_err(PartError::Flash)
+    }
+
+    fn capacity(&self) -> usize {
+        self.len as usize
+    }
+}
+
+#[cfg(feature = "hw")]
+impl<F: NorFlash> NorFlash for Window<'_, F> {
+    const WRITE_SIZE: usize = F::WRITE_SIZE;
+    const ERASE_SIZE: usize = F::ERASE_SIZE;
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        let at = self.at(offset, bytes.len())?;
+        self.flash.write(at, bytes).map_err(PartError::Flash)
+    }
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        let at = self.at(from, to.saturating_sub(from) as usize)?;
+        self.flash
+            .erase(at, at + (to - from))
+            .map_err(PartError::Flash)
+    }
+}
+
+/// A partition in the emulator's RAM, as NOR flash of the L475's units.
+#[cfg(feature = "emulator")]
+struct Ram<'a>(&'a mut [u8]);
+
+#[cfg(feature = "emulator")]
+impl ErrorType for Ram<'_> {
+    type Error = PartError<NorFlashErrorKind>;
 }
 
 #[cfg(feature = "emulator")]
-fn read_into(ram: &mut Medium<'_>, from: u32, to: u32, crc: &mut Crc32) -> Result<(), ()> {
-    crc.update(ram.get(from as usize..to as usize).ok_or(())?);
-    Ok(())
+impl ReadNorFlash for Ram<'_> {
+    const READ_SIZE: usize = 1;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        let from = offset as usize;
+        let to = from.checked_add(bytes.len()).ok_or(PartError::Outside)?;
+        bytes.copy_from_slice(self.0.get(from..to).ok_or(PartError::Outside)?);
+        Ok(())
+    }
+
+    fn capacity(&self) -> usize {
+        self.0.len()
+    }
+}
+
+#[cfg(feature = "emulator")]
+impl NorFlash for Ram<'_> {
+    const WRITE_SIZE: usize = WORD;
+    const ERASE_SIZE: usize = PAGE as usize;
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        let from = offset as usize;
+        let to = from.checked_add(bytes.len()).ok_or(PartError::Outside)?;
+        self.0
+            .get_mut(from..to)
+            .ok_or(PartError::Outside)?
+            .copy_from_slice(bytes);
+        Ok(())
+    }
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.0
+            .get_mut(from as usize..to as usize)
+            .ok_or(PartError::Outside)?
+            .fill(0xFF);
+        Ok(())
+    }
 }

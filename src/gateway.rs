@@ -138,6 +138,7 @@ pub async fn run(
     #[cfg(feature = "update")]
     if partition {
         node.set_update_target(crate::dfu::Dfu::target());
+        node.set_boot_state(dfu.start_up(settings));
     }
     let mut stop = boot.stop;
     node.set_stop_input(now(), stop);
@@ -289,10 +290,8 @@ pub async fn run(
                 // steps below, one per pass.
                 #[cfg(feature = "update")]
                 Action::Update(job) => {
-                    if let Some(result) = dfu.start(&job, settings) {
-                        node.update_done(
-                            result.map_err(|()| protocol::plc::update::UpdateError::Flash),
-                        );
+                    if let Some(outcome) = dfu.start(&job, settings) {
+                        crate::dfu::report(node, outcome);
                     }
                 }
             }
@@ -305,10 +304,13 @@ pub async fn run(
         // it is whole.
         #[cfg(feature = "update")]
         if node.quiet_for_flash() {
-            if let Some(result) = dfu.step(settings) {
-                node.update_done(result.map_err(|()| protocol::plc::update::UpdateError::Flash));
+            if let Some(outcome) = dfu.step(settings) {
+                crate::dfu::report(node, outcome);
             }
         }
+        // A new firmware on trial confirmed once it has shown it works (and the bus is quiet).
+        #[cfg(feature = "update")]
+        dfu.confirm(node, settings);
 
         // The I/O task shows them when it next wakes (1 ms with a PIO axis, else up to 20 ms:
         // the outputs are all OFF then). Every sample when the node wants them periodically

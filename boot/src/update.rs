@@ -12,7 +12,11 @@
 //! confirms itself with embassy-boot's `mark_booted` once it runs well; a reset before that
 //! makes the bootloader put the old application back.
 
-use embassy_boot::{BlockingFirmwareUpdater, FirmwareUpdaterError, State};
+use embassy_boot::BlockingFirmwareUpdater;
+/// embassy-boot's state partition and its states, for the application's marks (`mark_updated`
+/// after a [`Verifier`], `mark_booted` to confirm a trial): re-exported so that the application
+/// uses the same embassy-boot as this crate.
+pub use embassy_boot::{BlockingFirmwareState, FirmwareUpdaterError, State};
 use embedded_storage::nor_flash::NorFlash;
 
 use crate::image::{trailer_offset, ImageError, Trailer, TRAILER_LEN};

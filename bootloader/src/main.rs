@@ -1,6 +1,6 @@
 //! The bootloader of the L475 gateway: embassy-boot's swap, then the application.
 //!
-//! At every reset it reads the state partition (rc-boot's layout): **Boot**, the application in
+//! At every reset it reads the state partition (`rc_boot::layout::L475`): **Boot**, the application in
 //! ACTIVE runs; **Swap**, an image the application checked and marked (its signature through
 //! embassy-boot's `verify_and_mark_updated`) is swapped into ACTIVE page by page, the old one
 //! kept in DFU, and the new one runs on trial; a trial the application never confirmed
@@ -36,9 +36,7 @@ use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 
-mod layout;
-
-use layout::{ACTIVE, BOOTLOADER, DFU, FLASH_BASE, PAGE, STATE};
+use rc_boot::layout::{Region, FLASH_BASE, L475, PAGE};
 
 #[entry]
 fn main() -> ! {
@@ -47,15 +45,15 @@ fn main() -> ! {
     // SAFETY: the bootloader is the only code running, and the flash is its only peripheral.
     let flash = Flash::new_blocking(unsafe { embassy_stm32::peripherals::FLASH::steal() });
     let flash = Mutex::<NoopRawMutex, _>::new(RefCell::new(Watched(flash)));
-    let part = |range: &core::ops::Range<u32>| {
-        BlockingPartition::new(&flash, range.start - FLASH_BASE, range.end - range.start)
+    let part = |region: Region| {
+        BlockingPartition::new(&flash, region.offset_from(FLASH_BASE), region.len())
     };
     let config = BootLoaderConfig {
-        active: part(&ACTIVE),
-        dfu: part(&DFU),
-        state: part(&STATE),
+        active: part(L475.active),
+        dfu: part(L475.dfu),
+        state: part(L475.state),
     };
-    let Ok(loader) = BootLoader::try_prepare::<_, _, _, { PAGE as usize }>(config) else {
+    let Ok(loader) = BootLoader::try_prepare::<_, _, _, { rc_boot::BOOT_BUF_LEN }>(config) else {
         // A flash operation failed: from the top, where the swap's progress says.
         SCB::sys_reset();
     };
@@ -64,7 +62,7 @@ fn main() -> ! {
     instruction_cache_reset();
     // SAFETY: ACTIVE holds an application linked there (its vector table first), whole: the
     // swap is done or was never started.
-    unsafe { loader.load(ACTIVE.start) }
+    unsafe { loader.load(L475.active.start) }
 }
 
 /// The flash, one page at a time, the IWDG petted before each operation.
@@ -146,8 +144,13 @@ unsafe fn NonMaskableInt() {
     let eccr = pac::FLASH.eccr();
     let ecc = eccr.read();
     // FLASH_ECCR gives the address within the bank.
-    let offset = ecc.addr_ecc() + if ecc.bk_ecc() { layout::BANK_SIZE } else { 0 };
-    if ecc.eccd() && !ecc.sysf_ecc() && offset >= BOOTLOADER.end - FLASH_BASE {
+    let offset = ecc.addr_ecc()
+        + if ecc.bk_ecc() {
+            L475.bank2 - FLASH_BASE
+        } else {
+            0
+        };
+    if ecc.eccd() && !ecc.sysf_ecc() && offset >= L475.bootloader.end - FLASH_BASE {
         eccr.modify(|w| w.set_eccd(true));
         return;
     }

@@ -105,11 +105,29 @@ pub const LED_ON: embassy_stm32::gpio::Level = embassy_stm32::gpio::Level::High;
 #[cfg(feature = "hw")]
 pub const SETTINGS_RANGE: core::ops::Range<u32> = 0x000F_E000..0x0010_0000;
 
-/// The DFU partition (offsets from the start of flash): bank 2 up to the settings pages, 504 KiB,
-/// 252 pages of 2 KiB (`memory/l475vg.x` keeps the program in bank 1). Provisional: the
-/// bootloader (issue 37) owns the layout.
+/// Offsets from the start of flash of a region of the bootloader's layout.
 #[cfg(feature = "hw")]
-pub const DFU_RANGE: core::ops::Range<u32> = BANK_2..SETTINGS_RANGE.start;
+const fn offsets(region: rc_boot::layout::Region) -> core::ops::Range<u32> {
+    let start = region.offset_from(rc_boot::layout::FLASH_BASE);
+    start..start + region.len()
+}
+
+/// The DFU partition (offsets from the start of flash): where an image sent over the PLC link is
+/// written, and the old firmware kept during a trial (`rc_boot::layout::L475.dfu`, bank 2).
+#[cfg(feature = "hw")]
+pub const DFU_RANGE: core::ops::Range<u32> = offsets(rc_boot::layout::L475.dfu);
+
+/// embassy-boot's STATE pages (offsets from the start of flash): the mark for a swap, the
+/// swap's progress (`rc_boot::layout::L475.state`, bank 2, below the settings).
+#[cfg(feature = "hw")]
+pub const STATE_RANGE: core::ops::Range<u32> = offsets(rc_boot::layout::L475.state);
+
+// The settings pages are the layout's too.
+#[cfg(feature = "hw")]
+const _: () = assert!(
+    offsets(rc_boot::layout::L475.settings).start == SETTINGS_RANGE.start
+        && offsets(rc_boot::layout::L475.settings).end == SETTINGS_RANGE.end
+);
 
 /// The flash with the data cache off while it is read, written or erased, and a read that hit an
 /// ECC double error failing.
@@ -160,7 +178,10 @@ pub fn settings_ecc_error() -> bool {
         return false;
     }
     let offset = ecc.addr_ecc() + if ecc.bk_ecc() { BANK_2 } else { 0 };
-    if !SETTINGS_RANGE.contains(&offset) && !DFU_RANGE.contains(&offset) {
+    if !SETTINGS_RANGE.contains(&offset)
+        && !DFU_RANGE.contains(&offset)
+        && !STATE_RANGE.contains(&offset)
+    {
         return false;
     }
     SETTINGS_ECC_ERROR.store(offset, Ordering::Relaxed);

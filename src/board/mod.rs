@@ -34,7 +34,7 @@ pub use l475::{
 };
 /// The emulator has no settings store.
 #[cfg(all(feature = "board-l475", feature = "hw"))]
-pub use l475::{DFU_RANGE, SETTINGS_RANGE};
+pub use l475::{DFU_RANGE, SETTINGS_RANGE, STATE_RANGE};
 
 use embassy_stm32::gpio::{AnyPin, Input, Level, Output, Pin, Pull, Speed};
 use embassy_stm32::usart;
