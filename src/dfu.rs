@@ -191,6 +191,9 @@ impl Dfu {
 
     /// Reads what the bootloader did at this start from the state partition: a swap (the new
     /// firmware on trial), a rollback, or nothing (confirmed). For BOOTSTAT.
+    // Not inlined, as `confirm`: their frames (embassy-boot's state, a flash window) would sit
+    // in the gateway loop's under every request the node serves.
+    #[inline(never)]
     pub fn start_up(&mut self, settings: &mut crate::settings::SavedSettings) -> BootState {
         let state = self.parts(settings).state().and_then(|mut state| {
             let mut word = [0; WORD];
@@ -213,6 +216,7 @@ impl Dfu {
     /// Confirms a trial once the node says it passed and the bus is quiet: embassy-boot's
     /// `mark_booted`, after which the bootloader keeps this firmware. (After a rollback the old
     /// firmware is confirmed the same way, so that the next image may be marked.)
+    #[inline(never)]
     pub fn confirm(&mut self, node: &mut Node, settings: &mut crate::settings::SavedSettings) {
         if !self.unconfirmed || !node.trial_passed() || !node.quiet_for_flash() {
             return;
