@@ -100,14 +100,14 @@ pub struct Running {
     pub marked: u32,
 }
 
-/// VERSION, UPTIME and BOOTSTAT. Reading VERSION is a Modbus reply: on a gateway whose new
-/// firmware is on trial, it is what confirms the trial (`Node::trial_passed`), so BOOTSTAT is
-/// read after it.
+/// BOOTSTAT, then VERSION and UPTIME. Any Modbus reply of a gateway whose new firmware is on
+/// trial is what confirms the trial (`Node::trial_passed`, once the bus's establishment is
+/// over), so BOOTSTAT is read first: it shows the state the start left.
 pub fn running(gw: &mut Gw) -> Result<Running, Fail> {
     let unit = gw.unit;
+    let b = gw.read(unit, G_BOOT_STATUS, G_BOOT_STATUS_LEN)?;
     let v = gw.read(unit, G_VERSION, 4)?;
     let (vmaj, patch, up_hi, up_lo) = (v[0], v[1], v[2], v[3]);
-    let b = gw.read(unit, G_BOOT_STATUS, G_BOOT_STATUS_LEN)?;
     Ok(Running {
         version: format!("{}.{}.{patch}", vmaj >> 8, vmaj & 0xFF),
         uptime: u32::from(up_hi) << 16 | u32::from(up_lo),
@@ -160,9 +160,10 @@ pub fn restart(
             )));
         }
         if reconnect {
-            match crate::connect(cli) {
-                Ok(fresh) => {
-                    *gw = fresh;
+            // Only the link: the first request must be BOOTSTAT's read (`running`).
+            match crate::open_link(cli) {
+                Ok(link) => {
+                    gw.link = link;
                     reconnect = false;
                 }
                 Err(e) => {
@@ -187,6 +188,13 @@ pub fn restart(
                     std::thread::sleep(Duration::from_millis(200));
                     continue;
                 }
+                // A trial is confirmed by the gateway once it has answered (these reads) after
+                // its bus's establishment: wait a little to say so.
+                let confirmed = if now.boot == BootState::Trial {
+                    Some(wait_confirmed(gw, CONFIRM_PATIENCE)?)
+                } else {
+                    None
+                };
                 if json {
                     print_json(&json!({
                         "restart": true,
@@ -194,11 +202,19 @@ pub fn restart(
                         "version": now.version,
                         "uptime": now.uptime,
                         "boot": now.boot.name(),
+                        "confirmed": confirmed,
                         "marked": marked_text(now.marked),
                     }));
                 } else {
+                    let after = match confirmed {
+                        Some(true) => ", confirmed now (the gateway answered after its start)",
+                        Some(false) => {
+                            ", not confirmed yet: a restart before the confirmation rolls it back"
+                        }
+                        None => "",
+                    };
                     outln!(
-                        "restarted in {since:.1} s: running {}, {}",
+                        "restarted in {since:.1} s: running {}, {}{after}",
                         now.version,
                         boot_text(now.boot)
                     );
@@ -213,6 +229,25 @@ pub fn restart(
                 std::thread::sleep(Duration::from_millis(200));
             }
         }
+    }
+}
+
+/// How long `rcgw restart` waits for a trial's confirmation.
+const CONFIRM_PATIENCE: Duration = Duration::from_secs(10);
+
+/// Whether BOOTSTAT turns from on trial to confirmed within `limit`.
+fn wait_confirmed(gw: &mut Gw, limit: Duration) -> Result<bool, Fail> {
+    let deadline = Instant::now() + limit;
+    let unit = gw.unit;
+    loop {
+        let b = gw.read(unit, G_BOOT_STATUS, 1)?;
+        if BootState::from_code(b[0]) == Some(BootState::Confirmed) {
+            return Ok(true);
+        }
+        if Instant::now() > deadline {
+            return Ok(false);
+        }
+        std::thread::sleep(Duration::from_millis(50));
     }
 }
 

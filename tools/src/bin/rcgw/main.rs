@@ -254,8 +254,9 @@ fn emit(text: &str) {
     }
 }
 
-pub(crate) fn connect(cli: &Cli) -> Result<Gw, Fail> {
-    let link = match (&cli.rtu, &cli.tcp) {
+/// The line, opened: no request made.
+pub(crate) fn open_link(cli: &Cli) -> Result<Link, Fail> {
+    Ok(match (&cli.rtu, &cli.tcp) {
         (Some(path), _) => Link::rtu(
             path,
             cli.baud,
@@ -263,7 +264,11 @@ pub(crate) fn connect(cli: &Cli) -> Result<Gw, Fail> {
         )?,
         (None, Some(addr)) => Link::tcp(addr)?,
         (None, None) => return Err(Fail::Input("--rtu PATH or --tcp HOST:PORT".into())),
-    };
+    })
+}
+
+fn connect(cli: &Cli) -> Result<Gw, Fail> {
+    let link = open_link(cli)?;
     let mut gw = Gw {
         link,
         unit: cli.unit,

@@ -207,7 +207,15 @@ pub fn update(gw: &mut Gw, json: bool, image: &[u8], trailer: &Trailer) -> Resul
         )));
     }
     let same = s.size == size && s.crc32 == crc;
-    if s.state == UpdateState::Ready as u16 && same {
+    // The file's CRC-32 does not depend on the trailer (the trailer ends with its own CRC-32,
+    // which cancels it out): the same application signed again with another version has the
+    // same size and CRC-32. So "already there" also needs BOOTSTAT's marked version.
+    let marked_now = if s.state == UpdateState::Ready as u16 && same {
+        running(gw)?.marked
+    } else {
+        0
+    };
+    if s.state == UpdateState::Ready as u16 && same && marked_now == trailer.version.to_u32() {
         if json {
             let mut value = status_json(&s);
             value["already"] = json!(true);
