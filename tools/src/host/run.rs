@@ -44,11 +44,13 @@ impl Host {
             if let BusSide::Device { port, .. } = &mut self.bus {
                 port.flush()?;
             }
-            self.confirm_trial(now)?;
+            // A restart asked for in this pass comes first: the reply to RESTART is not the
+            // proof a trial needs (the firmware resets right after it).
             if let Some(why) = self.restart_due.take() {
                 self.restart(now, why)?;
                 continue;
             }
+            self.confirm_trial(now)?;
             self.sleep(until)?;
         }
     }

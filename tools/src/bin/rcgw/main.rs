@@ -395,6 +395,21 @@ fn run(cli: &Cli) -> Result<(), Fail> {
         }
         _ => {}
     }
+    // RESTART is the first request: a gateway whose new firmware is on trial and has not had
+    // a request yet restarts unconfirmed (and rolls back), as after a power cut.
+    if let Cmd::Restart { no_wait, wait } = &cli.command {
+        let mut gw = Gw {
+            link: open_link(cli)?,
+            unit: cli.unit,
+            base: 1,
+        };
+        return control::restart(
+            &mut gw,
+            cli,
+            cli.json,
+            (!no_wait).then(|| std::time::Duration::from_secs_f64(wait.max(0.0))),
+        );
+    }
     let mut gw = connect(cli)?;
     match &cli.command {
         Cmd::Status {
@@ -413,12 +428,7 @@ fn run(cli: &Cli) -> Result<(), Fail> {
         Cmd::Diag => diag::diag(&mut gw, cli.json),
         Cmd::Ack => control::ack(&mut gw, cli.json),
         Cmd::Save => control::save(&mut gw, cli.json),
-        Cmd::Restart { no_wait, wait } => control::restart(
-            &mut gw,
-            cli,
-            cli.json,
-            (!no_wait).then(|| std::time::Duration::from_secs_f64(wait.max(0.0))),
-        ),
+        Cmd::Restart { .. } => Ok(()),
         Cmd::FactoryReset { .. } => control::factory_reset(&mut gw, cli.json),
         Cmd::Update { status: true, .. } => update::status(&mut gw, cli.json),
         Cmd::Update { .. } => match &image {
