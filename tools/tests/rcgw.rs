@@ -780,7 +780,7 @@ fn signed(dir: &Scratch, name: &str, bytes: &[u8], version: &str, extra: &[&str]
     std::fs::write(&app_path, bytes).expect("write app");
     let out = dir.path(name);
     let mut args = vec!["sign", &app_path, "--version", version, "--out", &out];
-    if !extra.iter().any(|a| *a == "--key") {
+    if !extra.contains(&"--key") {
         args.push("--test-key");
     }
     args.extend_from_slice(extra);

@@ -163,7 +163,7 @@ impl NorFlash for FileFlash {
         if from > to {
             return Err(FlashError::OutOfBounds);
         }
-        if from % PAGE != 0 || to % PAGE != 0 {
+        if !from.is_multiple_of(PAGE) || !to.is_multiple_of(PAGE) {
             return Err(FlashError::NotAligned);
         }
         let range = self.range(from, (to - from) as usize)?;
@@ -175,7 +175,7 @@ impl NorFlash for FileFlash {
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
-        if offset % WORD != 0 || bytes.len() % WORD as usize != 0 {
+        if !offset.is_multiple_of(WORD) || !bytes.len().is_multiple_of(WORD as usize) {
             return Err(FlashError::NotAligned);
         }
         let range = self.range(offset, bytes.len())?;
