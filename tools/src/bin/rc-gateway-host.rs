@@ -55,6 +55,8 @@ CONTROL LINES (standard input)
                           what the simulator sees (frames received, moving, position...);
                           the gateway's FAILSAFE and the Modbus slave's counters
     stop-input on|off     the gateway's stop input (as the PIO *STP safety input)
+    restart               restart the gateway as a reset does (with --dfu: the bootloader runs;
+                          no Modbus request needed, so a trial can be left unconfirmed)
     quit                  end the run
     help                  the list
   With control lines enabled, the end of standard input ends the run like `quit` (so give
