@@ -1135,6 +1135,31 @@ fn a_trial_never_confirmed_is_rolled_back_to_the_old_version() {
         r.contains("running 2.0.1, rolled back: the new image did not confirm"),
         "{r}"
     );
+    // During a trial the DFU partition holds the previous firmware: a BEGIN that comes first
+    // (no rcgw: a bare FC16) is taken, but its erase is refused (OnTrial).
+    let v4 = signed(&dir, "v4.img", &app(12_000, 6), "2.2.0", &[]);
+    json(&gw.tcp(), &["update", &v4]);
+    gw.power_cycle();
+    let mut pdu = vec![0x10, 0x07, 0x00, 0x00, 0x06, 12];
+    for word in [1u16, 0, 12_096, 0x1234, 0x5678, 0x0475] {
+        pdu.extend_from_slice(&word.to_be_bytes());
+    }
+    assert_eq!(modbus(&gw.tcp, 63, &pdu)[0], 0x10);
+    let s = gw.status();
+    assert_eq!(
+        (&s["state"], &s["error"], &s["running"]),
+        (
+            &serde_json::json!("failed"),
+            &serde_json::json!(
+                "the running firmware is on trial: restart or wait for its confirmation"
+            ),
+            &serde_json::json!("2.2.0")
+        ),
+        "{s}"
+    );
+    // That reply confirmed the trial; the new firmware stays.
+    let r = ok(&gw.tcp(), &["restart"]);
+    assert!(r.contains("running 2.2.0, confirmed"), "{r}");
 }
 
 #[test]
@@ -1297,6 +1322,11 @@ fn the_host_restart_keeps_the_saved_settings_and_drops_tcp() {
     let gw = Board::start(&flash, &[]);
     // WATCHDOG written and saved, then written again and not saved: a restart starts with the
     // saved value, a factory reset with the defaults (the host's --watchdog-ms 0).
+    assert_eq!(
+        read_register(&gw.tcp, 63, 0x001A),
+        0,
+        "RESETCAUSE: power-on"
+    );
     write_register(&gw.tcp, 63, WATCHDOG, 500);
     ok(&gw.tcp(), &["save"]);
     write_register(&gw.tcp, 63, WATCHDOG, 700);
@@ -1315,6 +1345,8 @@ fn the_host_restart_keeps_the_saved_settings_and_drops_tcp() {
         assert_eq!(n, 0, "the connection was not dropped");
     }
     assert_eq!(read_register(&gw.tcp, 63, WATCHDOG), 500);
+    // RESETCAUSE: software.
+    assert_eq!(read_register(&gw.tcp, 63, 0x001A), 2);
     ok(&gw.tcp(), &["factory-reset", "--yes"]);
     std::thread::sleep(std::time::Duration::from_millis(300));
     assert_eq!(read_register(&gw.tcp, 63, WATCHDOG), 0);

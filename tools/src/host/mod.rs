@@ -257,7 +257,7 @@ impl Host {
             Some(dfu) => Some(board::Board::open(dfu)?),
             None => None,
         };
-        let node = Host::start_node(options, None, 0, board.as_mut())?;
+        let node = Host::start_node(options, None, 0, None, board.as_mut())?;
         let bus = match &options.bus {
             BusLine::Sim { axes, points } => {
                 BusSide::Sim(Box::new(simulated_bus(options, *axes, *points)?))
@@ -315,11 +315,12 @@ impl Host {
     }
 
     /// A new node, as the firmware starts: the configuration with the saved settings on it,
-    /// and, with a board, the bootloader's `prepare_boot` first and the version ACTIVE runs.
+    /// the reset's cause (a restart's: software), and, with a board, the bootloader's `prepare_boot` first and the version ACTIVE runs.
     fn start_node(
         options: &Options,
         saved: Option<&[u8]>,
         saves: u32,
+        reset: Option<protocol::plc::ResetCause>,
         board: Option<&mut board::Board>,
     ) -> io::Result<Box<Node>> {
         let mut config = gateway_config(options)?;
@@ -341,7 +342,7 @@ impl Host {
             source,
             load_errors,
             save_count: saves,
-            reset: protocol::plc::Boot::DEFAULT.reset,
+            reset: reset.unwrap_or(protocol::plc::Boot::DEFAULT.reset),
         };
         let started = match board {
             Some(board) => Some((board.boot()?, board.target())),

@@ -258,6 +258,7 @@ impl Host {
             &self.options,
             self.saved.as_ref().map(|r| r.as_slice()),
             self.saves,
+            Some(protocol::plc::ResetCause::Software),
             self.board.as_mut(),
         )?;
         self.node = node;
