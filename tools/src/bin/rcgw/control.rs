@@ -105,7 +105,10 @@ pub struct Running {
 /// over), so BOOTSTAT is read first: it shows the state the start left.
 pub fn running(gw: &mut Gw) -> Result<Running, Fail> {
     let unit = gw.unit;
-    let b = gw.read(unit, G_BOOT_STATUS, G_BOOT_STATUS_LEN)?;
+    // A gateway built without the update (an F103) has no BOOTSTAT: no bootloader.
+    let b = gw
+        .try_read(unit, G_BOOT_STATUS, G_BOOT_STATUS_LEN)?
+        .unwrap_or_else(|_| vec![0; usize::from(G_BOOT_STATUS_LEN)]);
     let v = gw.read(unit, G_VERSION, 4)?;
     let (vmaj, patch, up_hi, up_lo) = (v[0], v[1], v[2], v[3]);
     Ok(Running {
@@ -241,7 +244,7 @@ fn wait_confirmed(gw: &mut Gw, limit: Duration) -> Result<bool, Fail> {
     let unit = gw.unit;
     loop {
         let b = gw.read(unit, G_BOOT_STATUS, 1)?;
-        if BootState::from_code(b[0]) == Some(BootState::Confirmed) {
+        if BootState::from_code(b.first().copied().unwrap_or(0)) == Some(BootState::Confirmed) {
             return Ok(true);
         }
         if Instant::now() > deadline {
