@@ -1351,3 +1351,29 @@ fn the_host_restart_keeps_the_saved_settings_and_drops_tcp() {
     std::thread::sleep(std::time::Duration::from_millis(300));
     assert_eq!(read_register(&gw.tcp, 63, WATCHDOG), 0);
 }
+
+#[test]
+fn restart_fails_when_the_gateway_never_answers_again() {
+    use std::io::{Read, Write};
+    // A gateway that answers the RESTART write, then is gone (its port closed).
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+    let addr = listener.local_addr().expect("addr").to_string();
+    let server = std::thread::spawn(move || {
+        let (mut s, _) = listener.accept().expect("accept");
+        let mut request = [0u8; 12];
+        s.read_exact(&mut request).expect("request");
+        // FC06 at 0x001B (RESTART): echoed.
+        assert_eq!(&request[7..10], &[0x06, 0x00, 0x1B], "{request:?}");
+        s.write_all(&request).expect("reply");
+    });
+    let line = vec!["--tcp".to_string(), addr];
+    let started = std::time::Instant::now();
+    fails(
+        &line,
+        &["restart", "--wait", "2"],
+        1,
+        &["did not answer within 2 s"],
+    );
+    assert!(started.elapsed() < std::time::Duration::from_secs(8));
+    server.join().expect("server");
+}
