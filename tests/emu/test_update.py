@@ -2,8 +2,10 @@
 emulator build's DFU partition (32 KiB of RAM: QEMU's b-l475e-iot01a cannot write its flash, so
 the flash driver is not exercised here; src/dfu.rs), erased, written and read back in the gateway
 task's bounded steps, and reported ready (UPDSTAT state 5); meanwhile the bus keeps being polled
-and the stop input still stops. Then the refusals rcgw explains: another board's image (exit 1)
-and an image larger than the partition (exit 2)."""
+and the stop input still stops. The image is signed with the public TEST key (`rcgw sign
+--test-key`), which the emulator build verifies with. Then the refusals rcgw explains before
+sending anything (exit 2): an unsigned file, another board's image and an image larger than the
+partition."""
 
 import json
 import os
@@ -49,6 +51,18 @@ def rcgw_json(pty, *args):
     return json.loads(result.stdout)
 
 
+def sign(tmp_path, name, app, *args):
+    """`app` signed with the TEST key into tmp_path/name: the image's bytes."""
+    app_path = tmp_path / (name + ".app")
+    app_path.write_bytes(app)
+    out = tmp_path / name
+    result = subprocess.run([str(RCGW), "sign", str(app_path), "--test-key", "--version", "0.9.1",
+                             "--out", str(out), *args], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, f"rcgw sign: {result.returncode}\n{result.stdout}\n{result.stderr}"
+    assert "TEST key" in result.stderr, result.stderr
+    return out.read_bytes()
+
+
 def crc32(data):
     import zlib
     return zlib.crc32(data) & 0xFFFFFFFF
@@ -69,11 +83,13 @@ def test_rcgw_update_fills_the_partition_while_the_bus_is_served(elf, tmp_path):
         quiet = [c[0] for c in emu.bus_commands(0) if c[0] >= quiet_from]
         quiet_gaps = [b - a for a, b in zip(quiet, quiet[1:])]
 
-        image = random.Random(37).randbytes(PARTITION - 4093)
+        # The application not a multiple of 8: the trailer follows its padding.
+        app = random.Random(37).randbytes(PARTITION - 4093 - 96)
+        image = sign(tmp_path, "image.bin", app)
         path = tmp_path / "image.bin"
-        path.write_bytes(image)
+        assert len(image) < PARTITION
         started = time.monotonic() - emu.sim_started
-        update = subprocess.Popen([str(RCGW), "--rtu", pty, "--json", "update", str(path), "--board", BOARD],
+        update = subprocess.Popen([str(RCGW), "--rtu", pty, "--json", "update", str(path)],
                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         # The stop chain opens while the image goes in: the axis gets its stop at once.
         time.sleep(1.0)
@@ -107,17 +123,23 @@ def test_rcgw_update_fills_the_partition_while_the_bus_is_served(elf, tmp_path):
         assert "state      ready" in shown.stdout, shown.stdout
         assert f"{len(image)} of {len(image)} bytes written" in shown.stdout, shown.stdout
 
+        # An unsigned file: rcgw reads its trailer first, exit 2.
+        unsigned = tmp_path / "unsigned.bin"
+        unsigned.write_bytes(app)
+        plain = rcgw(pty, "update", str(unsigned))
+        assert plain.returncode == 2, (plain.returncode, plain.stdout, plain.stderr)
+        assert "not a signed image" in plain.stderr and "rcgw sign" in plain.stderr, plain.stderr
         # Another board's image: rcgw reads the gateway's board id (UPDSTAT) and refuses it
         # before anything is sent, naming both, exit 2.
-        other = rcgw(pty, "update", str(path), "--board", "0x0429")
+        sign(tmp_path, "other.bin", app, "--board", "0x0429")
+        other = rcgw(pty, "update", str(tmp_path / "other.bin"))
         assert other.returncode == 2, (other.returncode, other.stdout, other.stderr)
         assert "0x0429" in other.stderr and "0x0475" in other.stderr, other.stderr
         # Larger than the partition: refused by rcgw before anything is sent, exit 2.
-        large = tmp_path / "large.bin"
-        large.write_bytes(bytes(PARTITION + 1))
-        too_large = rcgw(pty, "update", str(large), "--board", BOARD)
+        large = sign(tmp_path, "large.bin", bytes(PARTITION + 1))
+        too_large = rcgw(pty, "update", str(tmp_path / "large.bin"))
         assert too_large.returncode == 2, (too_large.returncode, too_large.stdout, too_large.stderr)
-        assert str(PARTITION + 1) in too_large.stderr and str(PARTITION) in too_large.stderr, too_large.stderr
+        assert str(len(large)) in too_large.stderr and str(PARTITION) in too_large.stderr, too_large.stderr
         # Neither touched the image that is there.
         after = rcgw_json(pty, "update", "--status")
         assert (after["state"], after["crc32"]) == ("ready", s["crc32"]), after

@@ -736,78 +736,564 @@ fn restore_reports_the_save_and_network_changes_say_when() {
     assert!(diff.contains("[network] tcp_idle_s: 60 -> 30\n"), "{diff}");
 }
 
+// ---- Firmware update (issue 37): keys, signing, the transfer, the restart into the new
+// firmware, its trial, confirmation and rollback, on rc-gateway-host's board model (--dfu).
+
+/// A scratch directory, removed when dropped.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(name: &str) -> Scratch {
+        let dir = std::env::temp_dir().join(format!("rcgw-test-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        Scratch(dir)
+    }
+
+    fn path(&self, name: &str) -> String {
+        self.0.join(name).to_string_lossy().into_owned()
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// rcgw without a line (key, sign).
+fn offline(args: &[&str]) -> Output {
+    rcgw(&[], args)
+}
+
+/// An application binary of `len` bytes, different for each `seed`.
+fn app(len: usize, seed: u32) -> Vec<u8> {
+    (0..len as u32)
+        .map(|i| (i.wrapping_mul(31 + seed) ^ (i / 977) ^ seed) as u8)
+        .collect()
+}
+
+/// `bytes` written to `dir/name.app`, signed with the TEST key (or `key`) into `dir/name`:
+/// its path.
+fn signed(dir: &Scratch, name: &str, bytes: &[u8], version: &str, extra: &[&str]) -> String {
+    let app_path = dir.path(&format!("{name}.app"));
+    std::fs::write(&app_path, bytes).expect("write app");
+    let out = dir.path(name);
+    let mut args = vec!["sign", &app_path, "--version", version, "--out", &out];
+    if !extra.contains(&"--key") {
+        args.push("--test-key");
+    }
+    args.extend_from_slice(extra);
+    let o = offline(&args);
+    assert_eq!(o.status.code(), Some(0), "sign: {}", text(&o));
+    out
+}
+
+/// rc-gateway-host as a whole board (`--dfu`): two simulated axes, a PTY and a TCP port, and its
+/// control lines on a pipe (`restart` without any Modbus request).
+struct Board {
+    child: Child,
+    stdin: std::process::ChildStdin,
+    stdout: BufReader<ChildStdout>,
+    pty: String,
+    tcp: String,
+}
+
+impl Board {
+    fn start(flash: &str, extra: &[&str]) -> Board {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_rc-gateway-host"))
+            .args(["--plc-pty", "--modbus-tcp", "127.0.0.1:0", "--sim", "2"])
+            .args(["--control", "--watchdog-ms", "0", "--dfu", flash])
+            .args(extra)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start rc-gateway-host");
+        let stdin = child.stdin.take().expect("stdin");
+        let mut stdout = BufReader::new(child.stdout.take().expect("stdout"));
+        let (mut pty, mut tcp) = (String::new(), String::new());
+        while pty.is_empty() || tcp.is_empty() {
+            let mut line = String::new();
+            assert!(
+                stdout.read_line(&mut line).expect("read") > 0,
+                "gateway ended"
+            );
+            if let Some(p) = line.trim().strip_prefix("PLC ") {
+                pty = p.to_string();
+            } else if let Some(t) = line.trim().strip_prefix("TCP ") {
+                tcp = t.to_string();
+            }
+        }
+        Board {
+            child,
+            stdin,
+            stdout,
+            pty,
+            tcp,
+        }
+    }
+
+    fn rtu(&self) -> Vec<String> {
+        vec!["--rtu".into(), self.pty.clone()]
+    }
+
+    fn tcp(&self) -> Vec<String> {
+        vec!["--tcp".into(), self.tcp.clone()]
+    }
+
+    /// A control line and its JSON answer.
+    fn control(&mut self, line: &str) -> serde_json::Value {
+        use std::io::Write;
+        writeln!(self.stdin, "{line}").expect("control line");
+        self.stdin.flush().expect("flush");
+        let mut answer = String::new();
+        self.stdout.read_line(&mut answer).expect("answer");
+        serde_json::from_str(&answer).expect("JSON answer")
+    }
+
+    /// A restart without a Modbus request (a power cycle, as far as the trial goes).
+    fn power_cycle(&mut self) {
+        let answer = self.control("restart");
+        assert_eq!(answer["ok"], true, "{answer}");
+        // The restart is carried out at the end of the pass that read the line.
+        std::thread::sleep(std::time::Duration::from_millis(300));
+    }
+
+    /// `rcgw update --status --json`.
+    fn status(&self) -> serde_json::Value {
+        json(&self.tcp(), &["update", "--status"])
+    }
+
+    /// (running version, boot state) as `update --status` shows them.
+    fn running(&self) -> (String, String) {
+        let s = self.status();
+        (
+            s["running"].as_str().unwrap_or_default().to_string(),
+            s["boot"].as_str().unwrap_or_default().to_string(),
+        )
+    }
+}
+
+impl Drop for Board {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// WATCHDOG, register 0x0006.
+const WATCHDOG: u16 = 0x0006;
+
+/// The version the host runs with an empty ACTIVE: its built-in one.
+const BUILT_IN: &str = env!("CARGO_PKG_VERSION");
+
+fn pair(a: &str, b: &str) -> (String, String) {
+    (a.to_string(), b.to_string())
+}
+
 #[test]
-fn update_sends_an_image_resumes_a_cut_transfer_and_refuses_another_board() {
-    let dfu = std::env::temp_dir().join(format!("rcgw-test-dfu-{}.bin", std::process::id()));
-    let dfu_path = dfu.to_string_lossy().into_owned();
-    let gw = Gateway::with_args(
-        "update",
-        2,
-        &[
-            "--dfu",
-            &dfu_path,
-            "--dfu-size",
-            "131072",
-            "--board-id",
-            "0x0475",
-        ],
+fn key_new_sign_and_check() {
+    let dir = Scratch::new("keys");
+    let key = dir.path("release");
+    let out = offline(&["key", "new", "--out", &key]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let secret = std::fs::read(&key).expect("secret key");
+    let public = std::fs::read(format!("{key}.pub")).expect("public key");
+    assert_eq!((secret.len(), public.len()), (32, 32));
+    let hex: String = public.iter().map(|b| format!("{b:02x}")).collect();
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains(&hex),
+        "{}",
+        text(&out)
     );
-    let image: Vec<u8> = (0..100_003u32).map(|i| (i * 31 + i / 977) as u8).collect();
-    let path = gw.path("image.bin");
-    std::fs::write(&path, &image).expect("write image");
-    let idle = json(&gw.tcp(), &["update", "--status"]);
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(&key).expect("meta").permissions().mode();
+        assert_eq!(mode & 0o777, 0o600, "{mode:o}");
+    }
+    // Never overwritten.
+    let again = offline(&["key", "new", "--out", &key]);
+    assert_eq!(again.status.code(), Some(2), "{}", text(&again));
+    assert!(String::from_utf8_lossy(&again.stderr).contains("exists"));
+    assert_eq!(std::fs::read(&key).expect("secret key"), secret);
+    let other = dir.path("other");
     assert_eq!(
-        (&idle["state"], &idle["partition"], &idle["board"]),
+        offline(&["key", "new", "--out", &other]).status.code(),
+        Some(0)
+    );
+
+    let image = signed(&dir, "fw.img", &app(5001, 1), "1.2.3", &["--key", &key]);
+    let bytes = std::fs::read(&image).expect("image");
+    // The application, 0xFF to a multiple of 8, the 96-byte trailer.
+    assert_eq!(bytes.len(), 5008 + 96);
+    assert_eq!(&bytes[..5001], &app(5001, 1)[..]);
+    assert_eq!(&bytes[5008..5016], b"RCGWIMG1");
+    let check = |image: &str, key: &[&str]| {
+        let mut args = vec!["sign", "--check", image];
+        args.extend_from_slice(key);
+        offline(&args)
+    };
+    let good = check(&image, &["--pub", &format!("{key}.pub")]);
+    assert_eq!(good.status.code(), Some(0), "{}", text(&good));
+    assert!(
+        String::from_utf8_lossy(&good.stdout).contains("version 1.2.3 for board 0x0475"),
+        "{}",
+        text(&good)
+    );
+    // Another key, the TEST key: exit 1, said clearly.
+    for key in [vec!["--pub", &format!("{other}.pub")], vec!["--test-key"]] {
+        let bad = check(&image, &key);
+        assert_eq!(bad.status.code(), Some(1), "{}", text(&bad));
+        assert!(
+            String::from_utf8_lossy(&bad.stderr).contains("does NOT verify"),
+            "{}",
+            text(&bad)
+        );
+    }
+    // Altered after signing (one bit of the application), or not an image at all.
+    let mut altered = bytes.clone();
+    altered[100] ^= 1;
+    let altered_path = dir.path("altered.img");
+    std::fs::write(&altered_path, &altered).expect("write");
+    let bad = check(&altered_path, &["--pub", &format!("{key}.pub")]);
+    assert_eq!(bad.status.code(), Some(1), "{}", text(&bad));
+    let bad = check(&dir.path("fw.img.app"), &["--pub", &format!("{key}.pub")]);
+    assert_eq!(bad.status.code(), Some(1), "{}", text(&bad));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("not a signed image"));
+    // The TEST key: a loud warning, and its check passes only with the TEST key.
+    let app_path = dir.path("fw.img.app");
+    let test_img = dir.path("test.img");
+    let t = offline(&[
+        "sign",
+        &app_path,
+        "--test-key",
+        "--version",
+        "0.0.1",
+        "--out",
+        &test_img,
+    ]);
+    assert_eq!(t.status.code(), Some(0), "{}", text(&t));
+    assert!(String::from_utf8_lossy(&t.stderr).contains("WARNING"));
+    assert_eq!(check(&test_img, &["--test-key"]).status.code(), Some(0));
+    // Bad input: exit 2.
+    for args in [
+        vec![
+            "sign",
+            &app_path,
+            "--key",
+            &key,
+            "--version",
+            "1.2",
+            "--out",
+            &test_img,
+        ],
+        vec![
+            "sign",
+            &app_path,
+            "--key",
+            &app_path,
+            "--version",
+            "1.2.3",
+            "--out",
+            &test_img,
+        ],
+        vec!["sign", "--check", &test_img, "--pub", &app_path],
+        vec![
+            "sign",
+            &image,
+            "--key",
+            &key,
+            "--version",
+            "1.2.3",
+            "--out",
+            &test_img,
+        ],
+    ] {
+        let o = offline(&args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", text(&o));
+    }
+}
+
+#[test]
+fn update_restart_runs_the_new_version_on_trial_then_confirmed_over_rtu_and_tcp() {
+    let dir = Scratch::new("update-restart");
+    let flash = dir.path("flash.bin");
+    let gw = Board::start(&flash, &[]);
+    assert_eq!(gw.running(), pair(BUILT_IN, "confirmed"));
+    let idle = gw.status();
+    assert_eq!(
+        (
+            &idle["state"],
+            &idle["partition"],
+            &idle["board"],
+            &idle["marked"]
+        ),
         (
             &serde_json::json!("idle"),
-            &serde_json::json!(131072),
-            &serde_json::json!(0x0475)
-        )
+            &serde_json::json!(482 * 1024),
+            &serde_json::json!(0x0475),
+            &serde_json::Value::Null
+        ),
+        "{idle}"
     );
-    // Over RTU, cut off (the process killed) once a fifth of the image is in.
-    let mut cut = Command::new(env!("CARGO_BIN_EXE_rcgw"))
-        .args(gw.rtu())
-        .args(["update", &path, "--board", "0x0475"])
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("run rcgw");
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
-    loop {
-        let s = json(&gw.tcp(), &["update", "--status"]);
-        if s["next"].as_u64().unwrap_or(0) > 20_000 {
-            break;
-        }
-        assert!(std::time::Instant::now() < deadline, "no progress: {s}");
-        std::thread::sleep(std::time::Duration::from_millis(20));
+    // Over RTU: sent, checked and marked; the old version runs until the restart.
+    let v1 = signed(&dir, "v1.img", &app(20_001, 1), "1.2.3", &[]);
+    let out = ok(&gw.rtu(), &["update", &v1]);
+    assert!(out.contains("marked 1.2.3"), "{out}");
+    assert!(out.contains("rcgw restart"), "{out}");
+    let s = gw.status();
+    assert_eq!(
+        (&s["state"], &s["marked"]),
+        (&serde_json::json!("ready"), &serde_json::json!("1.2.3"))
+    );
+    assert_eq!(gw.running(), pair(BUILT_IN, "confirmed"));
+    // The flash file: the image at DFU's start (0x0808_0000).
+    let f = std::fs::read(&flash).expect("flash");
+    assert_eq!(f.len(), 1024 * 1024);
+    let v1_bytes = std::fs::read(&v1).expect("image");
+    assert!(f[0x80000..0x80000 + v1_bytes.len()] == v1_bytes[..]);
+    // Restart over RTU: the bootloader swaps it in, on trial; rcgw's reads confirm it.
+    let out = ok(&gw.rtu(), &["restart"]);
+    assert!(
+        out.contains("running 1.2.3, on trial, confirmed now"),
+        "{out}"
+    );
+    assert_eq!(gw.running(), pair("1.2.3", "confirmed"));
+    let f = std::fs::read(&flash).expect("flash");
+    assert!(
+        f[0x8000..0x8000 + v1_bytes.len()] == v1_bytes[..],
+        "ACTIVE holds v1"
+    );
+    // Confirmed: it stays at the next start.
+    let again = json(&gw.tcp(), &["restart"]);
+    assert_eq!(
+        (&again["version"], &again["boot"]),
+        (&serde_json::json!("1.2.3"), &serde_json::json!("confirmed")),
+        "{again}"
+    );
+    assert!(again["uptime"].as_u64().expect("uptime") <= 1, "{again}");
+    // Over TCP: the next version; restart over TCP (the connection is dropped and made again).
+    let v2 = signed(&dir, "v2.img", &app(30_003, 2), "1.3.0", &[]);
+    let done = json(&gw.tcp(), &["update", &v2]);
+    assert_eq!(
+        (&done["state"], &done["marked"]),
+        (&serde_json::json!("ready"), &serde_json::json!("1.3.0")),
+        "{done}"
+    );
+    let r = json(&gw.tcp(), &["restart"]);
+    assert_eq!(
+        (&r["version"], &r["boot"], &r["confirmed"]),
+        (
+            &serde_json::json!("1.3.0"),
+            &serde_json::json!("on trial"),
+            &serde_json::json!(true)
+        ),
+        "{r}"
+    );
+    assert_eq!(gw.running(), pair("1.3.0", "confirmed"));
+    // VERSION itself (register 0x0000) reads the new version: 1.3 and 0.
+    let version = modbus(&gw.tcp, 63, &[0x03, 0x00, 0x00, 0x00, 0x02]);
+    assert_eq!(&version[..], &[0x03, 0x04, 0x01, 0x03, 0x00, 0x00]);
+    // A restart without waiting says only that it was asked.
+    let out = ok(&gw.rtu(), &["restart", "--no-wait"]);
+    assert!(out.contains("restart requested"), "{out}");
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    assert_eq!(gw.running(), pair("1.3.0", "confirmed"));
+}
+
+#[test]
+fn a_trial_never_confirmed_is_rolled_back_to_the_old_version() {
+    let dir = Scratch::new("rollback");
+    let flash = dir.path("flash.bin");
+    let mut gw = Board::start(&flash, &[]);
+    let v1 = signed(&dir, "v1.img", &app(12_000, 3), "2.0.0", &[]);
+    json(&gw.tcp(), &["update", &v1]);
+    // Two restarts with no Modbus request between: the trial never passes.
+    gw.power_cycle();
+    gw.power_cycle();
+    assert_eq!(gw.running(), pair(BUILT_IN, "rolled back"));
+    let shown = ok(&gw.tcp(), &["update", "--status"]);
+    assert!(
+        shown.contains(&format!("running    {BUILT_IN}, rolled back")),
+        "{shown}"
+    );
+    // The old firmware confirmed itself with that read: the next start is a plain one.
+    let r = ok(&gw.rtu(), &["restart"]);
+    assert!(r.contains(&format!("running {BUILT_IN}, confirmed")), "{r}");
+    // It takes an image again, and that one runs.
+    let v2 = signed(&dir, "v2.img", &app(12_000, 4), "2.0.1", &[]);
+    json(&gw.tcp(), &["update", &v2]);
+    let r = ok(&gw.tcp(), &["restart"]);
+    assert!(r.contains("running 2.0.1, on trial"), "{r}");
+    // A trial whose first request is RESTART rolls back, and rcgw restart says so.
+    let v3 = signed(&dir, "v3.img", &app(12_000, 5), "2.1.0", &[]);
+    json(&gw.tcp(), &["update", &v3]);
+    gw.power_cycle();
+    let r = ok(&gw.tcp(), &["restart"]);
+    assert!(
+        r.contains("running 2.0.1, rolled back: the new image did not confirm"),
+        "{r}"
+    );
+    // During a trial the DFU partition holds the previous firmware: a BEGIN that comes first
+    // (no rcgw: a bare FC16) is taken, but its erase is refused (OnTrial).
+    let v4 = signed(&dir, "v4.img", &app(12_000, 6), "2.2.0", &[]);
+    json(&gw.tcp(), &["update", &v4]);
+    gw.power_cycle();
+    let mut pdu = vec![0x10, 0x07, 0x00, 0x00, 0x06, 12];
+    for word in [1u16, 0, 12_096, 0x1234, 0x5678, 0x0475] {
+        pdu.extend_from_slice(&word.to_be_bytes());
     }
-    cut.kill().expect("kill rcgw");
-    cut.wait().expect("rcgw ended");
-    let s = json(&gw.tcp(), &["update", "--status"]);
-    assert_eq!(s["state"], "receiving", "{s}");
-    let next = s["next"].as_u64().expect("next");
-    assert!(next > 20_000 && next < 100_003, "{s}");
-    // Again, over TCP: it goes on from there.
-    let done = json(&gw.tcp(), &["update", &path, "--board", "0x0475"]);
+    assert_eq!(modbus(&gw.tcp, 63, &pdu)[0], 0x10);
+    let s = gw.status();
+    assert_eq!(
+        (&s["state"], &s["error"], &s["running"]),
+        (
+            &serde_json::json!("failed"),
+            &serde_json::json!(
+                "the running firmware is on trial: restart or wait for its confirmation"
+            ),
+            &serde_json::json!("2.2.0")
+        ),
+        "{s}"
+    );
+    // That reply confirmed the trial; the new firmware stays.
+    let r = ok(&gw.tcp(), &["restart"]);
+    assert!(r.contains("running 2.2.0, confirmed"), "{r}");
+}
+
+#[test]
+fn refused_images_leave_the_old_version_running() {
+    let dir = Scratch::new("refused");
+    let flash = dir.path("flash.bin");
+    let key = dir.path("release");
+    assert_eq!(
+        offline(&["key", "new", "--out", &key]).status.code(),
+        Some(0)
+    );
+    // The board verifies with this key, not the TEST key.
+    let gw = Board::start(&flash, &["--update-key", &format!("{key}.pub")]);
+    let good = signed(&dir, "good.img", &app(9_000, 6), "3.0.0", &["--key", &key]);
+    let bytes = std::fs::read(&good).expect("image");
+    // Unsigned: refused by rcgw before anything is sent (exit 2).
+    let plain = dir.path("plain.bin");
+    std::fs::write(&plain, app(9_000, 6)).expect("write");
+    fails(
+        &gw.rtu(),
+        &["update", &plain],
+        2,
+        &["not a signed image", "rcgw sign"],
+    );
+    // Truncated (a cut download): no trailer at its end.
+    let cut = dir.path("cut.img");
+    std::fs::write(&cut, &bytes[..bytes.len() - 10]).expect("write");
+    fails(&gw.tcp(), &["update", &cut], 2, &["not a signed image"]);
+    // Another board's: named both, nothing sent; --board as a cross-check.
+    let other = signed(
+        &dir,
+        "other.img",
+        &app(9_000, 6),
+        "3.0.0",
+        &["--key", &key, "--board", "0x0429"],
+    );
+    fails(
+        &gw.tcp(),
+        &["update", &other],
+        2,
+        &["board 0x0429", "board 0x0475"],
+    );
+    fails(
+        &gw.tcp(),
+        &["update", &good, "--board", "0x0429"],
+        2,
+        &["0x0429", "0x0475"],
+    );
+    // Larger than ACTIVE (480 KiB): refused before anything is sent.
+    let large = signed(
+        &dir,
+        "large.img",
+        &app(480 * 1024, 7),
+        "3.0.0",
+        &["--key", &key],
+    );
+    fails(&gw.tcp(), &["update", &large], 2, &["491616", "491520"]);
+    assert_eq!(gw.status()["state"], "idle", "nothing was sent");
+    // Signed with the TEST key (another key than the board's): sent, refused at FINISH.
+    let test = signed(&dir, "test.img", &app(9_000, 6), "3.0.0", &[]);
+    fails(
+        &gw.tcp(),
+        &["update", &test],
+        1,
+        &["did not take the image 3.0.0", "signature does not match"],
+    );
+    let s = gw.status();
+    assert_eq!(
+        (&s["state"], &s["error"], &s["marked"]),
+        (
+            &serde_json::json!("failed"),
+            &serde_json::json!("the image's signature does not match this firmware's key"),
+            &serde_json::Value::Null
+        ),
+        "{s}"
+    );
+    let r = ok(&gw.rtu(), &["restart"]);
+    assert!(r.contains(&format!("running {BUILT_IN}, confirmed")), "{r}");
+    // The good one goes through.
+    let done = json(&gw.rtu(), &["update", &good]);
+    assert_eq!(done["marked"], "3.0.0", "{done}");
+    let r = ok(&gw.tcp(), &["restart"]);
+    assert!(r.contains("running 3.0.0, on trial"), "{r}");
+}
+
+#[test]
+fn a_cut_transfer_leaves_the_old_version_and_resumes() {
+    let dir = Scratch::new("cut");
+    let flash = dir.path("flash.bin");
+    let gw = Board::start(&flash, &[]);
+    let image = signed(&dir, "v.img", &app(60_003, 8), "4.5.6", &[]);
+    let size = std::fs::read(&image).expect("image").len() as u64;
+    // Over RTU, cut off (the process killed) once a fifth of the image is in.
+    let cut_at = |gw: &Board| {
+        let mut cut = Command::new(env!("CARGO_BIN_EXE_rcgw"))
+            .args(gw.rtu())
+            .args(["update", &image])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("run rcgw");
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+        loop {
+            let s = gw.status();
+            if s["next"].as_u64().unwrap_or(0) > size / 5 {
+                break;
+            }
+            assert!(std::time::Instant::now() < deadline, "no progress: {s}");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        cut.kill().expect("kill rcgw");
+        cut.wait().expect("rcgw ended");
+        let s = gw.status();
+        assert_eq!(s["state"], "receiving", "{s}");
+        let next = s["next"].as_u64().expect("next");
+        assert!(next > size / 5 && next < size, "{s}");
+        next
+    };
+    // Cut, then a restart: the transfer is forgotten, the old version runs.
+    cut_at(&gw);
+    let r = ok(&gw.tcp(), &["restart"]);
+    assert!(r.contains(&format!("running {BUILT_IN}, confirmed")), "{r}");
+    assert_eq!(gw.status()["state"], "idle");
+    // Cut again, then resumed over TCP from where it stopped.
+    let next = cut_at(&gw);
+    let done = json(&gw.tcp(), &["update", &image]);
     assert_eq!(done["state"], "ready", "{done}");
     assert!(
         done["resumed_at"].as_u64().expect("resumed") >= next,
         "{done}"
     );
-    let flash = std::fs::read(&dfu).expect("the partition");
-    assert_eq!(flash.len(), 131072);
-    assert!(
-        flash[..image.len()] == image[..],
-        "the image in the partition"
-    );
-    let mark = std::fs::read_to_string(format!("{dfu_path}.marked")).expect("marked");
-    assert_eq!(
-        mark.trim(),
-        format!("186a3 {}", done["crc32"].as_str().unwrap())
-    );
     // The same image again: it is there already, nothing is erased or sent.
-    let again = json(&gw.tcp(), &["update", &path, "--board", "0x0475"]);
+    let again = json(&gw.tcp(), &["update", &image]);
     assert_eq!(
         (&again["already"], &again["state"], &again["refusals"]),
         (
@@ -817,29 +1303,77 @@ fn update_sends_an_image_resumes_a_cut_transfer_and_refuses_another_board() {
         ),
         "{again}"
     );
-    // Another board's image (told before anything is sent), a missing file, an image larger
-    // than the partition.
-    fails(
-        &gw.rtu(),
-        &["update", &path, "--board", "0x0429"],
-        2,
-        &["board 0x0429", "board 0x0475"],
+    // The same application relabelled (same size, same CRC-32 of the file): not "already".
+    let relabelled = signed(&dir, "w.img", &app(60_003, 8), "4.5.7", &[]);
+    let sent = json(&gw.tcp(), &["update", &relabelled]);
+    assert_eq!(
+        (&sent["already"], &sent["marked"]),
+        (&serde_json::Value::Null, &serde_json::json!("4.5.7")),
+        "{sent}"
     );
-    assert_eq!(json(&gw.tcp(), &["update", "--status"])["state"], "ready");
-    fails(
-        &gw.tcp(),
-        &["update", &gw.path("none.bin"), "--board", "1"],
-        2,
-        &["none.bin"],
+    let r = ok(&gw.rtu(), &["restart"]);
+    assert!(r.contains("running 4.5.7, on trial, confirmed now"), "{r}");
+}
+
+#[test]
+fn the_host_restart_keeps_the_saved_settings_and_drops_tcp() {
+    let dir = Scratch::new("restart-settings");
+    let flash = dir.path("flash.bin");
+    let gw = Board::start(&flash, &[]);
+    // WATCHDOG written and saved, then written again and not saved: a restart starts with the
+    // saved value, a factory reset with the defaults (the host's --watchdog-ms 0).
+    assert_eq!(
+        read_register(&gw.tcp, 63, 0x001A),
+        0,
+        "RESETCAUSE: power-on"
     );
-    let large = gw.path("large.bin");
-    std::fs::write(&large, vec![0u8; 131073]).expect("write image");
+    write_register(&gw.tcp, 63, WATCHDOG, 500);
+    ok(&gw.tcp(), &["save"]);
+    write_register(&gw.tcp, 63, WATCHDOG, 700);
+    assert_eq!(read_register(&gw.tcp, 63, WATCHDOG), 700);
+    // A TCP connection open across the restart is dropped.
+    let mut stream = std::net::TcpStream::connect(&gw.tcp).expect("connect");
+    let r = ok(&gw.rtu(), &["restart"]);
+    assert!(r.contains(&format!("running {BUILT_IN}, confirmed")), "{r}");
+    {
+        use std::io::Read;
+        stream
+            .set_read_timeout(Some(std::time::Duration::from_secs(5)))
+            .expect("timeout");
+        let mut buf = [0u8; 16];
+        let n = stream.read(&mut buf).unwrap_or(0);
+        assert_eq!(n, 0, "the connection was not dropped");
+    }
+    assert_eq!(read_register(&gw.tcp, 63, WATCHDOG), 500);
+    // RESETCAUSE: software.
+    assert_eq!(read_register(&gw.tcp, 63, 0x001A), 2);
+    ok(&gw.tcp(), &["factory-reset", "--yes"]);
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    assert_eq!(read_register(&gw.tcp, 63, WATCHDOG), 0);
+}
+
+#[test]
+fn restart_fails_when_the_gateway_never_answers_again() {
+    use std::io::{Read, Write};
+    // A gateway that answers the RESTART write, then is gone (its port closed).
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+    let addr = listener.local_addr().expect("addr").to_string();
+    let server = std::thread::spawn(move || {
+        let (mut s, _) = listener.accept().expect("accept");
+        let mut request = [0u8; 12];
+        s.read_exact(&mut request).expect("request");
+        // FC06 at 0x001B (RESTART): echoed.
+        assert_eq!(&request[7..10], &[0x06, 0x00, 0x1B], "{request:?}");
+        s.write_all(&request).expect("reply");
+    });
+    let line = vec!["--tcp".to_string(), addr];
+    let started = std::time::Instant::now();
     fails(
-        &gw.tcp(),
-        &["update", &large, "--board", "0x0475"],
-        2,
-        &["131073", "131072"],
+        &line,
+        &["restart", "--wait", "2"],
+        1,
+        &["did not answer within 2 s"],
     );
-    let _ = std::fs::remove_file(&dfu);
-    let _ = std::fs::remove_file(format!("{dfu_path}.marked"));
+    assert!(started.elapsed() < std::time::Duration::from_secs(8));
+    server.join().expect("server");
 }

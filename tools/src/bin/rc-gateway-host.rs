@@ -55,6 +55,8 @@ CONTROL LINES (standard input)
                           what the simulator sees (frames received, moving, position...);
                           the gateway's FAILSAFE and the Modbus slave's counters
     stop-input on|off     the gateway's stop input (as the PIO *STP safety input)
+    restart               restart the gateway as a reset does (with --dfu: the bootloader runs;
+                          no Modbus request needed, so a trial can be left unconfirmed)
     quit                  end the run
     help                  the list
   With control lines enabled, the end of standard input ends the run like `quit` (so give
@@ -168,16 +170,32 @@ struct Cli {
     /// Ignore standard input (the default with --bus).
     #[arg(long, overrides_with = "control")]
     no_control: bool,
-    /// A DFU partition in this file (created, or resized to --dfu-size): `rcgw update` may send
-    /// a firmware image into it; FINISH marks it in PATH.marked.
+    /// The board's flash in this file (the L475's 1 MiB, created erased), with a bootloader:
+    /// `rcgw update` sends a signed image into its DFU partition, a restart (RESTART, FACTORY,
+    /// the `restart` control line) runs embassy-boot's prepare_boot on it (a marked image
+    /// swapped in on trial, an unconfirmed trial rolled back) and the gateway then runs the
+    /// version of the image in ACTIVE.
     #[arg(long, value_name = "PATH")]
     dfu: Option<PathBuf>,
-    /// --dfu: the partition's size, bytes (the largest image).
-    #[arg(long, default_value_t = 256 * 1024, value_name = "BYTES", requires = "dfu")]
-    dfu_size: u32,
+    /// --dfu: the public key (32 raw bytes, `rcgw key new`'s NAME.pub) the firmware verifies
+    /// images with. Default: the public TEST key (a warning is printed).
+    #[arg(long, value_name = "PATH.pub", requires = "dfu")]
+    update_key: Option<PathBuf>,
     /// --dfu: the board id an image must name (decimal, or hex with 0x).
     #[arg(long, default_value = "0x0475", value_name = "ID", value_parser = parse_board, requires = "dfu")]
     board_id: u16,
+}
+
+/// A 32-byte public key file.
+fn read_key(path: &std::path::Path) -> Result<[u8; 32], String> {
+    let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    bytes.as_slice().try_into().map_err(|_| {
+        format!(
+            "{}: {} bytes: a public key file is exactly 32 raw bytes (`rcgw key new`)",
+            path.display(),
+            bytes.len()
+        )
+    })
 }
 
 fn parse_board(text: &str) -> Result<u16, String> {
@@ -363,11 +381,22 @@ fn options(cli: &Cli) -> Result<Options, String> {
             Level::Off
         },
         control,
-        dfu: cli.dfu.as_ref().map(|path| rc_tools::host::DfuOptions {
-            path: path.clone(),
-            size: cli.dfu_size,
-            board: cli.board_id,
-        }),
+        dfu: match &cli.dfu {
+            Some(path) => Some(rc_tools::host::DfuOptions {
+                path: path.clone(),
+                board: cli.board_id,
+                public_key: match &cli.update_key {
+                    Some(key) => Some(read_key(key)?),
+                    None => {
+                        eprintln!(
+                            "rc-gateway-host: WARNING: --dfu without --update-key: images are verified with the public TEST key (tests only)"
+                        );
+                        None
+                    }
+                },
+            }),
+            None => None,
+        },
         ..Options::default()
     })
 }

@@ -2,7 +2,6 @@
 //! `stats`: the counters and the state of every axis.
 
 use protocol::engine::Link;
-use protocol::time::Instant;
 use protocol::Pulses;
 use serde_json::{json, Value};
 
@@ -35,8 +34,12 @@ impl Host {
             },
             Control::Stats => (self.stats(now), None),
             Control::StopInput(active) => {
-                self.node.set_stop_input(Instant(now), active);
+                self.node.set_stop_input(self.node_time(now), active);
                 (json!({"ok": true, "cmd": "stop-input"}), None)
+            }
+            Control::Restart => {
+                self.restart_due = Some(super::Restart::Reset);
+                (json!({"ok": true, "cmd": "restart"}), None)
             }
             Control::Quit => (json!({"ok": true, "cmd": "quit"}), Some(Ended::Quit)),
             Control::Help => (json!({"ok": true, "help": HELP}), None),

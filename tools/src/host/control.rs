@@ -12,6 +12,9 @@ pub enum Control {
     Stats,
     /// `stop-input on|off`: the gateway's stop input (as the PIO *STP safety input).
     StopInput(bool),
+    /// `restart`: restart the gateway as a reset does (the bootloader runs; no Modbus request
+    /// needed, so a trial can be left unconfirmed).
+    Restart,
     /// `quit`: end the run.
     Quit,
     /// `help`: the list of commands.
@@ -19,7 +22,8 @@ pub enum Control {
 }
 
 /// What `help` answers.
-pub const HELP: &str = "alarm <axis> <hex code> | stats | stop-input on|off | quit | help";
+pub const HELP: &str =
+    "alarm <axis> <hex code> | stats | stop-input on|off | restart | quit | help";
 
 /// Read one line (surrounding blanks ignored); `None` for an empty line.
 pub fn parse(line: &str) -> Option<Result<Control, String>> {
@@ -31,6 +35,7 @@ pub fn parse(line: &str) -> Option<Result<Control, String>> {
         ("stats", []) => Ok(Control::Stats),
         ("stop-input", ["on" | "1"]) => Ok(Control::StopInput(true)),
         ("stop-input", ["off" | "0"]) => Ok(Control::StopInput(false)),
+        ("restart", []) => Ok(Control::Restart),
         ("quit" | "exit", []) => Ok(Control::Quit),
         ("help", []) => Ok(Control::Help),
         _ => Err(format!("{:?}: expected {HELP}", line.trim())),
@@ -66,6 +71,7 @@ mod tests {
         assert_eq!(parse("stats"), Some(Ok(Control::Stats)));
         assert_eq!(parse("stop-input on"), Some(Ok(Control::StopInput(true))));
         assert_eq!(parse("quit"), Some(Ok(Control::Quit)));
+        assert_eq!(parse("restart"), Some(Ok(Control::Restart)));
         assert_eq!(parse("   "), None);
         assert!(matches!(parse("alarm 16 D8"), Some(Err(_))));
         assert!(matches!(parse("alarm 0 XY"), Some(Err(_))));

@@ -27,17 +27,17 @@
 //! pseudo-terminal nor a USB adapter gives byte times that obey the line rate.
 
 mod answers;
+pub mod board;
 mod config;
 mod control;
-pub mod dfu;
 pub mod log;
 pub mod port;
 mod run;
 pub mod tcp;
 
+pub use board::DfuOptions;
 pub use config::{gateway_config, simulated_bus};
 pub use control::{Control, HELP};
-pub use dfu::DfuOptions;
 pub use log::Level;
 pub use port::{Parity, Port};
 
@@ -206,6 +206,14 @@ pub struct Host {
     burst: Vec<u8>,
     /// Saves asked for (a PC has no settings flash).
     saves: u32,
+    /// The settings saved during the run (a restart starts with them).
+    saved: Option<[u8; protocol::plc::settings::RECORD_LEN]>,
+    /// The options, for a restart.
+    options: Options,
+    /// µs of the host's clock at the node's start (the node's clock starts at 0 at each start).
+    epoch: u64,
+    /// A restart asked for, carried out at the end of the pass (after the reply has left).
+    restart_due: Option<Restart>,
     /// The node's receiver counters when a burst was last logged.
     seen_receiver: protocol::modbus::ReceiverCounters,
     started: StdInstant,
@@ -213,29 +221,43 @@ pub struct Host {
     /// Standard input's partial line, when control lines are read.
     control: Option<Vec<u8>>,
     max_sleep: StdDuration,
-    /// The DFU partition, if there is one.
-    dfu: Option<dfu::DfuFile>,
+    /// The board's flash and bootloader, if there is one.
+    board: Option<board::Board>,
+}
+
+/// Why the host gateway restarts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Restart {
+    /// RESTART, or the `restart` control line (a reset: the saved settings).
+    Reset,
+    /// FACTORY: the saved settings erased first.
+    Factory,
+}
+
+/// The identity the node answers with: the built-in one, with the running image's version.
+fn identity_for(version: Option<rc_boot::image::Version>) -> &'static protocol::modbus::Identity {
+    match version {
+        None => &protocol::plc::IDENTITY,
+        Some(v) => {
+            // One small leak per start: the node keeps a `&'static Identity`.
+            let revision: &'static str =
+                Box::leak(format!("{}.{}.{}", v.major, v.minor, v.patch).into_boxed_str());
+            Box::leak(Box::new(protocol::modbus::Identity {
+                revision,
+                ..protocol::plc::IDENTITY
+            }))
+        }
+    }
 }
 
 impl Host {
     /// Open both lines and build the gateway.
     pub fn new(options: &Options) -> io::Result<Host> {
-        let config = gateway_config(options)?;
-        let mut node = Box::new(Node::new(
-            config,
-            &protocol::plc::IDENTITY,
-            protocol::plc::Boot::DEFAULT,
-        ));
-        let dfu = match &options.dfu {
-            Some(dfu) => {
-                let file = dfu::DfuFile::open(dfu).map_err(|e| {
-                    io::Error::new(e.kind(), format!("{}: {e}", dfu.path.display()))
-                })?;
-                node.set_update_target(file.target());
-                Some(file)
-            }
+        let mut board = match &options.dfu {
+            Some(dfu) => Some(board::Board::open(dfu)?),
             None => None,
         };
+        let node = Host::start_node(options, None, 0, None, board.as_mut())?;
         let bus = match &options.bus {
             BusLine::Sim { axes, points } => {
                 BusSide::Sim(Box::new(simulated_bus(options, *axes, *points)?))
@@ -280,12 +302,59 @@ impl Host {
             burst: Vec::new(),
             seen_receiver: protocol::modbus::ReceiverCounters::default(),
             saves: 0,
+            saved: None,
+            options: options.clone(),
+            epoch: 0,
+            restart_due: None,
             started: StdInstant::now(),
             last_bus_rx: 0,
             control: options.control.then(Vec::new),
             max_sleep: options.max_sleep,
-            dfu,
+            board,
         })
+    }
+
+    /// A new node, as the firmware starts: the configuration with the saved settings on it,
+    /// the reset's cause (a restart's: software), and, with a board, the bootloader's `prepare_boot` first and the version ACTIVE runs.
+    fn start_node(
+        options: &Options,
+        saved: Option<&[u8]>,
+        saves: u32,
+        reset: Option<protocol::plc::ResetCause>,
+        board: Option<&mut board::Board>,
+    ) -> io::Result<Box<Node>> {
+        let mut config = gateway_config(options)?;
+        let mut source = protocol::plc::ConfigSource::Defaults;
+        let mut load_errors = 0;
+        if let Some(record) = saved {
+            match protocol::plc::settings::Settings::decode(record) {
+                Ok(settings) => {
+                    config = settings.apply(config);
+                    source = protocol::plc::ConfigSource::Flash;
+                }
+                Err(_) => {
+                    source = protocol::plc::ConfigSource::Damaged;
+                    load_errors = 1;
+                }
+            }
+        }
+        let boot = protocol::plc::Boot {
+            source,
+            load_errors,
+            save_count: saves,
+            reset: reset.unwrap_or(protocol::plc::Boot::DEFAULT.reset),
+        };
+        let started = match board {
+            Some(board) => Some((board.boot()?, board.target())),
+            None => None,
+        };
+        let version = started.and_then(|(s, _)| s.version);
+        let mut node = Box::new(Node::new(config, identity_for(version), boot));
+        if let Some((started, target)) = started {
+            node.set_update_target(target);
+            node.set_boot_state(started.boot);
+        }
+        Ok(node)
     }
 
     /// The PLC's device: the pseudo-terminal's `/dev/pts/N`, or the device opened; `None`
@@ -315,5 +384,15 @@ impl Host {
     /// µs since the start.
     fn now(&self) -> u64 {
         u64::try_from(self.started.elapsed().as_micros()).unwrap_or(u64::MAX)
+    }
+
+    /// The node's time for the host's `now`: since the node's start.
+    fn node_time(&self, now: u64) -> protocol::time::Instant {
+        protocol::time::Instant(now.saturating_sub(self.epoch))
+    }
+
+    /// The bootloader's state told at the last start, if there is a board.
+    pub fn boot_state(&self) -> Option<protocol::plc::update::BootState> {
+        self.board.as_ref().map(board::Board::boot_state)
     }
 }

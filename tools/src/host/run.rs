@@ -16,7 +16,7 @@ use serde_json::json;
 
 use super::port::Input;
 use super::{
-    control, port, BusSide, Ended, Host, BUS_EVENT_GRAIN_US, MAX_LOGGED_BURST,
+    control, port, BusSide, Ended, Host, Restart, BUS_EVENT_GRAIN_US, MAX_LOGGED_BURST,
     MAX_OUTPUTS_PER_PASS, MAX_READS_PER_PASS,
 };
 
@@ -44,13 +44,21 @@ impl Host {
             if let BusSide::Device { port, .. } = &mut self.bus {
                 port.flush()?;
             }
+            // A restart asked for in this pass comes first: the reply to RESTART is not the
+            // proof a trial needs (the firmware resets right after it).
+            if let Some(why) = self.restart_due.take() {
+                self.restart(now, why)?;
+                continue;
+            }
+            self.confirm_trial(now)?;
             self.sleep(until)?;
         }
     }
 
     fn read_plc(&mut self, now: u64, buf: &mut [u8]) -> io::Result<()> {
+        let node_now = now.saturating_sub(self.epoch);
         if let Some(tcp) = &mut self.tcp {
-            tcp.pump(now, &mut self.node)?;
+            tcp.pump(node_now, &mut self.node)?;
         }
         for _ in 0..MAX_READS_PER_PASS {
             let Some(plc) = &mut self.plc else {
@@ -64,7 +72,7 @@ impl Host {
             // next one.
             self.drive(now)?;
             let bytes = buf.get(..n).unwrap_or(&[]);
-            self.node.plc_received(Instant(now), bytes);
+            self.node.plc_received(self.node_time(now), bytes);
             if self.burst.len() + bytes.len() <= MAX_LOGGED_BURST {
                 self.burst.extend_from_slice(bytes);
             }
@@ -79,7 +87,8 @@ impl Host {
                     let at = at.max(self.last_bus_rx);
                     self.last_bus_rx = at;
                     self.log.bus_received(at, byte);
-                    self.node.bus_received(Instant(at), &[byte]);
+                    self.node
+                        .bus_received(Instant(at.saturating_sub(self.epoch)), &[byte]);
                 }
             }
             BusSide::Device { port, .. } => {
@@ -92,7 +101,8 @@ impl Host {
                     for &byte in bytes {
                         self.log.bus_received(now, byte);
                     }
-                    self.node.bus_received(Instant(now), bytes);
+                    self.node
+                        .bus_received(Instant(now.saturating_sub(self.epoch)), bytes);
                 }
             }
         }
@@ -102,7 +112,7 @@ impl Host {
     /// Poll the node until it is idle; its deadline.
     fn drive(&mut self, now: u64) -> io::Result<Option<u64>> {
         for _ in 0..MAX_OUTPUTS_PER_PASS {
-            match self.node.poll(Instant(now)) {
+            match self.node.poll(self.node_time(now)) {
                 Some(Action::Bus(bytes)) => {
                     if let Ok(request) = protocol::Frame::new_checked(&bytes)
                         .and_then(|frame| Request::parse(&frame))
@@ -141,7 +151,12 @@ impl Host {
                     let bytes = self.node.tcp_reply().to_vec();
                     self.log.modbus_reply(now, &bytes);
                     if let Some(tcp) = &mut self.tcp {
-                        tcp.reply(now, socket, &bytes, &mut self.node);
+                        tcp.reply(
+                            now.saturating_sub(self.epoch),
+                            socket,
+                            &bytes,
+                            &mut self.node,
+                        );
                     }
                 }
                 Some(Action::Tcp(TcpAction::Close(socket))) => {
@@ -151,19 +166,31 @@ impl Host {
                     }
                 }
                 Some(Action::Settings(store)) => {
-                    // A PC has no settings flash: a save is kept for the run (and counted), a
-                    // restart or factory reset is only logged.
-                    if let protocol::plc::SettingsRequest::Save = store {
-                        self.saves += 1;
-                        self.node.stored(Ok(self.saves));
-                    }
                     self.log.note(now, &format!("store: {store:?}"));
+                    match store {
+                        // A PC has no settings flash: a save is kept for the run (and counted);
+                        // a restart starts with it.
+                        protocol::plc::SettingsRequest::Save => {
+                            self.saves += 1;
+                            self.saved = Some(self.node.settings_record());
+                            self.node.stored(Ok(self.saves));
+                        }
+                        // After this pass, once the reply has left.
+                        protocol::plc::SettingsRequest::Restart => {
+                            self.restart_due = Some(Restart::Reset);
+                            return Ok(Some(now));
+                        }
+                        protocol::plc::SettingsRequest::FactoryReset => {
+                            self.restart_due = Some(Restart::Factory);
+                            return Ok(Some(now));
+                        }
+                    }
                 }
                 Some(Action::Update(job)) => {
-                    // Only with a partition (`Node::set_update_target`) is the node asked.
-                    let result = match &mut self.dfu {
-                        Some(dfu) => dfu.carry_out(&job),
-                        None => Err(io::Error::other("no DFU partition")),
+                    // Only with a board (`Node::set_update_target`) is the node asked.
+                    let result = match &mut self.board {
+                        Some(board) => board.carry_out(&job),
+                        None => Err(UpdateError::NoPartition),
                     };
                     let what = match job {
                         UpdateJob::Erase { len } => format!("erase {len} B"),
@@ -175,8 +202,10 @@ impl Host {
                         }
                     };
                     self.log.note(now, &format!("update: {what}: {result:?}"));
-                    self.node
-                        .update_done(result.map_err(|_| UpdateError::Flash));
+                    if let Ok(Some(version)) = result {
+                        self.node.set_image_version(version);
+                    }
+                    self.node.update_done(result.map(|_| ()));
                 }
                 None => {
                     if self.node.receiver_counters() != self.seen_receiver {
@@ -187,12 +216,76 @@ impl Host {
                             self.burst.clear();
                         }
                     }
-                    return Ok(self.node.poll_at().map(|t| t.0));
+                    return Ok(self.node.poll_at().map(|t| t.0.saturating_add(self.epoch)));
                 }
             }
         }
         // More to do: come back at once.
         Ok(Some(now))
+    }
+
+    /// A firmware on trial that has shown it works (`Node::trial_passed`) is confirmed to the
+    /// bootloader (embassy-boot's `mark_booted`), as the firmware does.
+    fn confirm_trial(&mut self, now: u64) -> io::Result<()> {
+        let Some(board) = &mut self.board else {
+            return Ok(());
+        };
+        if board.unconfirmed() && self.node.trial_passed() {
+            let state = board.confirm()?;
+            self.node.set_boot_state(state);
+            self.log
+                .note(now, &format!("boot: confirmed ({})", state.name()));
+        }
+        Ok(())
+    }
+
+    /// A restart, as the board's reset: the reply to RESTART has left; the TCP connections are
+    /// dropped (the serial line stays: it is a wire), the bootloader runs (`prepare_boot`: a
+    /// marked image swapped in, an unconfirmed trial swapped back), and a new node starts with
+    /// the settings saved during the run (none after a factory reset), its uptime from 0.
+    pub(super) fn restart(&mut self, now: u64, why: Restart) -> io::Result<()> {
+        if let Some(plc) = &mut self.plc {
+            plc.flush()?;
+            plc.drain()?;
+        }
+        if let Some(tcp) = &mut self.tcp {
+            tcp.drop_all();
+        }
+        if why == Restart::Factory {
+            self.saved = None;
+        }
+        let node = super::Host::start_node(
+            &self.options,
+            self.saved.as_ref().map(|r| r.as_slice()),
+            self.saves,
+            Some(protocol::plc::ResetCause::Software),
+            self.board.as_mut(),
+        )?;
+        self.node = node;
+        self.epoch = self.now();
+        self.seen_receiver = protocol::modbus::ReceiverCounters::default();
+        self.burst.clear();
+        let config = self.node.gateway().config();
+        let (plc_bps, bus_baud) = (config.plc.baud.bits_per_second(), config.bus.baud);
+        if let Some(plc) = &mut self.plc {
+            plc.set_rate(plc_bps)?;
+        }
+        if let BusSide::Sim(bus) = &mut self.bus {
+            bus.set_host_baud(bus_baud);
+        }
+        let version = self.board.as_ref().and_then(|b| b.active_version());
+        self.log.note(
+            now,
+            &format!(
+                "restarted ({why:?}): running {}, {}",
+                version.map_or_else(
+                    || protocol::plc::IDENTITY.revision.to_string(),
+                    |v| format!("{}.{}.{}", v.major, v.minor, v.patch)
+                ),
+                self.boot_state().map_or("no bootloader", |b| b.name())
+            ),
+        );
+        Ok(())
     }
 
     fn line(&mut self, now: u64, action: LineAction) -> io::Result<()> {

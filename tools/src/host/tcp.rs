@@ -63,6 +63,20 @@ impl TcpSide {
         })
     }
 
+    /// Every connection dropped, as a reset of the gateway drops them: what is still to be
+    /// written is tried once, then the connection is shut down. The node is not told (it is
+    /// replaced).
+    pub fn drop_all(&mut self) {
+        for slot in &mut self.connections {
+            if let Some(mut connection) = slot.take() {
+                let (a, b) = connection.out.as_slices();
+                let _ = connection.stream.write_all(a);
+                let _ = connection.stream.write_all(b);
+                let _ = connection.stream.shutdown(Shutdown::Both);
+            }
+        }
+    }
+
     /// The address listened on.
     pub fn local_addr(&self) -> io::Result<SocketAddr> {
         self.listener.local_addr()

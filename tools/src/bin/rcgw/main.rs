@@ -35,6 +35,7 @@ mod link;
 mod points;
 mod restore;
 mod settings;
+mod sign;
 mod status;
 mod update;
 
@@ -50,8 +51,8 @@ use crate::settings::Settings;
 /// Configure, watch, back up and restore an IAI Robo Cylinder gateway over Modbus RTU or TCP.
 #[derive(Parser, Debug)]
 #[command(name = "rcgw", version)]
-#[command(group(ArgGroup::new("line").required(true).args(["rtu", "tcp"])))]
-struct Cli {
+#[command(group(ArgGroup::new("line").args(["rtu", "tcp"])))]
+pub(crate) struct Cli {
     /// Modbus RTU on this serial device (or pseudo-terminal).
     #[arg(long, global = true, value_name = "PATH")]
     rtu: Option<String>,
@@ -114,27 +115,82 @@ enum Cmd {
     Ack,
     /// Store the settings in flash (SAVE).
     Save,
-    /// Restart the gateway (the saved settings take effect).
-    Restart,
+    /// Restart the gateway (the saved settings take effect, a marked firmware image starts on
+    /// trial), wait until it answers again and say what it runs.
+    Restart {
+        /// Only write RESTART: do not wait for the gateway to come back.
+        #[arg(long)]
+        no_wait: bool,
+        /// How long to wait for the gateway to answer again, seconds (a swap of a whole image
+        /// takes tens of seconds on the board).
+        #[arg(long, default_value_t = 60.0, value_name = "S")]
+        wait: f64,
+    },
     /// Erase the stored settings and restart with the defaults.
     FactoryReset {
         /// Yes, erase them.
         #[arg(long)]
         yes: bool,
     },
-    /// Send a firmware image into the gateway's DFU partition (resumes a cut transfer), or show
-    /// what the gateway has (--status). Only the transfer so far: nothing starts the image yet.
+    /// Send a signed firmware image into the gateway's DFU partition (resumes a cut transfer),
+    /// where the gateway checks its signature and marks it for the next start; or show what the
+    /// gateway has and runs (--status).
     Update {
-        /// The image (a raw binary).
+        /// The signed image (`rcgw sign`).
         #[arg(required_unless_present = "status", conflicts_with = "status")]
         file: Option<String>,
-        /// The board the image is built for (decimal, or hex with 0x): the gateway refuses
-        /// another board's.
-        #[arg(long, value_parser = parse_board, required_unless_present = "status")]
+        /// A cross-check: refuse the image unless its trailer names this board (decimal, or hex
+        /// with 0x). Not needed: the image names its board and the gateway tells its own.
+        #[arg(long, value_parser = parse_board)]
         board: Option<u16>,
-        /// Show the transfer's state, the image in the DFU partition and the last error.
+        /// The running version, what the bootloader did at this start, the image marked for the
+        /// next start, and the transfer's state.
         #[arg(long)]
         status: bool,
+    },
+    /// Signing keys: `key new --out NAME` writes NAME (the secret seed) and NAME.pub.
+    Key {
+        #[command(subcommand)]
+        action: KeyCmd,
+    },
+    /// Sign an application binary into a firmware image, or check an image's signature
+    /// (--check IMAGE --pub NAME.pub). No gateway needed.
+    Sign {
+        /// The application's binary (raw, as objcopy -O binary writes it).
+        #[arg(required_unless_present = "check", conflicts_with = "check")]
+        app: Option<String>,
+        /// The secret key file (`rcgw key new`).
+        #[arg(long, value_name = "NAME", conflicts_with_all = ["test_key", "check"])]
+        key: Option<String>,
+        /// Sign (or check) with the public TEST key: for tests and the emulator only, never a
+        /// release.
+        #[arg(long)]
+        test_key: bool,
+        /// The board the image is for (decimal, or hex with 0x).
+        #[arg(long, value_parser = parse_board, default_value = "0x0475")]
+        board: u16,
+        /// The firmware's version, MAJOR.MINOR.PATCH.
+        #[arg(long, value_parser = sign::parse_version, required_unless_present = "check")]
+        version: Option<rc_boot::image::Version>,
+        /// Where the image goes.
+        #[arg(long, value_name = "IMAGE", required_unless_present = "check")]
+        out: Option<String>,
+        /// Check this image's signature instead (exit 0 if it verifies, 1 if not).
+        #[arg(long, value_name = "IMAGE")]
+        check: Option<String>,
+        /// --check: the public key file (NAME.pub).
+        #[arg(long = "pub", value_name = "NAME.pub", requires = "check")]
+        public: Option<String>,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+enum KeyCmd {
+    /// A new Ed25519 key pair: NAME (32 raw bytes, the secret seed, mode 0600) and NAME.pub (32
+    /// raw bytes, printed in hex too). Refuses to overwrite.
+    New {
+        #[arg(long, value_name = "NAME")]
+        out: String,
     },
 }
 
@@ -198,8 +254,9 @@ fn emit(text: &str) {
     }
 }
 
-fn connect(cli: &Cli) -> Result<Gw, Fail> {
-    let link = match (&cli.rtu, &cli.tcp) {
+/// The line, opened: no request made.
+pub(crate) fn open_link(cli: &Cli) -> Result<Link, Fail> {
+    Ok(match (&cli.rtu, &cli.tcp) {
         (Some(path), _) => Link::rtu(
             path,
             cli.baud,
@@ -207,7 +264,11 @@ fn connect(cli: &Cli) -> Result<Gw, Fail> {
         )?,
         (None, Some(addr)) => Link::tcp(addr)?,
         (None, None) => return Err(Fail::Input("--rtu PATH or --tcp HOST:PORT".into())),
-    };
+    })
+}
+
+fn connect(cli: &Cli) -> Result<Gw, Fail> {
+    let link = open_link(cli)?;
     let mut gw = Gw {
         link,
         unit: cli.unit,
@@ -250,6 +311,52 @@ fn print_json(value: &impl serde::Serialize) {
 }
 
 fn run(cli: &Cli) -> Result<(), Fail> {
+    // Commands without a gateway.
+    match &cli.command {
+        Cmd::Key {
+            action: KeyCmd::New { out },
+        } => return sign::key_new(out, cli.json),
+        Cmd::Sign {
+            check: Some(image),
+            public,
+            test_key,
+            ..
+        } => {
+            let key = match (public, test_key) {
+                (Some(path), false) => sign::KeySource::File(path),
+                (None, true) => sign::KeySource::Test,
+                _ => {
+                    return Err(Fail::Input(
+                        "--check IMAGE: --pub NAME.pub or --test-key".into(),
+                    ))
+                }
+            };
+            return sign::check(image, key, cli.json);
+        }
+        Cmd::Sign {
+            app: Some(app),
+            key,
+            test_key,
+            board,
+            version: Some(version),
+            out: Some(out),
+            ..
+        } => {
+            let key = match (key, test_key) {
+                (Some(path), false) => sign::KeySource::File(path),
+                (None, true) => sign::KeySource::Test,
+                _ => return Err(Fail::Input("sign: --key NAME or --test-key".into())),
+            };
+            return sign::sign(app, key, *board, *version, out, cli.json);
+        }
+        Cmd::Sign { .. } => {
+            return Err(Fail::Input(
+                "sign APP --key NAME --version V --out IMAGE, or sign --check IMAGE --pub NAME.pub"
+                    .into(),
+            ))
+        }
+        _ => {}
+    }
     // Files are checked before the line is opened: a bad file writes nothing.
     let mut image = None;
     match &cli.command {
@@ -263,9 +370,23 @@ fn run(cli: &Cli) -> Result<(), Fail> {
             backup::load(file)?;
         }
         Cmd::Update {
-            file: Some(file), ..
+            file: Some(file),
+            board,
+            ..
         } => {
-            image = Some(read_image(file)?);
+            let bytes = read_image(file)?;
+            let trailer = sign::read_trailer(&bytes).map_err(|why| {
+                Fail::Input(format!(
+                    "{file}: not a signed image ({why}): sign it with `rcgw sign`"
+                ))
+            })?;
+            if let Some(board) = board.filter(|&b| b != trailer.board) {
+                return Err(Fail::Input(format!(
+                    "{file}: the image is for board {:#06x}, not {board:#06x} (--board)",
+                    trailer.board
+                )));
+            }
+            image = Some((bytes, trailer));
         }
         Cmd::FactoryReset { yes: false } => {
             return Err(Fail::Input(
@@ -273,6 +394,21 @@ fn run(cli: &Cli) -> Result<(), Fail> {
             ))
         }
         _ => {}
+    }
+    // RESTART is the first request: a gateway whose new firmware is on trial and has not had
+    // a request yet restarts unconfirmed (and rolls back), as after a power cut.
+    if let Cmd::Restart { no_wait, wait } = &cli.command {
+        let mut gw = Gw {
+            link: open_link(cli)?,
+            unit: cli.unit,
+            base: 1,
+        };
+        return control::restart(
+            &mut gw,
+            cli,
+            cli.json,
+            (!no_wait).then(|| std::time::Duration::from_secs_f64(wait.max(0.0))),
+        );
     }
     let mut gw = connect(cli)?;
     match &cli.command {
@@ -292,14 +428,13 @@ fn run(cli: &Cli) -> Result<(), Fail> {
         Cmd::Diag => diag::diag(&mut gw, cli.json),
         Cmd::Ack => control::ack(&mut gw, cli.json),
         Cmd::Save => control::save(&mut gw, cli.json),
-        Cmd::Restart => control::restart(&mut gw, cli.json),
+        Cmd::Restart { .. } => Ok(()),
         Cmd::FactoryReset { .. } => control::factory_reset(&mut gw, cli.json),
         Cmd::Update { status: true, .. } => update::status(&mut gw, cli.json),
-        Cmd::Update { board, .. } => update::update(
-            &mut gw,
-            cli.json,
-            image.as_deref().unwrap_or_default(),
-            board.unwrap_or_default(),
-        ),
+        Cmd::Update { .. } => match &image {
+            Some((bytes, trailer)) => update::update(&mut gw, cli.json, bytes, trailer),
+            None => Err(Fail::Input("update FILE or update --status".into())),
+        },
+        Cmd::Key { .. } | Cmd::Sign { .. } => Ok(()),
     }
 }

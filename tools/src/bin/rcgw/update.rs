@@ -2,7 +2,10 @@
 //! (unit 63's UPDCTL, UPDSTAT and UPDCHUNK: `protocol::plc::update`), resumed where a cut
 //! transfer stopped; `rcgw update --status`: what the gateway has.
 //!
-//! Only the transfer: no signature yet, and nothing on the board starts the image (issue 37).
+//! The image is a signed one (`rcgw sign`): its trailer is read before anything is sent, and
+//! an image for another board or larger than the gateway takes is refused here (exit 2). The
+//! gateway checks the signature at FINISH and marks the image for its next start; `rcgw
+//! restart` starts it, on trial.
 
 use std::time::{Duration, Instant};
 
@@ -12,11 +15,14 @@ use protocol::plc::update::{
     begin_registers, chunk_registers, crc32, UpdateError, UpdateState, UpdateStatus, CHUNK_ALIGN,
     FINISH, MAX_CHUNK,
 };
+use rc_boot::image::Trailer;
 use serde_json::json;
 
 use crate::backup::progress;
+use crate::control::{boot_text, marked_text, running};
 use crate::link::{Fail, Gw};
 use crate::print_json;
+use crate::sign::version_text;
 
 /// How long a refusal that says "not now" (an axis moves, a SAVE, the flash busy) is waited
 /// out, and a state that is the gateway's to leave (erasing, finishing).
@@ -62,10 +68,23 @@ fn status_json(s: &UpdateStatus) -> serde_json::Value {
 /// `rcgw update --status`.
 pub fn status(gw: &mut Gw, json: bool) -> Result<(), Fail> {
     let s = read_status(gw)?;
+    let run = running(gw)?;
     if json {
-        print_json(&status_json(&s));
+        let mut value = status_json(&s);
+        value["running"] = json!(run.version);
+        value["boot"] = json!(run.boot.name());
+        value["marked"] = json!(marked_text(run.marked));
+        print_json(&value);
         return Ok(());
     }
+    outln!("running    {}, {}", run.version, boot_text(run.boot));
+    outln!(
+        "marked     {}",
+        marked_text(run.marked).map_or_else(
+            || "nothing for the next start".to_string(),
+            |v| format!("{v}, starts at the next restart (`rcgw restart`)")
+        )
+    );
     if s.partition == 0 {
         outln!("no DFU partition: this gateway takes no firmware image over the PLC link");
         return Ok(());
@@ -148,9 +167,22 @@ fn refused(gw: &Gw, address: u16, s: &UpdateStatus) -> Fail {
     ))
 }
 
-/// `rcgw update FILE --board ID`: the image sent, from the next offset the gateway shows when
-/// it already has part of this image, then checked and marked.
-pub fn update(gw: &mut Gw, json: bool, image: &[u8], board: u16) -> Result<(), Fail> {
+/// The largest image a gateway of `board` with a DFU partition of `partition` bytes takes: the
+/// partition, and for the L475 its ACTIVE partition (one page smaller than DFU), which the
+/// bootloader's swap fills.
+fn largest_image(board: u16, partition: u32) -> u32 {
+    if board == rc_boot::BOARD_L475 {
+        partition.min(rc_boot::layout::L475.max_image())
+    } else {
+        partition
+    }
+}
+
+/// `rcgw update FILE`: the signed image sent, from the next offset the gateway shows when it
+/// already has part of this image, then checked (the signature) and marked by the gateway.
+pub fn update(gw: &mut Gw, json: bool, image: &[u8], trailer: &Trailer) -> Result<(), Fail> {
+    let board = trailer.board;
+    let version = version_text(trailer.version);
     let show = !json && std::io::IsTerminal::is_terminal(&std::io::stderr());
     let size = u32::try_from(image.len()).unwrap_or(u32::MAX);
     let crc = crc32(image);
@@ -161,27 +193,36 @@ pub fn update(gw: &mut Gw, json: bool, image: &[u8], board: u16) -> Result<(), F
             gw.link.name
         )));
     }
-    if size > s.partition {
-        return Err(Fail::Input(format!(
-            "the image is {size} bytes, the gateway's DFU partition {}",
-            s.partition
-        )));
-    }
     if board != s.board {
         return Err(Fail::Input(format!(
-            "the image is for board {board:#06x}, this gateway is board {:#06x}",
+            "the image is for board {board:#06x}, this gateway is board {:#06x}: nothing sent",
             s.board
         )));
     }
+    let largest = largest_image(s.board, s.partition);
+    if size > largest {
+        return Err(Fail::Input(format!(
+            "the image is {size} bytes, the gateway takes at most {largest} (DFU partition {}): nothing sent",
+            s.partition
+        )));
+    }
     let same = s.size == size && s.crc32 == crc;
-    if s.state == UpdateState::Ready as u16 && same {
+    // The file's CRC-32 does not depend on the trailer (the trailer ends with its own CRC-32,
+    // which cancels it out): the same application signed again with another version has the
+    // same size and CRC-32. So "already there" also needs BOOTSTAT's marked version.
+    let marked_now = if s.state == UpdateState::Ready as u16 && same {
+        running(gw)?.marked
+    } else {
+        0
+    };
+    if s.state == UpdateState::Ready as u16 && same && marked_now == trailer.version.to_u32() {
         if json {
             let mut value = status_json(&s);
             value["already"] = json!(true);
             print_json(&value);
         } else {
             outln!(
-                "image of {size} bytes (CRC-32 {crc:08x}) already in the DFU partition, checked and marked: nothing sent"
+                "image {version} of {size} bytes (CRC-32 {crc:08x}) already in the DFU partition, checked and marked: nothing sent; restart the gateway to run it (`rcgw restart`)"
             );
         }
         return Ok(());
@@ -250,13 +291,20 @@ pub fn update(gw: &mut Gw, json: bool, image: &[u8], board: u16) -> Result<(), F
     let s = wait_out(gw, UpdateState::Finishing)?;
     progress(show, "");
     if s.state != UpdateState::Ready as u16 {
-        return Err(refused(gw, G_UPDATE, &s));
+        return Err(Fail::Device(format!(
+            "{}: the gateway did not take the image {version}: {} (state {})",
+            gw.at(gw.unit, G_UPDATE),
+            error_text(s.error),
+            state_name(s.state)
+        )));
     }
+    let marked = marked_text(running(gw)?.marked);
     let seconds = started.elapsed().as_secs_f64();
     if json {
         let mut value = status_json(&s);
         value["resumed_at"] = json!(resumed.then_some(from));
         value["seconds"] = json!(seconds);
+        value["marked"] = json!(marked);
         print_json(&value);
     } else {
         let resumed = if resumed {
@@ -265,7 +313,8 @@ pub fn update(gw: &mut Gw, json: bool, image: &[u8], board: u16) -> Result<(), F
             String::new()
         };
         outln!(
-            "image of {size} bytes (CRC-32 {crc:08x}) in the DFU partition, checked and marked, in {seconds:.1} s{resumed}"
+            "image {version} of {size} bytes (CRC-32 {crc:08x}) sent in {seconds:.1} s{resumed}; the gateway checked its signature and marked {} for the next start: restart the gateway to run it (`rcgw restart`)",
+            marked.as_deref().unwrap_or("it")
         );
     }
     Ok(())
