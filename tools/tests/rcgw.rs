@@ -1031,7 +1031,7 @@ fn update_restart_runs_the_new_version_on_trial_then_confirmed_over_rtu_and_tcp(
         ),
         (
             &serde_json::json!("idle"),
-            &serde_json::json!(482 * 1024),
+            &serde_json::json!(480 * 1024),
             &serde_json::json!(0x0475),
             &serde_json::Value::Null
         ),

@@ -237,11 +237,12 @@ impl Board {
         BlockingPartition::new(&self.flash, r.offset_from(self.layout.flash.start), r.len())
     }
 
-    /// What the node is told about the board: its id and DFU's size.
+    /// What the node is told about the board: its id and the largest image, as the firmware
+    /// tells it (src/dfu.rs): DFU's size, but no larger than ACTIVE, where the swap puts it.
     pub fn target(&self) -> Target {
         Target {
             board: self.board,
-            partition: self.layout.dfu.len(),
+            partition: self.layout.max_image(),
         }
     }
 
