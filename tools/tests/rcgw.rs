@@ -14,6 +14,24 @@ struct Gateway {
     dir: PathBuf,
 }
 
+/// The PLC's pseudo-terminal and the TCP address rc-gateway-host prints when it starts.
+fn lines_of(stdout: &mut BufReader<std::process::ChildStdout>) -> (String, String) {
+    let (mut pty, mut tcp) = (String::new(), String::new());
+    while pty.is_empty() || tcp.is_empty() {
+        let mut line = String::new();
+        assert!(
+            stdout.read_line(&mut line).expect("read") > 0,
+            "gateway ended"
+        );
+        if let Some(p) = line.trim().strip_prefix("PLC ") {
+            pty = p.to_string();
+        } else if let Some(t) = line.trim().strip_prefix("TCP ") {
+            tcp = t.to_string();
+        }
+    }
+    (pty, tcp)
+}
+
 impl Gateway {
     fn start(name: &str) -> Gateway {
         Gateway::with_axes(name, 2)
@@ -35,19 +53,7 @@ impl Gateway {
             .spawn()
             .expect("start rc-gateway-host");
         let mut stdout = BufReader::new(child.stdout.take().expect("stdout"));
-        let (mut pty, mut tcp) = (String::new(), String::new());
-        while pty.is_empty() || tcp.is_empty() {
-            let mut line = String::new();
-            assert!(
-                stdout.read_line(&mut line).expect("read") > 0,
-                "gateway ended"
-            );
-            if let Some(p) = line.trim().strip_prefix("PLC ") {
-                pty = p.to_string();
-            } else if let Some(t) = line.trim().strip_prefix("TCP ") {
-                tcp = t.to_string();
-            }
-        }
+        let (pty, tcp) = lines_of(&mut stdout);
         let dir = std::env::temp_dir().join(format!("rcgw-test-{name}-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("temp dir");
         Gateway {
@@ -812,19 +818,7 @@ impl Board {
             .expect("start rc-gateway-host");
         let stdin = child.stdin.take().expect("stdin");
         let mut stdout = BufReader::new(child.stdout.take().expect("stdout"));
-        let (mut pty, mut tcp) = (String::new(), String::new());
-        while pty.is_empty() || tcp.is_empty() {
-            let mut line = String::new();
-            assert!(
-                stdout.read_line(&mut line).expect("read") > 0,
-                "gateway ended"
-            );
-            if let Some(p) = line.trim().strip_prefix("PLC ") {
-                pty = p.to_string();
-            } else if let Some(t) = line.trim().strip_prefix("TCP ") {
-                tcp = t.to_string();
-            }
-        }
+        let (pty, tcp) = lines_of(&mut stdout);
         Board {
             child,
             stdin,
