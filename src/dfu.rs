@@ -73,11 +73,12 @@ const VERIFY_STEP: u32 = 2048;
 /// The flash's write unit: every write is whole double words.
 const WORD: usize = rc_boot::layout::WORD as usize;
 
-/// The public key images are verified with.
+/// The public key images are verified with. A static, so that its 32 bytes are in the image as
+/// they are (`rcgw sign` refuses an application that does not hold the signing key's public half).
 #[cfg(feature = "hw")]
-const UPDATE_KEY: Option<[u8; 32]> = include!(concat!(env!("OUT_DIR"), "/update_key.rs"));
+static UPDATE_KEY: Option<[u8; 32]> = include!(concat!(env!("OUT_DIR"), "/update_key.rs"));
 #[cfg(feature = "emulator")]
-const UPDATE_KEY: Option<[u8; 32]> = Some(rc_boot::TEST_PUBLIC_KEY);
+static UPDATE_KEY: Option<[u8; 32]> = Some(rc_boot::TEST_PUBLIC_KEY);
 
 /// The emulator's DFU partition, in RAM: 32 KiB of the 96 KiB the build links into (the other
 /// statics and the deepest stack, the node in it, take about 16 KiB: `scripts/size-report.sh`).
@@ -205,7 +206,10 @@ impl Dfu {
             Ok(State::Swap) => (BootState::Trial, true),
             Ok(State::Revert) => (BootState::RolledBack, true),
             Ok(_) => (BootState::Confirmed, false),
-            Err(()) => (BootState::Unknown, false),
+            // Unreadable: a word a power cut tore during a mark (an ECC error; the bootloader
+            // read it as it could and started this firmware). Nothing is marked or erased until
+            // `confirm` has rewritten the pages.
+            Err(()) => (BootState::Unknown, true),
         };
         if self.unconfirmed {
             info!("update: a trial (or a rollback) until the bus and the PLC link answer");
@@ -223,6 +227,16 @@ impl Dfu {
         }
         let confirmed = self.parts(settings).state().and_then(|mut state| {
             let mut word = [0; WORD];
+            let marked = BlockingFirmwareState::new(&mut state, &mut word).mark_booted();
+            if marked.is_ok() {
+                return Ok(());
+            }
+            // The pages unreadable (a mark torn by a power cut: embassy-boot reads the magic
+            // before it erases, and fails on the ECC error every time): erased whole, then the
+            // mark. Safe: this firmware runs, so the swap or the revert before it was whole.
+            warn!("update: the state pages are unreadable: erased");
+            let capacity = state.capacity() as u32;
+            state.erase(0, capacity).map_err(|_| ())?;
             BlockingFirmwareState::new(&mut state, &mut word)
                 .mark_booted()
                 .map_err(|_| ())
@@ -231,7 +245,7 @@ impl Dfu {
             Ok(()) => {
                 info!("update: this firmware confirmed");
                 self.unconfirmed = false;
-                if self.boot == BootState::Trial {
+                if matches!(self.boot, BootState::Trial | BootState::Unknown) {
                     self.boot = BootState::Confirmed;
                     node.set_boot_state(BootState::Confirmed);
                 }
@@ -404,11 +418,11 @@ fn finish(parts: &mut Parts<'_>, crc: Crc32, want: u32, signed: Verifier, versio
         warn!("update: the image read back has another CRC-32");
         return Outcome::failed(UpdateError::Flash);
     }
-    let Some(key) = UPDATE_KEY else {
+    let Some(key) = &UPDATE_KEY else {
         warn!("update: built without a key (RC_GATEWAY_UPDATE_KEY): no image is taken");
         return Outcome::failed(UpdateError::Signature);
     };
-    if signed.finish(&key).is_err() {
+    if signed.finish(key).is_err() {
         warn!("update: the image's signature does not verify");
         return Outcome::failed(UpdateError::Signature);
     }

@@ -63,3 +63,16 @@ fn test_key_constants_agree() {
     let k = SecretKey(rc_boot::TEST_KEY_SEED);
     assert_eq!(k.public_key(), rc_boot::TEST_PUBLIC_KEY);
 }
+
+/// `boot/test-key.pub` is the TEST key's public half as text (what scripts/size-report.sh builds
+/// the board firmware with: any key links the same code, none links no verification at all).
+#[test]
+fn the_test_key_file_is_the_test_public_key() {
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/test-key.pub"))
+        .expect("boot/test-key.pub");
+    let hex: String = rc_boot::TEST_PUBLIC_KEY
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    assert_eq!(text.trim(), hex);
+}

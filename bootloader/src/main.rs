@@ -9,9 +9,13 @@
 //! at any instant resumes where it stopped (rc-boot's tests cut it at every flash operation).
 //!
 //! What this adds to embassy-boot, for a board in a cabinet:
-//! - **The IWDG**, once the application started it, runs across resets and cannot be stopped: a
-//!   swap of the whole ACTIVE partition erases and writes about 480 pages (25 ms each to erase),
-//!   far past its second. Every flash operation is one page and pets it first ([`Watched`]).
+//! - **The IWDG.** A firmware on trial that hangs before it starts its own watchdog would hang
+//!   for good, and only a power cycle would reach the rollback: so the bootloader starts the IWDG
+//!   (about 8 s) before it starts a firmware on trial ([`watchdog`]); the firmware sets its own
+//!   timeout when it starts it. (The IWDG stops at a reset in software mode, its option bytes'
+//!   default; with the hardware-watchdog option bit it runs from power-up.) Either way a swap of
+//!   the whole ACTIVE partition erases and writes about 480 pages (25 ms each to erase), far
+//!   past its timeout: every flash operation is one page and pets it first ([`Watched`]).
 //! - **The flash's data cache** is off while the bootloader runs, so that a page read after its
 //!   erase or write is read from the flash, not from a stale line; the caches are reset before the
 //!   application starts, as it must not execute stale instructions of the old image.
@@ -28,7 +32,7 @@ use core::cell::RefCell;
 
 use cortex_m::peripheral::SCB;
 use cortex_m_rt::{entry, exception};
-use embassy_boot_stm32::{BootLoader, BootLoaderConfig};
+use embassy_boot_stm32::{BootLoader, BootLoaderConfig, State};
 use embassy_embedded_hal::flash::partition::BlockingPartition;
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::pac;
@@ -57,6 +61,11 @@ fn main() -> ! {
         // A flash operation failed: from the top, where the swap's progress says.
         SCB::sys_reset();
     };
+    // A firmware on trial (the swap just done, or the trial's second start, which reverted):
+    // a hang before its own watchdog runs ends in a reset, and the reset in the rollback.
+    if loader.state == State::Swap {
+        watchdog();
+    }
     // The caches emptied: the application may have been rewritten under them.
     data_cache(true);
     instruction_cache_reset();
@@ -109,7 +118,29 @@ impl NorFlash for Watched {
     }
 }
 
-/// Restarts the IWDG's count (nothing if the application never started it).
+/// Starts the IWDG at about 8 s (LSI 32 kHz / 64, 4095 counts): long enough for any start-up,
+/// short enough that a firmware on trial that hangs goes back to the old one by itself. The
+/// firmware's own `start_watchdog` sets its timeout over this one.
+fn watchdog() {
+    use pac::iwdg::vals::{Key, Pr};
+    let iwdg = pac::IWDG;
+    iwdg.kr().write(|w| w.set_key(Key::START));
+    iwdg.kr().write(|w| w.set_key(Key::ENABLE));
+    // PR 4: LSI / 64.
+    iwdg.pr().write(|w| w.set_pr(Pr::from_bits(4)));
+    iwdg.rlr().write(|w| w.set_rl(4095));
+    // The new values reach the IWDG's clock domain within a few LSI cycles (a bounded wait:
+    // QEMU models no IWDG and reads its registers as 0).
+    for _ in 0..100_000 {
+        let sr = iwdg.sr().read();
+        if !sr.pvu() && !sr.rvu() {
+            break;
+        }
+    }
+    pet();
+}
+
+/// Restarts the IWDG's count (nothing if it was never started).
 fn pet() {
     pac::IWDG
         .kr()

@@ -786,7 +786,10 @@ fn signed(dir: &Scratch, name: &str, bytes: &[u8], version: &str, extra: &[&str]
     std::fs::write(&app_path, bytes).expect("write app");
     let out = dir.path(name);
     let mut args = vec!["sign", &app_path, "--version", version, "--out", &out];
-    if !extra.contains(&"--key") {
+    if extra.contains(&"--key") {
+        // Test bytes, not a firmware holding the key (`key_in_the_firmware_...` checks that).
+        args.push("--unchecked");
+    } else {
         args.push("--test-key");
     }
     args.extend_from_slice(extra);
@@ -1370,4 +1373,43 @@ fn restart_fails_when_the_gateway_never_answers_again() {
     );
     assert!(started.elapsed() < std::time::Duration::from_secs(8));
     server.join().expect("server");
+}
+
+#[test]
+fn sign_refuses_an_application_that_does_not_hold_the_key() {
+    let dir = Scratch::new("sign-key-inside");
+    let key = dir.path("release");
+    assert_eq!(
+        offline(&["key", "new", "--out", &key]).status.code(),
+        Some(0)
+    );
+    let public = std::fs::read(format!("{key}.pub")).expect("public key");
+    let secret = std::fs::read(&key).expect("secret key");
+    let sign = |name: &str, bytes: &[u8]| {
+        let app = dir.path(&format!("{name}.bin"));
+        std::fs::write(&app, bytes).expect("write app");
+        let out = dir.path(&format!("{name}.img"));
+        offline(&[
+            "sign",
+            &app,
+            "--key",
+            &key,
+            "--version",
+            "1.0.0",
+            "--out",
+            &out,
+        ])
+    };
+    // Built without the key, or with the secret file in its place: refused, nothing written.
+    let mut without = app(4000, 7);
+    let refused = sign("without", &without);
+    assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("does not hold"));
+    assert!(!std::path::Path::new(&dir.path("without.img")).exists());
+    without[1000..1032].copy_from_slice(&secret);
+    assert_eq!(sign("secret", &without).status.code(), Some(2));
+    // Holding the public half (as a firmware built with RC_GATEWAY_UPDATE_KEY does): signed.
+    without[2000..2032].copy_from_slice(&public);
+    let ok = sign("with", &without);
+    assert_eq!(ok.status.code(), Some(0), "{}", text(&ok));
 }

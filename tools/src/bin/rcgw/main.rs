@@ -181,6 +181,10 @@ enum Cmd {
         /// --check: the public key file (NAME.pub).
         #[arg(long = "pub", value_name = "NAME.pub", requires = "check")]
         public: Option<String>,
+        /// Sign even if the application does not hold the key's public half (a test image; a
+        /// firmware without it would refuse every image after it).
+        #[arg(long, conflicts_with = "check")]
+        unchecked: bool,
     },
 }
 
@@ -340,6 +344,7 @@ fn run(cli: &Cli) -> Result<(), Fail> {
             board,
             version: Some(version),
             out: Some(out),
+            unchecked,
             ..
         } => {
             let key = match (key, test_key) {
@@ -347,7 +352,7 @@ fn run(cli: &Cli) -> Result<(), Fail> {
                 (None, true) => sign::KeySource::Test,
                 _ => return Err(Fail::Input("sign: --key NAME or --test-key".into())),
             };
-            return sign::sign(app, key, *board, *version, out, cli.json);
+            return sign::sign(app, key, *board, *version, out, *unchecked, cli.json);
         }
         Cmd::Sign { .. } => {
             return Err(Fail::Input(

@@ -124,6 +124,7 @@ pub fn sign(
     board: u16,
     version: Version,
     out: &str,
+    unchecked: bool,
     json: bool,
 ) -> Result<(), Fail> {
     let app = std::fs::read(app_path).map_err(|e| Fail::Input(format!("{app_path}: {e}")))?;
@@ -142,6 +143,19 @@ pub fn sign(
             SecretKey(rc_boot::TEST_KEY_SEED)
         }
     };
+    // The firmware verifies the next image with the key built into it: an application without
+    // this key's public half (built without RC_GATEWAY_UPDATE_KEY, with another key, or with the
+    // secret file by mistake) would be accepted now and refuse every image after it.
+    if let KeySource::File(path) = key {
+        let public = secret.public_key();
+        if !unchecked && !app.windows(public.len()).any(|w| w == public) {
+            return Err(Fail::Input(format!(
+                "{app_path}: the application does not hold {path}'s public key: a firmware built \
+                 with RC_GATEWAY_UPDATE_KEY={path}.pub verifies images with it; this one would \
+                 refuse every image after it (--unchecked signs anyway, for a test image)"
+            )));
+        }
+    }
     let signed = image::sign(&app, board, version, &secret)
         .map_err(|e| Fail::Input(format!("{app_path}: cannot be signed: {e:?}")))?;
     std::fs::write(out, &signed).map_err(|e| Fail::Input(format!("{out}: {e}")))?;
