@@ -255,6 +255,13 @@ impl Dfu {
         }
     }
 
+    /// The firmware that runs is not confirmed yet (a trial, a rollback, unreadable STATE
+    /// pages): [`Dfu::confirm`] has work to do. Asked before the call, so that the loop's passes
+    /// do not carry its frame.
+    pub fn unconfirmed(&self) -> bool {
+        self.unconfirmed
+    }
+
     /// A job is under way: the gateway task does not sleep until it is done.
     pub fn busy(&self) -> bool {
         !matches!(self.job, Job::None)
@@ -331,6 +338,9 @@ impl Dfu {
     /// on or when there is none.
     #[inline(never)]
     pub fn step(&mut self, settings: &mut crate::settings::SavedSettings) -> Option<Outcome> {
+        if !self.busy() {
+            return None;
+        }
         let job = core::mem::replace(&mut self.job, Job::None);
         let mut parts = self.parts(settings);
         let (next, outcome) = match job {

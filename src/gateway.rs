@@ -303,14 +303,16 @@ pub async fn run(
         // is owed a stop): a stop never waits behind a step. Its result goes to the node when
         // it is whole.
         #[cfg(feature = "update")]
-        if node.quiet_for_flash() {
+        if dfu.busy() && node.quiet_for_flash() {
             if let Some(outcome) = dfu.step(settings) {
                 crate::dfu::report(node, outcome);
             }
         }
         // A new firmware on trial confirmed once it has shown it works (and the bus is quiet).
         #[cfg(feature = "update")]
-        dfu.confirm(node, settings);
+        if dfu.unconfirmed() {
+            dfu.confirm(node, settings);
+        }
 
         // The I/O task shows them when it next wakes (1 ms with a PIO axis, else up to 20 ms:
         // the outputs are all OFF then). Every sample when the node wants them periodically
