@@ -196,7 +196,9 @@ impl Gateway {
     /// ([`quiet_for_flash`](Self::quiet_for_flash)): handed out once (feature `update`).
     #[cfg(feature = "update")]
     pub fn take_update_job(&mut self) -> Option<super::update::UpdateJob<'_>> {
-        if self.quiet_for_flash() && self.update.take_due() {
+        // Whether a job is due first: the quiet check walks every axis, and this runs at every
+        // idle poll (scripts/cpu-load.sh counts it).
+        if self.update.is_due() && self.quiet_for_flash() && self.update.take_due() {
             self.update.job()
         } else {
             None

@@ -723,6 +723,11 @@ impl Update {
         Ok(())
     }
 
+    /// Whether a job is due, without taking it.
+    pub(super) fn is_due(&self) -> bool {
+        self.due
+    }
+
     /// Whether a job is due: taken by this call (the node hands it out once).
     pub(super) fn take_due(&mut self) -> bool {
         core::mem::take(&mut self.due)
