@@ -50,15 +50,16 @@
 //! transfer, the steps, the signature check and embassy-boot's marks run on the real ELF; the
 //! flash driver does not, and no swap follows (the bootloader reads the real, unwritten flash).
 
-use embedded_storage::nor_flash::{
-    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
-};
+use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
 use protocol::plc::update::{BootState, Crc32, Target, UpdateError, UpdateJob};
 use rc_boot::image::{trailer_offset, Trailer, TRAILER_LEN};
 use rc_boot::layout::L475;
 use rc_boot::update::{BlockingFirmwareState, State, Verifier};
 
 use crate::node::Node;
+
+mod parts;
+use parts::Parts;
 
 /// The board id an image must declare (BEGIN and its trailer): the L475's, on the board and in
 /// the emulator (the same firmware).
@@ -518,173 +519,4 @@ fn read_into(
         at += n;
     }
     Ok(())
-}
-
-/// Where DFU and STATE are: windows on the board's flash.
-#[cfg(feature = "hw")]
-struct Parts<'a> {
-    flash: Option<&'a mut crate::board::SettingsFlash>,
-}
-
-#[cfg(feature = "hw")]
-impl Parts<'_> {
-    fn window(&mut self, range: core::ops::Range<u32>) -> Result<impl NorFlash + '_, ()> {
-        let flash = self.flash.as_deref_mut().ok_or(())?;
-        Ok(Window {
-            flash,
-            base: range.start,
-            len: range.end - range.start,
-        })
-    }
-
-    fn dfu(&mut self) -> Result<impl NorFlash + '_, ()> {
-        self.window(crate::board::DFU_RANGE)
-    }
-
-    fn state(&mut self) -> Result<impl NorFlash + '_, ()> {
-        self.window(crate::board::STATE_RANGE)
-    }
-}
-
-/// Where DFU and STATE are: the emulator's RAM.
-#[cfg(feature = "emulator")]
-struct Parts<'a> {
-    dfu: &'a mut [u8],
-    state: &'a mut [u8],
-}
-
-#[cfg(feature = "emulator")]
-impl Parts<'_> {
-    fn dfu(&mut self) -> Result<impl NorFlash + '_, ()> {
-        Ok(Ram(&mut *self.dfu))
-    }
-
-    fn state(&mut self) -> Result<impl NorFlash + '_, ()> {
-        Ok(Ram(&mut *self.state))
-    }
-}
-
-/// A partition of the flash: offsets from its start, none past its end.
-#[cfg(feature = "hw")]
-struct Window<'a, F> {
-    flash: &'a mut F,
-    base: u32,
-    len: u32,
-}
-
-/// A partition's error: the flash's, or an offset outside the partition.
-#[derive(Debug)]
-enum PartError<E> {
-    Outside,
-    #[cfg_attr(feature = "emulator", allow(dead_code))]
-    Flash(E),
-}
-
-impl<E: NorFlashError> NorFlashError for PartError<E> {
-    fn kind(&self) -> NorFlashErrorKind {
-        match self {
-            PartError::Outside => NorFlashErrorKind::OutOfBounds,
-            PartError::Flash(e) => e.kind(),
-        }
-    }
-}
-
-#[cfg(feature = "hw")]
-impl<F: ErrorType> ErrorType for Window<'_, F> {
-    type Error = PartError<F::Error>;
-}
-
-#[cfg(feature = "hw")]
-impl<F: ReadNorFlash> Window<'_, F> {
-    /// The flash's offset of `offset..offset + len` in the window, if it is inside.
-    fn at(&self, offset: u32, len: usize) -> Result<u32, PartError<F::Error>> {
-        let end = (offset as usize)
-            .checked_add(len)
-            .ok_or(PartError::Outside)?;
-        if end > self.len as usize {
-            return Err(PartError::Outside);
-        }
-        Ok(self.base + offset)
-    }
-}
-
-#[cfg(feature = "hw")]
-impl<F: ReadNorFlash> ReadNorFlash for Window<'_, F> {
-    const READ_SIZE: usize = F::READ_SIZE;
-
-    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-        let at = self.at(offset, bytes.len())?;
-        self.flash.read(at, bytes).map_err(PartError::Flash)
-    }
-
-    fn capacity(&self) -> usize {
-        self.len as usize
-    }
-}
-
-#[cfg(feature = "hw")]
-impl<F: NorFlash> NorFlash for Window<'_, F> {
-    const WRITE_SIZE: usize = F::WRITE_SIZE;
-    const ERASE_SIZE: usize = F::ERASE_SIZE;
-
-    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-        let at = self.at(offset, bytes.len())?;
-        self.flash.write(at, bytes).map_err(PartError::Flash)
-    }
-
-    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-        let at = self.at(from, to.saturating_sub(from) as usize)?;
-        self.flash
-            .erase(at, at + (to - from))
-            .map_err(PartError::Flash)
-    }
-}
-
-/// A partition in the emulator's RAM, as NOR flash of the L475's units.
-#[cfg(feature = "emulator")]
-struct Ram<'a>(&'a mut [u8]);
-
-#[cfg(feature = "emulator")]
-impl ErrorType for Ram<'_> {
-    type Error = PartError<NorFlashErrorKind>;
-}
-
-#[cfg(feature = "emulator")]
-impl ReadNorFlash for Ram<'_> {
-    const READ_SIZE: usize = 1;
-
-    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-        let from = offset as usize;
-        let to = from.checked_add(bytes.len()).ok_or(PartError::Outside)?;
-        bytes.copy_from_slice(self.0.get(from..to).ok_or(PartError::Outside)?);
-        Ok(())
-    }
-
-    fn capacity(&self) -> usize {
-        self.0.len()
-    }
-}
-
-#[cfg(feature = "emulator")]
-impl NorFlash for Ram<'_> {
-    const WRITE_SIZE: usize = WORD;
-    const ERASE_SIZE: usize = PAGE as usize;
-
-    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-        let from = offset as usize;
-        let to = from.checked_add(bytes.len()).ok_or(PartError::Outside)?;
-        self.0
-            .get_mut(from..to)
-            .ok_or(PartError::Outside)?
-            .copy_from_slice(bytes);
-        Ok(())
-    }
-
-    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-        self.0
-            .get_mut(from as usize..to as usize)
-            .ok_or(PartError::Outside)?
-            .fill(0xFF);
-        Ok(())
-    }
 }

@@ -1,0 +1,178 @@
+//! Where DFU and STATE are ([`Parts`]): on the board, windows on the settings store's flash
+//! driver; in the emulator, RAM (QEMU's flash cannot be written). Each is a
+//! [`NorFlash`](embedded_storage::nor_flash::NorFlash) that never reaches outside its partition.
+
+#[cfg(feature = "emulator")]
+use super::{PAGE, WORD};
+use embedded_storage::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
+
+/// Where DFU and STATE are: windows on the board's flash.
+#[cfg(feature = "hw")]
+pub(super) struct Parts<'a> {
+    pub(super) flash: Option<&'a mut crate::board::SettingsFlash>,
+}
+
+#[cfg(feature = "hw")]
+impl Parts<'_> {
+    fn window(&mut self, range: core::ops::Range<u32>) -> Result<impl NorFlash + '_, ()> {
+        let flash = self.flash.as_deref_mut().ok_or(())?;
+        Ok(Window {
+            flash,
+            base: range.start,
+            len: range.end - range.start,
+        })
+    }
+
+    pub(super) fn dfu(&mut self) -> Result<impl NorFlash + '_, ()> {
+        self.window(crate::board::DFU_RANGE)
+    }
+
+    pub(super) fn state(&mut self) -> Result<impl NorFlash + '_, ()> {
+        self.window(crate::board::STATE_RANGE)
+    }
+}
+
+/// Where DFU and STATE are: the emulator's RAM.
+#[cfg(feature = "emulator")]
+pub(super) struct Parts<'a> {
+    pub(super) dfu: &'a mut [u8],
+    pub(super) state: &'a mut [u8],
+}
+
+#[cfg(feature = "emulator")]
+impl Parts<'_> {
+    pub(super) fn dfu(&mut self) -> Result<impl NorFlash + '_, ()> {
+        Ok(Ram(&mut *self.dfu))
+    }
+
+    pub(super) fn state(&mut self) -> Result<impl NorFlash + '_, ()> {
+        Ok(Ram(&mut *self.state))
+    }
+}
+
+/// A partition of the flash: offsets from its start, none past its end.
+#[cfg(feature = "hw")]
+struct Window<'a, F> {
+    flash: &'a mut F,
+    base: u32,
+    len: u32,
+}
+
+/// A partition's error: the flash's, or an offset outside the partition.
+#[derive(Debug)]
+enum PartError<E> {
+    Outside,
+    #[cfg_attr(feature = "emulator", allow(dead_code))]
+    Flash(E),
+}
+
+impl<E: NorFlashError> NorFlashError for PartError<E> {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            PartError::Outside => NorFlashErrorKind::OutOfBounds,
+            PartError::Flash(e) => e.kind(),
+        }
+    }
+}
+
+#[cfg(feature = "hw")]
+impl<F: ErrorType> ErrorType for Window<'_, F> {
+    type Error = PartError<F::Error>;
+}
+
+#[cfg(feature = "hw")]
+impl<F: ReadNorFlash> Window<'_, F> {
+    /// The flash's offset of `offset..offset + len` in the window, if it is inside.
+    fn at(&self, offset: u32, len: usize) -> Result<u32, PartError<F::Error>> {
+        let end = (offset as usize)
+            .checked_add(len)
+            .ok_or(PartError::Outside)?;
+        if end > self.len as usize {
+            return Err(PartError::Outside);
+        }
+        Ok(self.base + offset)
+    }
+}
+
+#[cfg(feature = "hw")]
+impl<F: ReadNorFlash> ReadNorFlash for Window<'_, F> {
+    const READ_SIZE: usize = F::READ_SIZE;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        let at = self.at(offset, bytes.len())?;
+        self.flash.read(at, bytes).map_err(PartError::Flash)
+    }
+
+    fn capacity(&self) -> usize {
+        self.len as usize
+    }
+}
+
+#[cfg(feature = "hw")]
+impl<F: NorFlash> NorFlash for Window<'_, F> {
+    const WRITE_SIZE: usize = F::WRITE_SIZE;
+    const ERASE_SIZE: usize = F::ERASE_SIZE;
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        let at = self.at(offset, bytes.len())?;
+        self.flash.write(at, bytes).map_err(PartError::Flash)
+    }
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        let at = self.at(from, to.saturating_sub(from) as usize)?;
+        self.flash
+            .erase(at, at + (to - from))
+            .map_err(PartError::Flash)
+    }
+}
+
+/// A partition in the emulator's RAM, as NOR flash of the L475's units.
+#[cfg(feature = "emulator")]
+struct Ram<'a>(&'a mut [u8]);
+
+#[cfg(feature = "emulator")]
+impl ErrorType for Ram<'_> {
+    type Error = PartError<NorFlashErrorKind>;
+}
+
+#[cfg(feature = "emulator")]
+impl ReadNorFlash for Ram<'_> {
+    const READ_SIZE: usize = 1;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        let from = offset as usize;
+        let to = from.checked_add(bytes.len()).ok_or(PartError::Outside)?;
+        bytes.copy_from_slice(self.0.get(from..to).ok_or(PartError::Outside)?);
+        Ok(())
+    }
+
+    fn capacity(&self) -> usize {
+        self.0.len()
+    }
+}
+
+#[cfg(feature = "emulator")]
+impl NorFlash for Ram<'_> {
+    const WRITE_SIZE: usize = WORD;
+    const ERASE_SIZE: usize = PAGE as usize;
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        let from = offset as usize;
+        let to = from.checked_add(bytes.len()).ok_or(PartError::Outside)?;
+        self.0
+            .get_mut(from..to)
+            .ok_or(PartError::Outside)?
+            .copy_from_slice(bytes);
+        Ok(())
+    }
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.0
+            .get_mut(from as usize..to as usize)
+            .ok_or(PartError::Outside)?
+            .fill(0xFF);
+        Ok(())
+    }
+}
