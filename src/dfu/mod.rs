@@ -46,7 +46,7 @@
 //! never reads outside its own pages.
 //!
 //! **The emulator** (`emulator`): QEMU's `b-l475e-iot01a` models no flash interface (its flash
-//! cannot be written), so DFU is [`EMU_PARTITION`] bytes of RAM and STATE four pages of RAM: the
+//! cannot be written), so DFU is [`EMU_PARTITION`](parts::EMU_PARTITION) bytes of RAM and STATE four pages of RAM: the
 //! transfer, the steps, the signature check and embassy-boot's marks run on the real ELF; the
 //! flash driver does not, and no swap follows (the bootloader reads the real, unwritten flash).
 
@@ -59,7 +59,7 @@ use rc_boot::update::{BlockingFirmwareState, State, Verifier};
 use crate::node::Node;
 
 mod parts;
-use parts::Parts;
+use parts::{Home, Parts, UPDATE_KEY};
 
 /// The board id an image must declare (BEGIN and its trailer): the L475's, on the board and in
 /// the emulator (the same firmware).
@@ -73,27 +73,6 @@ const VERIFY_STEP: u32 = 2048;
 
 /// The flash's write unit: every write is whole double words.
 const WORD: usize = rc_boot::layout::WORD as usize;
-
-/// The public key images are verified with. A static, so that its 32 bytes are in the image as
-/// they are (`rcgw sign` refuses an application that does not hold the signing key's public half).
-#[cfg(feature = "hw")]
-static UPDATE_KEY: Option<[u8; 32]> = include!(concat!(env!("OUT_DIR"), "/update_key.rs"));
-#[cfg(feature = "emulator")]
-static UPDATE_KEY: Option<[u8; 32]> = Some(rc_boot::TEST_PUBLIC_KEY);
-
-/// The emulator's DFU partition, in RAM: 32 KiB of the 96 KiB the build links into (the other
-/// statics and the deepest stack, the node in it, take about 16 KiB: `scripts/size-report.sh`).
-#[cfg(feature = "emulator")]
-pub const EMU_PARTITION: usize = 32 * 1024;
-
-#[cfg(feature = "emulator")]
-static EMU_RAM: static_cell::ConstStaticCell<[u8; EMU_PARTITION]> =
-    static_cell::ConstStaticCell::new([0; EMU_PARTITION]);
-
-/// The emulator's STATE pages, in RAM: as large as the board's.
-#[cfg(feature = "emulator")]
-static EMU_STATE: static_cell::ConstStaticCell<[u8; rc_boot::layout::STATE_SIZE as usize]> =
-    static_cell::ConstStaticCell::new([0xFF; rc_boot::layout::STATE_SIZE as usize]);
 
 /// How a job went, for [`report`].
 pub struct Outcome {
@@ -158,10 +137,8 @@ pub struct Dfu {
     boot: BootState,
     /// A trial (or the old firmware after a rollback) not yet confirmed.
     unconfirmed: bool,
-    #[cfg(feature = "emulator")]
-    ram: &'static mut [u8],
-    #[cfg(feature = "emulator")]
-    state: &'static mut [u8],
+    /// Where DFU and STATE are.
+    home: Home,
 }
 
 impl Dfu {
@@ -171,23 +148,16 @@ impl Dfu {
             job: Job::None,
             boot: BootState::Unknown,
             unconfirmed: false,
-            #[cfg(feature = "emulator")]
-            ram: EMU_RAM.take().as_mut_slice(),
-            #[cfg(feature = "emulator")]
-            state: EMU_STATE.take().as_mut_slice(),
+            home: Home::new(),
         }
     }
 
     /// What the node is told: this board, and the largest image (DFU's size, but no larger than
     /// ACTIVE, where the bootloader swaps it).
     pub fn target() -> Target {
-        #[cfg(feature = "hw")]
-        let partition = L475.max_image();
-        #[cfg(feature = "emulator")]
-        let partition = EMU_PARTITION as u32;
         Target {
             board: BOARD_ID,
-            partition,
+            partition: Home::LARGEST_IMAGE,
         }
     }
 
@@ -197,7 +167,7 @@ impl Dfu {
     // in the gateway loop's under every request the node serves.
     #[inline(never)]
     pub fn start_up(&mut self, settings: &mut crate::settings::SavedSettings) -> BootState {
-        let state = self.parts(settings).state().and_then(|mut state| {
+        let state = self.home.parts(settings).state().and_then(|mut state| {
             let mut word = [0; WORD];
             BlockingFirmwareState::new(&mut state, &mut word)
                 .get_state()
@@ -226,7 +196,7 @@ impl Dfu {
         if !self.unconfirmed || !node.trial_passed() || !node.quiet_for_flash() {
             return;
         }
-        let confirmed = self.parts(settings).state().and_then(|mut state| {
+        let confirmed = self.home.parts(settings).state().and_then(|mut state| {
             let mut word = [0; WORD];
             let marked = BlockingFirmwareState::new(&mut state, &mut word).mark_booted();
             if marked.is_ok() {
@@ -283,7 +253,7 @@ impl Dfu {
         if self.unconfirmed && !matches!(job, UpdateJob::Write { .. }) {
             return Some(Outcome::failed(UpdateError::OnTrial));
         }
-        let mut parts = self.parts(settings);
+        let mut parts = self.home.parts(settings);
         match *job {
             UpdateJob::Erase { len } => {
                 // An image marked earlier in this run is unmarked before its pages go.
@@ -343,7 +313,7 @@ impl Dfu {
             return None;
         }
         let job = core::mem::replace(&mut self.job, Job::None);
-        let mut parts = self.parts(settings);
+        let mut parts = self.home.parts(settings);
         let (next, outcome) = match job {
             Job::None => return None,
             Job::Erase { next, end } if next >= end => (Job::None, Some(Ok(()).into())),
@@ -403,22 +373,6 @@ impl Dfu {
         };
         self.job = next;
         outcome
-    }
-
-    /// DFU and STATE, on the board's flash or in the emulator's RAM.
-    #[cfg(feature = "hw")]
-    fn parts<'a>(&'a mut self, settings: &'a mut crate::settings::SavedSettings) -> Parts<'a> {
-        Parts {
-            flash: settings.flash(),
-        }
-    }
-
-    #[cfg(feature = "emulator")]
-    fn parts<'a>(&'a mut self, _settings: &'a mut crate::settings::SavedSettings) -> Parts<'a> {
-        Parts {
-            dfu: &mut *self.ram,
-            state: &mut *self.state,
-        }
     }
 }
 

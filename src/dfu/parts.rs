@@ -8,10 +8,82 @@ use embedded_storage::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
 
+/// The public key images are verified with. A static, so that its 32 bytes are in the image as
+/// they are (`rcgw sign` refuses an application that does not hold the signing key's public half).
+#[cfg(feature = "hw")]
+pub(super) static UPDATE_KEY: Option<[u8; 32]> =
+    include!(concat!(env!("OUT_DIR"), "/update_key.rs"));
+#[cfg(feature = "emulator")]
+pub(super) static UPDATE_KEY: Option<[u8; 32]> = Some(rc_boot::TEST_PUBLIC_KEY);
+
+/// The emulator's DFU partition, in RAM: 32 KiB of the 96 KiB the build links into (the other
+/// statics and the deepest stack, the node in it, take about 16 KiB: `scripts/size-report.sh`).
+#[cfg(feature = "emulator")]
+pub const EMU_PARTITION: usize = 32 * 1024;
+
+#[cfg(feature = "emulator")]
+static EMU_RAM: static_cell::ConstStaticCell<[u8; EMU_PARTITION]> =
+    static_cell::ConstStaticCell::new([0; EMU_PARTITION]);
+
+/// The emulator's STATE pages, in RAM: as large as the board's.
+#[cfg(feature = "emulator")]
+static EMU_STATE: static_cell::ConstStaticCell<[u8; rc_boot::layout::STATE_SIZE as usize]> =
+    static_cell::ConstStaticCell::new([0xFF; rc_boot::layout::STATE_SIZE as usize]);
+
+/// Where the partitions are kept: on the board, nothing (the settings store lends its flash
+/// driver for each job); in the emulator, the RAM of both (taken once: the gateway task's).
+pub(super) struct Home {
+    #[cfg(feature = "emulator")]
+    dfu: &'static mut [u8],
+    #[cfg(feature = "emulator")]
+    state: &'static mut [u8],
+}
+
+impl Home {
+    /// The largest image: DFU's size, but no larger than ACTIVE, where the bootloader swaps it.
+    #[cfg(feature = "hw")]
+    pub(super) const LARGEST_IMAGE: u32 = rc_boot::layout::L475.max_image();
+    /// The largest image: the emulator's RAM partition.
+    #[cfg(feature = "emulator")]
+    pub(super) const LARGEST_IMAGE: u32 = EMU_PARTITION as u32;
+
+    pub(super) fn new() -> Home {
+        Home {
+            #[cfg(feature = "emulator")]
+            dfu: EMU_RAM.take().as_mut_slice(),
+            #[cfg(feature = "emulator")]
+            state: EMU_STATE.take().as_mut_slice(),
+        }
+    }
+
+    /// DFU and STATE, on the board's flash.
+    #[cfg(feature = "hw")]
+    pub(super) fn parts<'a>(
+        &'a mut self,
+        settings: &'a mut crate::settings::SavedSettings,
+    ) -> Parts<'a> {
+        Parts {
+            flash: settings.flash(),
+        }
+    }
+
+    /// DFU and STATE, in the emulator's RAM.
+    #[cfg(feature = "emulator")]
+    pub(super) fn parts<'a>(
+        &'a mut self,
+        _settings: &'a mut crate::settings::SavedSettings,
+    ) -> Parts<'a> {
+        Parts {
+            dfu: &mut *self.dfu,
+            state: &mut *self.state,
+        }
+    }
+}
+
 /// Where DFU and STATE are: windows on the board's flash.
 #[cfg(feature = "hw")]
 pub(super) struct Parts<'a> {
-    pub(super) flash: Option<&'a mut crate::board::SettingsFlash>,
+    flash: Option<&'a mut crate::board::SettingsFlash>,
 }
 
 #[cfg(feature = "hw")]
@@ -37,8 +109,8 @@ impl Parts<'_> {
 /// Where DFU and STATE are: the emulator's RAM.
 #[cfg(feature = "emulator")]
 pub(super) struct Parts<'a> {
-    pub(super) dfu: &'a mut [u8],
-    pub(super) state: &'a mut [u8],
+    dfu: &'a mut [u8],
+    state: &'a mut [u8],
 }
 
 #[cfg(feature = "emulator")]
