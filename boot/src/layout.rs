@@ -36,8 +36,29 @@
 //! * **SETTINGS, untouched**: `0x080F_E000..0x0810_0000`, the settings store's four pages, as
 //!   before.
 //!
-//! Every rule is checked at compile time ([`Layout::check`] on [`L475`]), and the same check
-//! serves the scaled-down layouts of the tests.
+//! # The STM32F429ZI (2 MiB, two banks of 1 MiB, sectors of 16, 64 and 128 KiB, 4-byte writes)
+//!
+//! | Region | From | To (excl.) | Size | Sectors | Written by |
+//! |---|---|---|---|---|---|
+//! | BOOTLOADER | `0x0800_0000` | `0x0802_0000` | 128 KiB (the bootloader takes 32 KiB of it) | 0-4 | the programmer (SWD) only |
+//! | ACTIVE | `0x0802_0000` | `0x080E_0000` | 768 KiB | 5-10 | the bootloader |
+//! | (spare) | `0x080E_0000` | `0x0810_0000` | 128 KiB | 11 | nobody |
+//! | SETTINGS | `0x0810_0000` | `0x0810_8000` | 32 KiB | 12, 13 | the application's settings store |
+//! | STATE | `0x0810_8000` | `0x0810_C000` | 16 KiB | 14 | the application (marks); the bootloader |
+//! | (spare) | `0x0810_C000` | `0x0812_0000` | 80 KiB | 15, 16 | nobody |
+//! | DFU | `0x0812_0000` | `0x0820_0000` | 896 KiB | 17-23 | the application; the bootloader (swap) |
+//!
+//! embassy-boot copies ACTIVE and DFU in pages of one erase unit, so its page here is a 128 KiB
+//! sector: ACTIVE must start on one (sector 5, so the bootloader's region is the first 128 KiB)
+//! and DFU, which must be ACTIVE and one page, takes all seven of bank 2 (so ACTIVE has six, and
+//! sector 11 stays spare). STATE needs only `(2 + 4 × 6) × 4 = 104` bytes: one 16 KiB sector of
+//! bank 2, erased in 0.25 s (0.5 s at most) where a 128 KiB one takes 1 s (2 s at most). The
+//! settings keep their two sectors. The application runs from bank 1 and writes only bank 2
+//! (read-while-write between the banks). It erases DFU's 128 KiB sectors without waiting
+//! (src/board/f429.rs): one outlasts its 1 s watchdog.
+//!
+//! Every rule is checked at compile time ([`Layout::check`] on [`L475`] and [`F429`]), and the same
+//! check serves the scaled-down layouts of the tests.
 
 /// One of the L475's erase units: a 2 KiB page.
 pub const PAGE: u32 = 2048;
@@ -91,8 +112,12 @@ pub struct Layout {
     /// The first address of the second bank (the flash can read one bank while it programs
     /// the other).
     pub bank2: u32,
-    /// The erase unit (a page), in bytes.
+    /// The erase unit of ACTIVE and DFU (a page, or a sector), in bytes: embassy-boot's page,
+    /// which its swap copies whole.
     pub page: u32,
+    /// The erase unit of STATE and the settings, in bytes (the L475: a page, as everywhere; the
+    /// F429: a 16 KiB sector, where ACTIVE's and DFU's are 128 KiB).
+    pub small_page: u32,
     /// The write unit, in bytes.
     pub word: u32,
     /// The bootloader's own code.
@@ -123,7 +148,7 @@ pub enum LayoutError {
     /// ACTIVE is not in the first bank, or DFU or STATE is not in the second: the application,
     /// running from ACTIVE, writes DFU and STATE.
     Banks,
-    /// The page size is not a multiple of the write unit.
+    /// The small page is not a multiple of the write unit, or the page of the small page.
     Units,
 }
 
@@ -141,32 +166,38 @@ impl Layout {
         self.active.len()
     }
 
-    const fn pages(&self, r: &Region) -> bool {
+    const fn pages(&self, r: &Region, unit: u32) -> bool {
         r.start < r.end
             && self.flash.contains(r)
-            && r.start.is_multiple_of(self.page)
-            && r.end.is_multiple_of(self.page)
+            && r.start.is_multiple_of(unit)
+            && r.end.is_multiple_of(unit)
     }
 
     /// Checks embassy-boot's rules and ours; `Ok` if the layout is usable.
     pub const fn check(&self) -> Result<(), LayoutError> {
-        if self.word == 0 || self.page == 0 || !self.page.is_multiple_of(self.word) {
+        if self.word == 0
+            || self.small_page == 0
+            || !self.small_page.is_multiple_of(self.word)
+            || !self.page.is_multiple_of(self.small_page)
+        {
             return Err(LayoutError::Units);
         }
+        // The bootloader's region is never erased by embassy-boot, but ACTIVE follows it on a
+        // page; STATE and the settings are erased in small pages.
         let regions = [
-            self.bootloader,
-            self.active,
-            self.dfu,
-            self.state,
-            self.settings,
+            (self.bootloader, self.page),
+            (self.active, self.page),
+            (self.dfu, self.page),
+            (self.state, self.small_page),
+            (self.settings, self.small_page),
         ];
-        let mut rest: &[Region] = &regions;
-        while let [r, others @ ..] = rest {
-            if !self.pages(r) {
+        let mut rest: &[(Region, u32)] = &regions;
+        while let [(r, unit), others @ ..] = rest {
+            if !self.pages(r, *unit) {
                 return Err(LayoutError::NotPages);
             }
             let mut after = others;
-            while let [o, more @ ..] = after {
+            while let [(o, _), more @ ..] = after {
                 if r.overlaps(o) {
                     return Err(LayoutError::Overlap);
                 }
@@ -218,6 +249,7 @@ pub const L475: Layout = Layout {
     },
     bank2: BANK2,
     page: PAGE,
+    small_page: PAGE,
     word: WORD,
     bootloader: Region {
         start: FLASH_BASE,
@@ -253,6 +285,65 @@ const _: () = assert!(L475.state.start == 0x080F_C000 && L475.state.end == 0x080
 const _: () = assert!(L475.settings.start == 0x080F_E000 && L475.settings.end == 0x0810_0000);
 const _: () = assert!(L475.state_needed() == 7_696);
 
+/// The F429's sectors: bank 1's (and bank 2's) first four are 16 KiB, the fifth 64 KiB, the other
+/// seven 128 KiB (RM0090, "Flash module organization", 2 MiB dual-bank).
+pub const F429_SMALL_SECTOR: u32 = 16 * 1024;
+/// The F429's 128 KiB sectors: ACTIVE's and DFU's erase unit.
+pub const F429_SECTOR: u32 = 128 * 1024;
+/// The F429's write unit, as embassy-stm32 writes it (a 32-bit word at x32 parallelism).
+pub const F429_WORD: u32 = 4;
+/// The F429's second bank (its flash is 2 MiB in two banks of 1 MiB).
+pub const F429_BANK2: u32 = FLASH_BASE + 0x10_0000;
+
+/// The STM32F429ZI's layout (NUCLEO-F429ZI; see the module's second table).
+pub const F429: Layout = Layout {
+    flash: Region {
+        start: FLASH_BASE,
+        end: FLASH_BASE + 0x20_0000,
+    },
+    bank2: F429_BANK2,
+    page: F429_SECTOR,
+    small_page: F429_SMALL_SECTOR,
+    word: F429_WORD,
+    // Sectors 0-4 (4 × 16 + 64 KiB): ACTIVE must start on a 128 KiB sector.
+    bootloader: Region {
+        start: FLASH_BASE,
+        end: FLASH_BASE + F429_SECTOR,
+    },
+    // Sectors 5-10. (Sector 11 is spare: DFU must be ACTIVE and one sector, and bank 2 has
+    // seven 128 KiB sectors.)
+    active: Region {
+        start: FLASH_BASE + F429_SECTOR,
+        end: FLASH_BASE + 7 * F429_SECTOR,
+    },
+    // Sectors 17-23.
+    dfu: Region {
+        start: F429_BANK2 + F429_SECTOR,
+        end: F429_BANK2 + 8 * F429_SECTOR,
+    },
+    // Sector 14.
+    state: Region {
+        start: F429_BANK2 + 2 * F429_SMALL_SECTOR,
+        end: F429_BANK2 + 3 * F429_SMALL_SECTOR,
+    },
+    // Sectors 12 and 13, as before the bootloader (src/board/f429.rs).
+    settings: Region {
+        start: F429_BANK2,
+        end: F429_BANK2 + 2 * F429_SMALL_SECTOR,
+    },
+};
+
+const _: () = assert!(
+    matches!(F429.check(), Ok(())),
+    "the F429's layout breaks a rule"
+);
+// The figures in the module's table.
+const _: () = assert!(F429.active.start == 0x0802_0000 && F429.active.end == 0x080E_0000);
+const _: () = assert!(F429.dfu.start == 0x0812_0000 && F429.dfu.end == 0x0820_0000);
+const _: () = assert!(F429.state.start == 0x0810_8000 && F429.state.end == 0x0810_C000);
+const _: () = assert!(F429.settings.start == 0x0810_0000 && F429.settings.end == 0x0810_8000);
+const _: () = assert!(F429.state_needed() == 104);
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -264,8 +355,37 @@ mod tests {
     }
 
     #[test]
-    fn l475_passes() {
+    fn l475_and_f429_pass() {
         assert_eq!(L475.check(), Ok(()));
+        assert_eq!(F429.check(), Ok(()));
+    }
+
+    #[test]
+    fn f429_rules_can_fail() {
+        let with = |f: &dyn Fn(&mut Layout)| {
+            let mut l = F429;
+            f(&mut l);
+            l.check()
+        };
+        // DFU must be ACTIVE and one 128 KiB sector: sectors 18-23 are not.
+        assert_eq!(
+            with(&|l| l.dfu.start += F429_SECTOR),
+            Err(LayoutError::DfuTooSmall)
+        );
+        // ACTIVE on a 16 KiB sector (right after a 32 KiB bootloader) is not a whole page.
+        assert_eq!(
+            with(&|l| {
+                l.bootloader.end = FLASH_BASE + 2 * F429_SMALL_SECTOR;
+                l.active.start = l.bootloader.end;
+            }),
+            Err(LayoutError::NotPages)
+        );
+        // STATE in 16 KiB sectors is fine, but not across half of one.
+        assert_eq!(
+            with(&|l| l.state.end -= F429_SMALL_SECTOR / 2),
+            Err(LayoutError::NotPages)
+        );
+        assert_eq!(with(&|l| l.small_page = 48 * 1024), Err(LayoutError::Units));
     }
 
     #[test]

@@ -40,7 +40,18 @@ pub const TEST_PUBLIC_KEY: [u8; 32] = [
 
 /// The gateway's board id for the L475 (the transfer's BEGIN and the image's trailer).
 pub const BOARD_L475: u16 = 0x0475;
+/// The gateway's board id for the NUCLEO-F429ZI.
+pub const BOARD_F429: u16 = 0x0429;
 
-/// The length of the buffer to give embassy-boot's `prepare_boot`: one page, so a page is
-/// copied with one read and one write.
+/// The flash layout of the board with this id, if it has a bootloader.
+pub const fn layout_of(board: u16) -> Option<&'static layout::Layout> {
+    match board {
+        BOARD_L475 => Some(&layout::L475),
+        BOARD_F429 => Some(&layout::F429),
+        _ => None,
+    }
+}
+
+/// The length of the buffer to give embassy-boot's `prepare_boot`: one L475 page, so a page is
+/// copied with one read and one write (an F429 sector of 128 KiB in 64 of them).
 pub const BOOT_BUF_LEN: usize = layout::PAGE as usize;

@@ -1,8 +1,8 @@
-//! The linker scripts say what `layout::L475` says: the bootloader's (bootloader/memory.x) and
-//! the application's (memory/l475vg.x) FLASH regions are BOOTLOADER and ACTIVE. The scripts cannot
-//! read the constants, so this holds them equal.
+//! The linker scripts say what `layout::L475` and `layout::F429` say: the bootloader's
+//! (bootloader/memory-*.x) and the application's (memory/l475vg.x, memory/f429zi.x) FLASH regions
+//! are BOOTLOADER and ACTIVE. The scripts cannot read the constants, so this holds them equal.
 
-use rc_boot::layout::{Region, L475};
+use rc_boot::layout::{Region, F429, L475};
 
 /// The FLASH region's origin and length in a linker script's MEMORY block.
 fn flash_region(path: &str) -> Region {
@@ -39,10 +39,12 @@ fn flash_region(path: &str) -> Region {
 
 #[test]
 fn the_bootloader_is_linked_where_the_layout_puts_it() {
-    assert_eq!(flash_region("bootloader/memory.x"), L475.bootloader);
+    assert_eq!(flash_region("bootloader/memory-l475.x"), L475.bootloader);
+    assert_eq!(flash_region("bootloader/memory-f429.x"), F429.bootloader);
 }
 
 #[test]
 fn the_application_is_linked_into_active() {
     assert_eq!(flash_region("memory/l475vg.x"), L475.active);
+    assert_eq!(flash_region("memory/f429zi.x"), F429.active);
 }

@@ -414,6 +414,7 @@ pub fn small_layout() -> Layout {
         flash: r(0, 32),
         bank2: 16 * p,
         page: p,
+        small_page: p,
         word: WORD,
         bootloader: r(0, 4),
         active: r(4, 16),

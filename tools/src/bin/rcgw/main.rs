@@ -166,8 +166,9 @@ enum Cmd {
         /// release.
         #[arg(long)]
         test_key: bool,
-        /// The board the image is for (decimal, or hex with 0x).
-        #[arg(long, value_parser = parse_board, default_value = "0x0475")]
+        /// The board the image is for: l475 (0x0475) or f429 (0x0429), or an id (decimal, or
+        /// hex with 0x).
+        #[arg(long, value_parser = parse_board, default_value = "l475")]
         board: u16,
         /// The firmware's version, MAJOR.MINOR.PATCH.
         #[arg(long, value_parser = sign::parse_version, required_unless_present = "check")]
@@ -199,11 +200,17 @@ enum KeyCmd {
 }
 
 fn parse_board(text: &str) -> Result<u16, String> {
+    match text.to_ascii_lowercase().as_str() {
+        "l475" => return Ok(rc_boot::BOARD_L475),
+        "f429" => return Ok(rc_boot::BOARD_F429),
+        _ => {}
+    }
     let parsed = match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
         Some(hex) => u16::from_str_radix(hex, 16),
         None => text.parse(),
     };
-    parsed.map_err(|_| format!("{text:?}: a board id is 0-65535 (or 0x0000-0xFFFF)"))
+    parsed
+        .map_err(|_| format!("{text:?}: a board is l475, f429 or an id 0-65535 (or 0x0000-0xFFFF)"))
 }
 
 #[derive(Subcommand, Debug)]

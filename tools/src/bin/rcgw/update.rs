@@ -168,13 +168,12 @@ fn refused(gw: &Gw, address: u16, s: &UpdateStatus) -> Fail {
 }
 
 /// The largest image a gateway of `board` with a DFU partition of `partition` bytes takes: the
-/// partition, and for the L475 its ACTIVE partition (one page smaller than DFU), which the
-/// bootloader's swap fills.
+/// partition, and for a board with a bootloader its ACTIVE partition (smaller than DFU), which
+/// the bootloader's swap fills.
 fn largest_image(board: u16, partition: u32) -> u32 {
-    if board == rc_boot::BOARD_L475 {
-        partition.min(rc_boot::layout::L475.max_image())
-    } else {
-        partition
+    match rc_boot::layout_of(board) {
+        Some(layout) => partition.min(layout.max_image()),
+        None => partition,
     }
 }
 
