@@ -1,6 +1,7 @@
-//! The bootloader of the L475 gateway: embassy-boot's swap, then the application.
+//! The bootloader of the gateways with room for two images (the L475, feature `board-l475`; the
+//! F429, feature `board-f429`): embassy-boot's swap, then the application.
 //!
-//! At every reset it reads the state partition (`rc_boot::layout::L475`): **Boot**, the application in
+//! At every reset it reads the state partition (`rc_boot::layout::L475` or `F429`): **Boot**, the application in
 //! ACTIVE runs; **Swap**, an image the application checked and marked (its signature through
 //! embassy-boot's `verify_and_mark_updated`) is swapped into ACTIVE page by page, the old one
 //! kept in DFU, and the new one runs on trial; a trial the application never confirmed
@@ -14,15 +15,20 @@
 //!   (about 8 s) before it starts a firmware on trial ([`watchdog`]); the firmware sets its own
 //!   timeout when it starts it. (The IWDG stops at a reset in software mode, its option bytes'
 //!   default; with the hardware-watchdog option bit it runs from power-up.) Either way a swap of
-//!   the whole ACTIVE partition erases and writes about 480 pages (25 ms each to erase), far
-//!   past its timeout: every flash operation is one page and pets it first ([`Watched`]).
+//!   the whole ACTIVE partition erases and writes about 480 pages (L475: 25 ms each to erase) or
+//!   12 sectors of 128 KiB (F429: 2 s each at most), far past its timeout: every flash operation
+//!   is one page or sector (writes 2 KiB) and pets it first ([`Watched`]).
 //! - **The flash's data cache** is off while the bootloader runs, so that a page read after its
 //!   erase or write is read from the flash, not from a stale line; the caches are reset before the
-//!   application starts, as it must not execute stale instructions of the old image.
-//! - **ECC errors**: a word a power cut tore reads with an ECC double error, which the flash
-//!   raises as an NMI. One in the partitions is cleared and the read goes on (its data is
-//!   whatever the torn word holds; embassy-boot rewrites every page it resumes), instead of the
-//!   default handler's spin until the IWDG resets into the same read: a boot loop.
+//!   application starts, as it must not execute stale instructions of the old image. (The L4's
+//!   and the F4's flash interfaces name these bits alike: FLASH_ACR's DCEN, DCRST, ICEN, ICRST.)
+//! - **ECC errors** (the L475; the F4's flash has no ECC): a word a power cut tore reads with an
+//!   ECC double error, which the flash raises as an NMI. One in the partitions is cleared and the
+//!   read goes on (its data is whatever the torn word holds; embassy-boot rewrites every page it
+//!   resumes), instead of the default handler's spin until the IWDG resets into the same read: a
+//!   boot loop.
+//! - **Partitions of two erase units** (the F429): ACTIVE and DFU in 128 KiB sectors, STATE in a
+//!   16 KiB one; each partition is a [`Part`] with its own erase unit over the one flash.
 //! - **A failure** (a flash operation that reports an error) resets the chip to try again; the
 //!   swap resumes from its recorded progress.
 #![no_std]
@@ -33,14 +39,29 @@ use core::cell::RefCell;
 use cortex_m::peripheral::SCB;
 use cortex_m_rt::{entry, exception};
 use embassy_boot_stm32::{BootLoader, BootLoaderConfig, State};
-use embassy_embedded_hal::flash::partition::BlockingPartition;
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::pac;
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
-use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
+use embedded_storage::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
 
-use rc_boot::layout::{Region, FLASH_BASE, L475, PAGE};
+use rc_boot::layout::{Layout, Region, FLASH_BASE};
+
+/// This board's layout.
+#[cfg(feature = "board-l475")]
+const LAYOUT: Layout = rc_boot::layout::L475;
+/// This board's layout.
+#[cfg(feature = "board-f429")]
+const LAYOUT: Layout = rc_boot::layout::F429;
+
+/// ACTIVE's and DFU's erase unit: embassy-boot's page.
+const PAGE: usize = LAYOUT.page as usize;
+/// STATE's erase unit.
+const SMALL_PAGE: usize = LAYOUT.small_page as usize;
+/// The most bytes written between two pets of the IWDG (an L475 page).
+const WRITE_CHUNK: usize = 2048;
 
 #[entry]
 fn main() -> ! {
@@ -49,13 +70,10 @@ fn main() -> ! {
     // SAFETY: the bootloader is the only code running, and the flash is its only peripheral.
     let flash = Flash::new_blocking(unsafe { embassy_stm32::peripherals::FLASH::steal() });
     let flash = Mutex::<NoopRawMutex, _>::new(RefCell::new(Watched(flash)));
-    let part = |region: Region| {
-        BlockingPartition::new(&flash, region.offset_from(FLASH_BASE), region.len())
-    };
     let config = BootLoaderConfig {
-        active: part(L475.active),
-        dfu: part(L475.dfu),
-        state: part(L475.state),
+        active: Part::<PAGE>::new(&flash, LAYOUT.active),
+        dfu: Part::<PAGE>::new(&flash, LAYOUT.dfu),
+        state: Part::<SMALL_PAGE>::new(&flash, LAYOUT.state),
     };
     let Ok(loader) = BootLoader::try_prepare::<_, _, _, { rc_boot::BOOT_BUF_LEN }>(config) else {
         // A flash operation failed: from the top, where the swap's progress says.
@@ -71,7 +89,89 @@ fn main() -> ! {
     instruction_cache_reset();
     // SAFETY: ACTIVE holds an application linked there (its vector table first), whole: the
     // swap is done or was never started.
-    unsafe { loader.load(L475.active.start) }
+    unsafe { loader.load(LAYOUT.active.start) }
+}
+
+/// A partition of the flash with its erase unit (embassy-embedded-hal's `BlockingPartition` has
+/// the flash's one unit for all): offsets from its start, none outside it.
+struct Part<'a, const ERASE: usize> {
+    flash: &'a Mutex<NoopRawMutex, RefCell<Watched>>,
+    region: Region,
+}
+
+impl<'a, const ERASE: usize> Part<'a, ERASE> {
+    fn new(flash: &'a Mutex<NoopRawMutex, RefCell<Watched>>, region: Region) -> Self {
+        Part { flash, region }
+    }
+
+    /// The flash's offset of `offset..offset + len`, if it lies inside the partition.
+    fn at(&self, offset: u32, len: usize) -> Result<u32, PartError> {
+        let end = offset.checked_add(len as u32).ok_or(PartError::Outside)?;
+        if end > self.region.len() {
+            return Err(PartError::Outside);
+        }
+        Ok(self.region.offset_from(FLASH_BASE) + offset)
+    }
+}
+
+/// The flash's error, or an offset outside the partition.
+#[derive(Debug)]
+enum PartError {
+    Outside,
+    Flash(embassy_stm32::flash::Error),
+}
+
+impl NorFlashError for PartError {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            PartError::Outside => NorFlashErrorKind::OutOfBounds,
+            PartError::Flash(e) => e.kind(),
+        }
+    }
+}
+
+impl<const ERASE: usize> ErrorType for Part<'_, ERASE> {
+    type Error = PartError;
+}
+
+impl<const ERASE: usize> ReadNorFlash for Part<'_, ERASE> {
+    const READ_SIZE: usize = <Watched as ReadNorFlash>::READ_SIZE;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        let at = self.at(offset, bytes.len())?;
+        self.flash
+            .lock(|f| f.borrow_mut().read(at, bytes))
+            .map_err(PartError::Flash)
+    }
+
+    fn capacity(&self) -> usize {
+        self.region.len() as usize
+    }
+}
+
+impl<const ERASE: usize> NorFlash for Part<'_, ERASE> {
+    const WRITE_SIZE: usize = <Watched as NorFlash>::WRITE_SIZE;
+    const ERASE_SIZE: usize = ERASE;
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        let at = self.at(offset, bytes.len())?;
+        self.flash
+            .lock(|f| f.borrow_mut().write(at, bytes))
+            .map_err(PartError::Flash)
+    }
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        let at = self.at(from, to.saturating_sub(from) as usize)?;
+        if !from.is_multiple_of(ERASE as u32) || !to.is_multiple_of(ERASE as u32) {
+            return Err(PartError::Flash(embassy_stm32::flash::Error::Unaligned));
+        }
+        self.flash
+            .lock(|f| {
+                f.borrow_mut()
+                    .erase_units(at, at + (to - from), ERASE as u32)
+            })
+            .map_err(PartError::Flash)
+    }
 }
 
 /// The flash, one page at a time, the IWDG petted before each operation.
@@ -99,20 +199,33 @@ impl NorFlash for Watched {
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
         let mut at = offset;
-        for page in bytes.chunks(PAGE as usize) {
+        for chunk in bytes.chunks(WRITE_CHUNK) {
             pet();
-            self.0.blocking_write(at, page)?;
-            at += PAGE;
+            self.0.blocking_write(at, chunk)?;
+            at += chunk.len() as u32;
         }
         Ok(())
     }
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.erase_units(from, to, Self::ERASE_SIZE as u32)
+    }
+}
+
+impl Watched {
+    /// Erases `from..to` one erase unit (a page, or a sector of `unit` bytes) at a time, the
+    /// IWDG petted before each.
+    fn erase_units(
+        &mut self,
+        from: u32,
+        to: u32,
+        unit: u32,
+    ) -> Result<(), embassy_stm32::flash::Error> {
         let mut at = from;
         while at < to {
             pet();
-            self.0.blocking_erase(at, at + PAGE)?;
-            at += PAGE;
+            self.0.blocking_erase(at, at + unit)?;
+            at += unit;
         }
         Ok(())
     }
@@ -170,6 +283,7 @@ fn instruction_cache_reset() {
 /// An ECC double error in the partitions (a torn word) is cleared and the read goes on; any
 /// other NMI (an error in the bootloader's own pages or the system flash, the clock security
 /// system) resets the chip.
+#[cfg(feature = "board-l475")]
 #[exception]
 unsafe fn NonMaskableInt() {
     let eccr = pac::FLASH.eccr();
@@ -177,14 +291,21 @@ unsafe fn NonMaskableInt() {
     // FLASH_ECCR gives the address within the bank.
     let offset = ecc.addr_ecc()
         + if ecc.bk_ecc() {
-            L475.bank2 - FLASH_BASE
+            LAYOUT.bank2 - FLASH_BASE
         } else {
             0
         };
-    if ecc.eccd() && !ecc.sysf_ecc() && offset >= L475.bootloader.end - FLASH_BASE {
+    if ecc.eccd() && !ecc.sysf_ecc() && offset >= LAYOUT.bootloader.end - FLASH_BASE {
         eccr.modify(|w| w.set_eccd(true));
         return;
     }
+    SCB::sys_reset();
+}
+
+/// The F4's flash has no ECC: any NMI (the clock security system) resets the chip.
+#[cfg(feature = "board-f429")]
+#[exception]
+unsafe fn NonMaskableInt() {
     SCB::sys_reset();
 }
 
