@@ -152,10 +152,11 @@ pub async fn run(
     loop {
         let hold = node.bus_frame_due();
         // With a DFU job under way the wait is only a look at the lines: its next step follows
-        // (unless the bus is not quiet: then the job waits, and the loop with it).
+        // (unless the bus is not quiet: then the job waits, and the loop with it), or, while the
+        // flash erases a sector by itself, a short sleep before the next look.
         #[cfg(feature = "update")]
         let heartbeat = if dfu.busy() && node.quiet_for_flash() {
-            protocol::time::Duration(0)
+            dfu.step_in()
         } else {
             HEARTBEAT
         };

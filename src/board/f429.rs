@@ -61,8 +61,9 @@ use crate::io::Pins;
 use crate::pins::{LineBreak, PinId};
 use crate::serial::Rs485;
 
-/// The settings' flash: bank 2's first four 16 KiB sectors (sectors 12-15, 0x0810_0000 to
-/// 0x0811_0000), as offsets from 0x0810_0000, through the whole chip's blocking flash driver.
+/// Bank 2 of the flash (0x0810_0000 to 0x0820_0000), as offsets from 0x0810_0000, through the
+/// whole chip's blocking flash driver: the settings (sectors 12 and 13), embassy-boot's STATE
+/// (sector 14) and the DFU partition (sectors 17-23; `rc_boot::layout::F429`).
 ///
 /// - **Interrupts run during an erase.** embassy-stm32 0.6.0's per-region flash objects (such as
 ///   `Bank2Region1`) erase each sector and write each word inside a critical section
@@ -71,8 +72,15 @@ use crate::serial::Rs485;
 ///   whole chip's object does neither (`erase_sector_unlocked`, `write_chunk_unlocked`), which is
 ///   safe here: the program, its vectors and every handler run from bank 1 while bank 2 is
 ///   erased or written (read-while-write between the banks), and no handler touches the flash
-///   interface. The task that asked still waits for the erase (the driver polls FLASH_SR.BSY):
-///   the executor's other tasks, and the stop on the bus, wait for it too (docs/plc.md, "Settings, SAVE and factory reset").
+///   interface. The task that asked still waits for a blocking erase (the driver polls
+///   FLASH_SR.BSY): the executor's other tasks, and the stop on the bus, wait for it too
+///   (docs/plc.md, "Settings, SAVE and factory reset"). So the blocking [`NorFlash::erase`]
+///   reaches only the four 16 KiB sectors (12-15: the settings and STATE).
+/// - **DFU's 128 KiB sectors are erased without waiting** ([`SettingsSectors::erase_step`]): one
+///   takes 1 s (2 s at most, x32), past the 1 s IWDG, and the gateway task must serve the lines
+///   meanwhile. The first call starts the sector's erase and returns; later calls look at
+///   FLASH_SR.BSY, until it is done. Any other operation first waits for it to end (a SAVE during
+///   an update's erase: the watchdog fed meanwhile).
 /// - **x32.** embassy-stm32 0.6.0 never sets FLASH_CR.PSIZE for an erase, and its writes leave
 ///   it at 0 (x8, the reset value), where a 16 KiB sector takes about 0.4 s (0.8 s at most)
 ///   instead of 0.25 s (0.5 s) at x32 (STM32F429 datasheet, flash characteristics; 2.7-3.6 V
@@ -81,26 +89,137 @@ use crate::serial::Rs485;
 /// - **The watchdog is fed before each sector**: the longest stretch without a pet is one
 ///   sector's erase, 0.5 s, against the IWDG's shortest 0.68 s (`super::WATCHDOG_TIMEOUT_US`),
 ///   however many sectors an erase spans.
+/// - **The data cache** is off while a sector of bank 2 is erased without waiting, and emptied
+///   after (STM32F42x/43x errata 2.2.12, as embassy-stm32 does around its own erases).
 /// - **Bounds**: the whole chip's driver takes any offset, the program's too; every offset here
-///   is checked against these four sectors first.
-pub struct SettingsSectors(
-    pub embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>,
-);
+///   is checked against bank 2 first.
+///
+/// [`NorFlash::erase`]: embedded_storage::nor_flash::NorFlash::erase
+pub struct SettingsSectors {
+    flash: embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>,
+    /// A DFU sector whose erase was started and not yet seen ended.
+    erasing: Option<Erasing>,
+}
+
+/// A sector erase under way ([`SettingsSectors::erase_step`]).
+#[derive(Clone, Copy)]
+struct Erasing {
+    /// Its offset in bank 2.
+    offset: u32,
+    /// The data cache was on before it (it is off while the erase runs).
+    dcache: bool,
+}
 
 /// Bank 2's first sector (0x0810_0000) as an offset from the start of flash.
-const BANK_2: u32 = 0x10_0000;
+const BANK_2: u32 = rc_boot::layout::F429_BANK2 - rc_boot::layout::FLASH_BASE;
+/// Bank 2's size.
+const BANK_LEN: u32 = 0x10_0000;
 /// A sector of bank 2's first region.
-const SECTOR: u32 = 16 * 1024;
-/// The four sectors of bank 2's first region.
+const SECTOR: u32 = rc_boot::layout::F429_SMALL_SECTOR;
+/// The four sectors of bank 2's first region: what the blocking erase reaches.
 const SECTORS_LEN: u32 = 4 * SECTOR;
+/// Bank 2's 128 KiB sectors (17-23): from this offset.
+const LARGE_FROM: u32 = 0x2_0000;
+/// A 128 KiB sector.
+const LARGE: u32 = rc_boot::layout::F429_SECTOR;
+/// The index in its bank of the first 128 KiB sector (FLASH_CR.SNB: bank 2's have bit 4 set).
+const LARGE_INDEX: u32 = 5;
 
 impl SettingsSectors {
-    /// `BANK_2 + offset`, if `offset..offset + len` lies inside the four sectors.
+    /// Bank 2 through the whole chip's driver.
+    pub fn new(
+        flash: embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>,
+    ) -> Self {
+        SettingsSectors {
+            flash,
+            erasing: None,
+        }
+    }
+
+    /// `BANK_2 + offset`, if `offset..offset + len` lies inside bank 2.
     fn address(offset: u32, len: usize) -> Result<u32, embassy_stm32::flash::Error> {
         let len = u32::try_from(len).map_err(|_| embassy_stm32::flash::Error::Size)?;
         match offset.checked_add(len) {
-            Some(end) if end <= SECTORS_LEN => Ok(BANK_2 + offset),
+            Some(end) if end <= BANK_LEN => Ok(BANK_2 + offset),
             _ => Err(embassy_stm32::flash::Error::Size),
+        }
+    }
+
+    /// One step of the erase of the 128 KiB sector at `offset` (in bank 2: 0x2_0000 and every
+    /// 128 KiB after): started at the first call, `WouldBlock` while the flash works, its result
+    /// once it has ended. The gateway task calls it once a pass, between its other work.
+    pub fn erase_step(&mut self, offset: u32) -> nb::Result<(), embassy_stm32::flash::Error> {
+        use embassy_stm32::flash::Error;
+        use embassy_stm32::pac::{flash::vals::Psize, FLASH};
+        if let Some(erasing) = self.erasing {
+            if FLASH.sr().read().bsy() {
+                return Err(nb::Error::WouldBlock);
+            }
+            let ended = self.end_erase(erasing);
+            if erasing.offset == offset {
+                return ended.map_err(nb::Error::Other);
+            }
+        }
+        if !(LARGE_FROM..BANK_LEN).contains(&offset) || !(offset - LARGE_FROM).is_multiple_of(LARGE)
+        {
+            return Err(nb::Error::Other(Error::Unaligned));
+        }
+        if FLASH.cr().read().lock() {
+            FLASH.keyr().write_value(0x4567_0123);
+            FLASH.keyr().write_value(0xCDEF_89AB);
+        }
+        // Clears the error flags (written back as read: they clear on a 1).
+        FLASH.sr().modify(|_| {});
+        let dcache = FLASH.acr().read().dcen();
+        FLASH.acr().modify(|w| w.set_dcen(false));
+        let index = LARGE_INDEX + (offset - LARGE_FROM) / LARGE;
+        FLASH.cr().write(|w| {
+            w.set_ser(true);
+            w.set_snb(0x10 | index as u8);
+            w.set_psize(Psize::PSIZE32);
+        });
+        FLASH.cr().modify(|w| w.set_strt(true));
+        self.erasing = Some(Erasing { offset, dcache });
+        Err(nb::Error::WouldBlock)
+    }
+
+    /// The erase under way has ended (FLASH_SR.BSY clear): the interface locked, the data cache
+    /// emptied and back, its result.
+    fn end_erase(&mut self, erasing: Erasing) -> Result<(), embassy_stm32::flash::Error> {
+        use embassy_stm32::flash::Error;
+        use embassy_stm32::pac::FLASH;
+        self.erasing = None;
+        let sr = FLASH.sr().read();
+        FLASH.cr().write(|w| w.set_lock(true));
+        FLASH.sr().modify(|_| {});
+        if erasing.dcache {
+            let acr = FLASH.acr();
+            acr.modify(|w| w.set_dcrst(true));
+            acr.modify(|w| w.set_dcrst(false));
+            acr.modify(|w| w.set_dcen(true));
+        }
+        if sr.pgserr() {
+            Err(Error::Seq)
+        } else if sr.pgperr() {
+            Err(Error::Parallelism)
+        } else if sr.pgaerr() {
+            Err(Error::Unaligned)
+        } else if sr.wrperr() {
+            Err(Error::Protected)
+        } else {
+            Ok(())
+        }
+    }
+
+    /// Waits for an erase under way to end, the watchdog fed (its result is not lost: the DFU
+    /// job's next step starts the sector's erase again).
+    fn settle(&mut self) {
+        while let Some(erasing) = self.erasing {
+            if embassy_stm32::pac::FLASH.sr().read().bsy() {
+                super::pet_watchdog();
+            } else {
+                let _ = self.end_erase(erasing);
+            }
         }
     }
 }
@@ -114,11 +233,12 @@ impl embedded_storage::nor_flash::ReadNorFlash for SettingsSectors {
 
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
         let at = Self::address(offset, bytes.len())?;
-        self.0.blocking_read(at, bytes)
+        self.settle();
+        self.flash.blocking_read(at, bytes)
     }
 
     fn capacity(&self) -> usize {
-        SECTORS_LEN as usize
+        BANK_LEN as usize
     }
 }
 
@@ -128,7 +248,8 @@ impl embedded_storage::nor_flash::NorFlash for SettingsSectors {
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
         let at = Self::address(offset, bytes.len())?;
-        self.0.blocking_write(at, bytes)
+        self.settle();
+        self.flash.blocking_write(at, bytes)
     }
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
@@ -137,7 +258,11 @@ impl embedded_storage::nor_flash::NorFlash for SettingsSectors {
         if !from.is_multiple_of(SECTOR) || !to.is_multiple_of(SECTOR) || from > to {
             return Err(Error::Unaligned);
         }
-        Self::address(from, (to - from) as usize)?;
+        if to > SECTORS_LEN {
+            // A 128 KiB sector blocks for up to 2 s: `erase_step`.
+            return Err(Error::Size);
+        }
+        self.settle();
         let mut sector = BANK_2 + from;
         while sector < BANK_2 + to {
             super::pet_watchdog();
@@ -146,7 +271,7 @@ impl embedded_storage::nor_flash::NorFlash for SettingsSectors {
                 FLASH.keyr().write_value(0xCDEF_89AB);
             }
             FLASH.cr().modify(|w| w.set_psize(Psize::PSIZE32));
-            let result = self.0.blocking_erase(sector, sector + SECTOR);
+            let result = self.flash.blocking_erase(sector, sector + SECTOR);
             FLASH.cr().modify(|w| w.set_lock(true));
             result?;
             sector += SECTOR;
@@ -154,6 +279,30 @@ impl embedded_storage::nor_flash::NorFlash for SettingsSectors {
         Ok(())
     }
 }
+
+/// Offsets in bank 2 of a region of the bootloader's layout.
+const fn offsets(region: rc_boot::layout::Region) -> core::ops::Range<u32> {
+    let start = region.offset_from(rc_boot::layout::F429_BANK2);
+    start..start + region.len()
+}
+
+/// The DFU partition (offsets in bank 2): where an image sent over the PLC link is written, and
+/// the old firmware kept during a trial (`rc_boot::layout::F429.dfu`, sectors 17-23).
+pub const DFU_RANGE: core::ops::Range<u32> = offsets(rc_boot::layout::F429.dfu);
+
+/// embassy-boot's STATE sector (offsets in bank 2): the mark for a swap, the swap's progress
+/// (`rc_boot::layout::F429.state`, sector 14).
+pub const STATE_RANGE: core::ops::Range<u32> = offsets(rc_boot::layout::F429.state);
+
+// The settings sectors are the layout's too; STATE is erased with the blocking erase, DFU only
+// in steps.
+const _: () = assert!(
+    offsets(rc_boot::layout::F429.settings).start == SETTINGS_RANGE.start
+        && offsets(rc_boot::layout::F429.settings).end == SETTINGS_RANGE.end
+        && STATE_RANGE.end <= SECTORS_LEN
+        && DFU_RANGE.start == LARGE_FROM
+        && DFU_RANGE.end == BANK_LEN
+);
 
 /// The board, as the gateway names it to the PLC (device identification).
 pub const MODEL_NAME: &str = "NUCLEO-F429ZI (STM32F429ZI)";

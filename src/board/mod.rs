@@ -25,8 +25,8 @@ pub use f103::{
 };
 #[cfg(feature = "board-f429")]
 pub use f429::{
-    board, clock_config, reset_cause, uart_config, Ethernet, EthernetDevice, BUS_UART_HZ, LED_ON,
-    MODEL_NAME, PLC_UART_HZ, SETTINGS_RANGE,
+    board, clock_config, reset_cause, uart_config, Ethernet, EthernetDevice, BUS_UART_HZ,
+    DFU_RANGE, LED_ON, MODEL_NAME, PLC_UART_HZ, SETTINGS_RANGE, STATE_RANGE,
 };
 #[cfg(feature = "board-l475")]
 pub use l475::{
@@ -107,9 +107,9 @@ type Flash = embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking
 pub type SettingsFlash = l475::DcacheOff<Flash>;
 #[cfg(all(feature = "hw", feature = "board-f103"))]
 pub type SettingsFlash = Flash;
-/// On the F429, bank 2's first region (its four 16 KiB sectors; offsets from 0x0810_0000): its
-/// erase page is a 16 KiB sector, where the whole flash's is the largest sector, 128 KiB
-/// (`memory/f429zi.x` says why the small sectors), erased with the interrupts running
+/// On the F429, bank 2 (offsets from 0x0810_0000): its erase page is a 16 KiB sector of its first
+/// region, where the whole flash's is the largest sector, 128 KiB (`memory/f429zi.x` says why the
+/// small sectors), erased with the interrupts running; DFU's 128 KiB sectors in steps
 /// ([`f429::SettingsSectors`]).
 #[cfg(all(feature = "hw", feature = "board-f429"))]
 pub type SettingsFlash = f429::SettingsSectors;
@@ -255,7 +255,7 @@ pub(crate) fn settings_flash(
     #[cfg(feature = "board-l475")]
     let flash = l475::DcacheOff(flash);
     #[cfg(feature = "board-f429")]
-    let flash = f429::SettingsSectors(flash);
+    let flash = f429::SettingsSectors::new(flash);
     Some(flash)
 }
 

@@ -53,7 +53,6 @@
 use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
 use protocol::plc::update::{BootState, Crc32, Target, UpdateError, UpdateJob};
 use rc_boot::image::{trailer_offset, Trailer, TRAILER_LEN};
-use rc_boot::layout::L475;
 use rc_boot::update::{BlockingFirmwareState, State, Verifier};
 
 use crate::node::Node;
@@ -61,18 +60,24 @@ use crate::node::Node;
 mod parts;
 use parts::{Home, Parts, UPDATE_KEY};
 
-/// The board id an image must declare (BEGIN and its trailer): the L475's, on the board and in
-/// the emulator (the same firmware).
-pub const BOARD_ID: u16 = rc_boot::BOARD_L475;
+/// The board id an image must declare (BEGIN and its trailer): this board's (the emulator's is
+/// the L475's: the same firmware).
+pub const BOARD_ID: u16 = parts::BOARD_ID;
 
-/// The erase unit: a 2 KiB page of the L475 (the emulator erases its RAM in the same steps).
-const PAGE: u32 = rc_boot::layout::PAGE;
+/// DFU's erase unit, one step of an Erase: a 2 KiB page of the L475 (the emulator erases its RAM
+/// in the same steps), a 128 KiB sector of the F429 (erased without waiting: its steps look
+/// whether it is done).
+const PAGE: u32 = parts::LAYOUT.page;
+
+/// How often a sector erase under way is looked at (the F429's 128 KiB sector: about 1 s).
+const ERASE_LOOK: protocol::time::Duration = protocol::time::Duration::from_millis(10);
 
 /// Bytes read back into the CRC-32 and the SHA-512 per step (a few ms on the board).
 const VERIFY_STEP: u32 = 2048;
 
-/// The flash's write unit: every write is whole double words.
-const WORD: usize = rc_boot::layout::WORD as usize;
+/// The flash's write unit (the L475: a double word; the F429: a word): every write is whole
+/// units.
+const WORD: usize = parts::LAYOUT.word as usize;
 
 /// How a job went, for [`report`].
 pub struct Outcome {
@@ -139,6 +144,8 @@ pub struct Dfu {
     unconfirmed: bool,
     /// Where DFU and STATE are.
     home: Home,
+    /// The last step found the flash still erasing a sector.
+    erasing: bool,
 }
 
 impl Dfu {
@@ -149,6 +156,7 @@ impl Dfu {
             boot: BootState::Unknown,
             unconfirmed: false,
             home: Home::new(),
+            erasing: false,
         }
     }
 
@@ -238,6 +246,17 @@ impl Dfu {
         !matches!(self.job, Job::None)
     }
 
+    /// With a job under way, when its next step is due: at once, or (the flash erasing a sector
+    /// without waiting: the F429) after [`ERASE_LOOK`], so that the gateway task sleeps in
+    /// between and the executor's other tasks run.
+    pub fn step_in(&self) -> protocol::time::Duration {
+        if self.erasing {
+            ERASE_LOOK
+        } else {
+            protocol::time::Duration(0)
+        }
+    }
+
     /// Takes `job` (the node hands out one at a time: a job under way is replaced, which the
     /// node never asks). A chunk is written at once (its bytes are the node's, lent for this
     /// call only), a refusal given at once: the outcome; an erase or a check goes on in
@@ -313,25 +332,25 @@ impl Dfu {
             return None;
         }
         let job = core::mem::replace(&mut self.job, Job::None);
+        self.erasing = false;
         let mut parts = self.home.parts(settings);
         let (next, outcome) = match job {
             Job::None => return None,
             Job::Erase { next, end } if next >= end => (Job::None, Some(Ok(()).into())),
-            Job::Erase { next, end } => {
-                match parts
-                    .dfu()
-                    .and_then(|mut dfu| erase(&mut dfu, next, next + PAGE))
-                {
-                    Ok(()) => (
-                        Job::Erase {
-                            next: next + PAGE,
-                            end,
-                        },
-                        None,
-                    ),
-                    Err(()) => (Job::None, Some(Outcome::failed(UpdateError::Flash))),
+            Job::Erase { next, end } => match parts.erase_step(next) {
+                Err(nb::Error::WouldBlock) => {
+                    self.erasing = true;
+                    (Job::Erase { next, end }, None)
                 }
-            }
+                Ok(()) => (
+                    Job::Erase {
+                        next: next + PAGE,
+                        end,
+                    },
+                    None,
+                ),
+                Err(nb::Error::Other(())) => (Job::None, Some(Outcome::failed(UpdateError::Flash))),
+            },
             Job::Verify {
                 next,
                 len,
@@ -417,19 +436,9 @@ fn read_trailer(dfu: &mut impl NorFlash, len: u32) -> Result<Trailer, UpdateErro
     dfu.read(at, &mut raw).map_err(|_| UpdateError::Flash)?;
     let trailer = Trailer::parse(&raw).map_err(|_| UpdateError::NotAnImage)?;
     trailer
-        .check(BOARD_ID, len, L475.max_image())
+        .check(BOARD_ID, len, parts::LAYOUT.max_image())
         .map_err(|_| UpdateError::NotAnImage)?;
     Ok(trailer)
-}
-
-/// Erases DFU's page at `from..to`.
-fn erase(dfu: &mut impl NorFlash, from: u32, to: u32) -> Result<(), ()> {
-    if to as usize > dfu.capacity() {
-        return Err(());
-    }
-    dfu.erase(from, to).map_err(|_| {
-        warn!("update: erase at {:#x} failed", from);
-    })
 }
 
 /// Writes `bytes` at `offset` of DFU (a multiple of the word): the whole words, then the rest

@@ -8,6 +8,20 @@ use embedded_storage::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
 
+/// This board's flash layout (the emulator's is the L475's: the same firmware).
+#[cfg(feature = "board-l475")]
+pub(super) const LAYOUT: rc_boot::layout::Layout = rc_boot::layout::L475;
+/// This board's flash layout.
+#[cfg(feature = "board-f429")]
+pub(super) const LAYOUT: rc_boot::layout::Layout = rc_boot::layout::F429;
+
+/// This board's id.
+#[cfg(feature = "board-l475")]
+pub(super) const BOARD_ID: u16 = rc_boot::BOARD_L475;
+/// This board's id.
+#[cfg(feature = "board-f429")]
+pub(super) const BOARD_ID: u16 = rc_boot::BOARD_F429;
+
 /// The public key images are verified with. A static, so that its 32 bytes are in the image as
 /// they are (`rcgw sign` refuses an application that does not hold the signing key's public half).
 #[cfg(feature = "hw")]
@@ -42,7 +56,7 @@ pub(super) struct Home {
 impl Home {
     /// The largest image: DFU's size, but no larger than ACTIVE, where the bootloader swaps it.
     #[cfg(feature = "hw")]
-    pub(super) const LARGEST_IMAGE: u32 = rc_boot::layout::L475.max_image();
+    pub(super) const LARGEST_IMAGE: u32 = LAYOUT.max_image();
     /// The largest image: the emulator's RAM partition.
     #[cfg(feature = "emulator")]
     pub(super) const LARGEST_IMAGE: u32 = EMU_PARTITION as u32;
@@ -104,6 +118,42 @@ impl Parts<'_> {
     pub(super) fn state(&mut self) -> Result<impl NorFlash + '_, ()> {
         self.window(crate::board::STATE_RANGE)
     }
+
+    /// One step of the erase of DFU's erase unit at `offset`: the L475's 2 KiB page erased at
+    /// once (25 ms at most).
+    #[cfg(feature = "board-l475")]
+    pub(super) fn erase_step(&mut self, offset: u32) -> nb::Result<(), ()> {
+        let page = super::PAGE;
+        let mut dfu = self.dfu().map_err(nb::Error::Other)?;
+        if offset.saturating_add(page) as usize > dfu.capacity() {
+            return Err(nb::Error::Other(()));
+        }
+        dfu.erase(offset, offset + page).map_err(|_| {
+            warn!("update: erase at {:#x} failed", offset);
+            nb::Error::Other(())
+        })
+    }
+
+    /// One step of the erase of DFU's erase unit at `offset`: the F429's 128 KiB sector started,
+    /// or looked at (`WouldBlock` while the flash works: up to 2 s).
+    #[cfg(feature = "board-f429")]
+    pub(super) fn erase_step(&mut self, offset: u32) -> nb::Result<(), ()> {
+        let flash = self.flash.as_deref_mut().ok_or(nb::Error::Other(()))?;
+        let range = crate::board::DFU_RANGE;
+        if offset >= range.end - range.start {
+            return Err(nb::Error::Other(()));
+        }
+        flash.erase_step(range.start + offset).map_err(|e| {
+            if let nb::Error::Other(e) = e {
+                warn!(
+                    "update: erase at {:#x} failed: {}",
+                    offset,
+                    defmt::Debug2Format(&e)
+                );
+            }
+            e.map(|_| ())
+        })
+    }
 }
 
 /// Where DFU and STATE are: the emulator's RAM.
@@ -121,6 +171,14 @@ impl Parts<'_> {
 
     pub(super) fn state(&mut self) -> Result<impl NorFlash + '_, ()> {
         Ok(Ram(&mut *self.state))
+    }
+
+    /// One step of the erase of DFU's page at `offset`: in RAM, at once.
+    pub(super) fn erase_step(&mut self, offset: u32) -> nb::Result<(), ()> {
+        let page = super::PAGE;
+        Ram(&mut *self.dfu)
+            .erase(offset, offset.saturating_add(page))
+            .map_err(|_| nb::Error::Other(()))
     }
 }
 
