@@ -8,7 +8,7 @@
 //! `memory.x`: the linker would read the top-level one first.
 //!
 //! With `update` on the board (`hw`), it also writes the public key images are verified with
-//! (`update_key.rs`, for src/dfu.rs): the file `RC_GATEWAY_UPDATE_KEY` names (its 32 bytes, or
+//! (`update_key.rs`, for src/dfu/): the file `RC_GATEWAY_UPDATE_KEY` names (its 32 bytes, or
 //! 64 hexadecimal digits: `rcgw key new` writes NAME.pub), or no key at all, which refuses every
 //! image. Never the TEST key: only the emulator build takes that one.
 //!

@@ -26,7 +26,9 @@
 # a third of the chip's, with the Ethernet frames (12 KiB), the TCP buffers (10 KiB), the
 # socket pipes (8 KiB) and the node (13 KiB) in it, and leaves the rest for more frames or
 # sockets. Its stack is the deeper of the L475 emulator's (no TCP: an underestimate of the
-# gateway task's) and its own start-up path by the call graph (with its own, larger node).
+# gateway task's) and its own start-up path by the call graph (with its own, larger node). Its
+# application is linked into ACTIVE (sectors 5-10, 768 KiB) and its bootloader, 32 KiB enforced
+# and 8 KiB of RAM + stack as the L475's, into the first 128 KiB (rc_boot::layout::F429).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -37,13 +39,14 @@ rustup toolchain install >/dev/null 2>&1 || rustup toolchain install
 # The firmware's linker (.cargo/config.toml).
 scripts/flip-link-install.sh
 # The F429 first: it is built for the same target as the L475 and writes the same ELF path, so
-# its ELF is copied aside before the L475's build replaces it.
-cargo fw-eth --locked --quiet
+# its ELF is copied aside before the L475's build replaces it. Both with a key, as a board is
+# built (README, "Updating the firmware"): without one the image's signature check is not linked
+# at all (7 KB less). Which key does not matter: the TEST key's public half, boot/test-key.pub.
+RC_GATEWAY_UPDATE_KEY=$PWD/boot/test-key.pub cargo fw-eth --locked --quiet
 mkdir -p target/f429
 cp target/thumbv7em-none-eabihf/release/rc-gateway target/f429/rc-gateway
-# With a key, as a board is built (README, "Updating the firmware"): without one the image's
-# signature check is not linked at all (7 KB less). Which key does not matter: the TEST key's
-# public half, boot/test-key.pub.
+cargo boot-f429 --locked --quiet
+cp target/thumbv7em-none-eabihf/release/rc-bootloader target/f429/rc-bootloader
 RC_GATEWAY_UPDATE_KEY=$PWD/boot/test-key.pub cargo fw --locked --quiet
 cargo boot-l475 --locked --quiet
 # The F103 build as it is flashed (`cargo fw-run-f103`).
@@ -65,5 +68,7 @@ objdump="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p
         0x08000000 0x08008000 0x20000000 0x20018000 32 8 1 \
     "F103 STM32F103C8 (blue pill)" target/thumbv7m-none-eabi/release/rc-gateway \
         0x08000000 0x0800F000 0x20000000 0x20005000 56 16 1 \
-    "F429 NUCLEO-F429ZI (STM32F429ZI, Ethernet)" target/f429/rc-gateway \
-        0x08000000 0x08100000 0x20000000 0x20030000 128 64 1
+    "F429 NUCLEO-F429ZI (STM32F429ZI, Ethernet), the application in ACTIVE" target/f429/rc-gateway \
+        0x08020000 0x080E0000 0x20000000 0x20030000 128 64 1 \
+    "F429-bootloader rc-bootloader (embassy-boot), 32 KiB of its 128 KiB" target/f429/rc-bootloader \
+        0x08000000 0x08008000 0x20000000 0x20030000 32 8 1

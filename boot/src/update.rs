@@ -1,6 +1,6 @@
 //! The application's side: check the image in DFU and mark it for the bootloader.
 //!
-//! The transfer (`protocol::plc::update`, `src/dfu.rs`) writes the image file into DFU from
+//! The transfer (`protocol::plc::update`, `src/dfu/`) writes the image file into DFU from
 //! offset 0. At FINISH the application calls [`verify_and_mark`]: it reads the trailer at the
 //! file's end, checks it ([`Trailer::parse`], [`Trailer::check`]), then hands the signature and
 //! [`Trailer::signed_len`] to embassy-boot's `verify_and_mark_updated`, which hashes DFU's first
@@ -85,7 +85,7 @@ pub enum VerifyError {
 }
 
 /// The same check as embassy-boot's `verify_and_mark_updated`, in steps: for an application
-/// that must not stop for the whole image's SHA-512 in one call (`src/dfu.rs` reads the image
+/// that must not stop for the whole image's SHA-512 in one call (`src/dfu/` reads the image
 /// back a page per pass of its loop). Feed the image's first [`Trailer::signed_len`] bytes in
 /// order with [`Verifier::update`], then [`Verifier::finish`]; on `Ok`, mark the image with
 /// embassy-boot's `BlockingFirmwareState::mark_updated`. The scheme is the one

@@ -1,6 +1,6 @@
 """`rcgw update` against the real firmware in QEMU (issue 37): an image over the PLC line into the
 emulator build's DFU partition (32 KiB of RAM: QEMU's b-l475e-iot01a cannot write its flash, so
-the flash driver is not exercised here; src/dfu.rs), erased, written and read back in the gateway
+the flash driver is not exercised here; src/dfu/), erased, written and read back in the gateway
 task's bounded steps, and reported ready (UPDSTAT state 5); meanwhile the bus keeps being polled
 and the stop input still stops. The image is signed with the public TEST key (`rcgw sign
 --test-key`), which the emulator build verifies with. Then the refusals rcgw explains before

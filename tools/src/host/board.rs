@@ -238,7 +238,7 @@ impl Board {
     }
 
     /// What the node is told about the board: its id and the largest image, as the firmware
-    /// tells it (src/dfu.rs): DFU's size, but no larger than ACTIVE, where the swap puts it.
+    /// tells it (src/dfu/): DFU's size, but no larger than ACTIVE, where the swap puts it.
     pub fn target(&self) -> Target {
         Target {
             board: self.board,
