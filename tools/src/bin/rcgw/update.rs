@@ -110,11 +110,25 @@ pub fn status(gw: &mut Gw, json: bool) -> Result<(), Fail> {
     Ok(())
 }
 
+/// Read failures in a row that [`wait_out`] rides out: the gateway may not answer while one step
+/// of its own work runs (the L475 checks the signature in one step: tens of ms on the board, but
+/// over a second in an emulator on a busy PC), and UPDSTAT's read can simply be asked again.
+const SILENT_READS: u32 = 3;
+
 /// Waits while the gateway is in `state` (erasing, finishing): its status after.
 fn wait_out(gw: &mut Gw, state: UpdateState) -> Result<UpdateStatus, Fail> {
     let deadline = Instant::now() + PATIENCE;
+    let mut silent = 0;
     loop {
-        let s = read_status(gw)?;
+        let s = match read_status(gw) {
+            Ok(s) => s,
+            Err(Fail::Device(_)) if silent < SILENT_READS && Instant::now() < deadline => {
+                silent += 1;
+                continue;
+            }
+            Err(e) => return Err(e),
+        };
+        silent = 0;
         if s.state != state as u16 {
             return Ok(s);
         }
