@@ -61,6 +61,12 @@ if [[ ${BENCH_NET_EMU:-1} != 0 ]] && command -v qemu-system-arm >/dev/null; then
     wait "$qemu" 2>/dev/null || true
 fi
 
+# A firmware update's transfer (issue 37): a full-size image into rc-gateway-host's board model
+# over TCP and over an RTU pseudo-terminal, per board, and the 115.2 kbit/s RTU time computed from
+# its frames (scripts/update-bench.sh, about a minute). BENCH_UPDATE=0 skips it.
+if [[ ${BENCH_UPDATE:-1} != 0 ]]; then
+    scripts/update-bench.sh
+fi
 if [[ $cpu_doc_stale == 1 ]]; then
     echo "bench: docs/performance.md's CPU figure is stale (above: the line to paste between its cpu markers)" >&2
     exit 1
