@@ -19,5 +19,6 @@ export RC_GATEWAY_EMU_ELF="$elf"
 export PYTHONDONTWRITEBYTECODE=1
 mkdir -p target/emu
 : > target/emu/stack-hwm.log
+: > target/emu/stack-hwm-update.log
 # Bounded: each test waits at most seconds; the whole run gets a hard limit too.
 timeout --kill-after=10 900 "$python" -m pytest -q -p no:cacheprovider tests/emu "$@"

@@ -72,3 +72,11 @@ objdump="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p
         0x08020000 0x080E0000 0x20000000 0x20030000 128 64 1 \
     "F429-bootloader rc-bootloader (embassy-boot), 32 KiB of its 128 KiB" target/f429/rc-bootloader \
         0x08000000 0x08008000 0x20000000 0x20030000 32 8 1
+# The update path's stack (the L475's SHA-512 and Ed25519 check in the gateway task), measured by
+# the emulator's update tests apart from the log above (the F103, held to that one, has no update).
+update_hwm=target/emu/stack-hwm-update.log
+if [[ -s $update_hwm ]]; then
+    deepest=$(sort -n "$update_hwm" | tail -1)
+    general=$(sort -n "$hwm" | tail -1 | cut -d' ' -f1)
+    echo "L475 stack with an update under way (emulator): ${deepest%% *} B (${deepest#* }); without: $general B"
+fi

@@ -15,7 +15,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tests" / "pyshared"))
 
-from emu import HWM_LOG, Emulator  # noqa: E402
+from emu import Emulator, record_stack  # noqa: E402
 
 
 def _build_elf():
@@ -53,11 +53,7 @@ def emu(request, elf, tmp_path):
         emulator.start()
         yield emulator
     finally:
-        hwm = emulator.stop()
-        if hwm is not None:
-            HWM_LOG.parent.mkdir(parents=True, exist_ok=True)
-            with open(HWM_LOG, "a") as log:
-                log.write(f"{hwm} {request.node.name}\n")
+        record_stack(emulator.stop(), request.node.name)
         failed = getattr(request.node, "report_call", None)
         if failed is not None and failed.failed:
             print("---- firmware log (semihosting) ----")

@@ -17,7 +17,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tests" / "pyshared"))
 
-from emu import Emulator  # noqa: E402
+from emu import HWM_UPDATE_LOG, Emulator, record_stack  # noqa: E402
 from plc import ModbusError, crc16, wait_for  # noqa: E402
 from signed_image import BOARD_L475, sign, version_word  # noqa: E402
 
@@ -103,4 +103,4 @@ def test_the_firmware_takes_only_an_image_signed_with_its_key(elf, tmp_path):
             print("\n".join(emu.log()[-40:]))
         raise
     finally:
-        emu.stop()
+        record_stack(emu.stop(), "test_the_firmware_takes_only_an_image_signed_with_its_key", HWM_UPDATE_LOG)

@@ -20,7 +20,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tests" / "pyshared"))
 
-from emu import STOP_INPUT, Emulator  # noqa: E402
+from emu import HWM_UPDATE_LOG, STOP_INPUT, Emulator, record_stack  # noqa: E402
 from plc import wait_for  # noqa: E402
 
 TARGET = Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
@@ -150,4 +150,4 @@ def test_rcgw_update_fills_the_partition_while_the_bus_is_served(elf, tmp_path):
             print("rc-sim:\n" + "\n".join(emu.sim_log()[-40:]))
         raise
     finally:
-        emu.stop()
+        record_stack(emu.stop(), "test_rcgw_update_fills_the_partition_while_the_bus_is_served", HWM_UPDATE_LOG)

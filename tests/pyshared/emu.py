@@ -61,6 +61,18 @@ class EmulatorError(AssertionError):
 QEMU = os.environ.get("QEMU", "qemu-system-arm")
 RC_SIM = Path(os.environ.get("RC_SIM", ROOT / "target" / "debug" / "rc-sim"))
 HWM_LOG = ROOT / "target" / "emu" / "stack-hwm.log"
+# The update path's (the L475 only: SHA-512 and the Ed25519 check in the gateway task), apart from
+# HWM_LOG, which the size report also holds the F103's RAM budget to (the F103 has no update).
+HWM_UPDATE_LOG = ROOT / "target" / "emu" / "stack-hwm-update.log"
+
+
+def record_stack(hwm, name, log=HWM_LOG):
+    """Appends a test's stack high-water mark (`Emulator.stop()`'s; None: not measured)."""
+    if hwm is None:
+        return
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, "a") as out:
+        out.write(f"{hwm} {name}\n")
 
 PAINT = 0xA5
 # The bus commands that only read (status and position polls, memory reads): everything else
