@@ -7,12 +7,12 @@ mod common;
 
 use common::*;
 use embassy_boot::State;
-use rc_boot::layout::{Layout, L475};
+use rc_boot::layout::L475;
 use rc_boot::update::verify_and_mark;
 use rc_boot::BOARD_L475;
 
 /// Erase and write operations `f` does on a copy of `rig`.
-fn count_ops(rig: &Rig, f: impl FnOnce(&mut Rig)) -> usize {
+fn count_ops<C: Chip>(rig: &Rig<C>, f: impl FnOnce(&mut Rig<C>)) -> usize {
     let mut r = rig.clone();
     r.flash.arm(usize::MAX, Tear::Nothing);
     f(&mut r);
@@ -27,7 +27,7 @@ enum Holds {
     New,
 }
 
-fn holds(rig: &Rig, old: &[u8], new: &[u8], what: &str) -> Holds {
+fn holds<C: Chip>(rig: &Rig<C>, old: &[u8], new: &[u8], what: &str) -> Holds {
     let r = std::panic::catch_unwind(|| holds_one_of(rig, old, new));
     match r {
         Ok(false) => Holds::Old,
@@ -48,8 +48,12 @@ struct Counts {
 /// Cuts during the swap and during the revert, at every operation and every tear.
 /// `follow_every`: how often (in cut points) the whole follow-up (confirm, rollback, a new
 /// update) is run after the recovery; the recovery itself is checked at every point.
-fn swap_and_revert(layout: Layout, buf: usize, follow_every: usize) -> Counts {
-    let (marked, old, new) = marked(layout, buf, 11, 12);
+/// `(marked, old, new)`: a board with an image marked, from [`marked_on`].
+fn swap_and_revert<C: Chip>(
+    (marked, old, new): (Rig<C>, Vec<u8>, Vec<u8>),
+    follow_every: usize,
+) -> Counts {
+    let (layout, buf) = (marked.layout, marked.boot_buf);
     let mut counts = Counts {
         swap_ops: count_ops(&marked, |r| assert_eq!(r.boot(), Ok(State::Swap))),
         ..Counts::default()
@@ -158,14 +162,14 @@ fn swap_and_revert(layout: Layout, buf: usize, follow_every: usize) -> Counts {
 }
 
 /// A new image transferred, marked, swapped in and confirmed: the board is not stuck.
-fn update_again(rig: &mut Rig, what: &str) {
-    let layout = rig.layout;
+fn update_again<C: Chip>(rig: &mut Rig<C>, what: &str) {
+    let (layout, board) = (rig.layout, rig.board);
     let max = layout.max_image() as usize;
     let app = app_bytes(max / 2 + 5, 99);
-    let image = signed(&app, BOARD_L475, &test_key());
+    let image = signed(&app, board, &test_key());
     rig.transfer(&image).unwrap();
     let key = test_key().public_key();
-    rig.app(|u| verify_and_mark(u, image.len() as u32, BOARD_L475, max as u32, &key))
+    rig.app(|u| verify_and_mark(u, image.len() as u32, board, max as u32, &key))
         .unwrap_or_else(|e| panic!("{what}: mark refused: {e:?}"));
     assert_eq!(rig.boot(), Ok(State::Swap), "{what}");
     assert_eq!(&rig.active()[..app.len()], &app[..], "{what}");
@@ -177,7 +181,7 @@ fn update_again(rig: &mut Rig, what: &str) {
 #[test]
 fn cut_at_every_step_of_swap_and_revert_small() {
     for buf in [512, 2048] {
-        let c = swap_and_revert(small_layout(), buf, 1);
+        let c = swap_and_revert(marked(small_layout(), buf, 11, 12), 1);
         eprintln!("small layout, buffer {buf}: {c:?}");
         assert_eq!(c.cut_points, 3 * (c.swap_ops + 1 + c.revert_ops + 1));
     }
@@ -185,7 +189,7 @@ fn cut_at_every_step_of_swap_and_revert_small() {
 
 #[test]
 fn cut_at_every_step_of_swap_and_revert_l475() {
-    let c = swap_and_revert(L475, 2048, 37);
+    let c = swap_and_revert(marked(L475, 2048, 11, 12), 37);
     eprintln!("L475 layout, buffer 2048: {c:?}");
     assert_eq!(c.swap_ops, 1440);
     assert_eq!(c.cut_points, 3 * (c.swap_ops + 1 + c.revert_ops + 1));
