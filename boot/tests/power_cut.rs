@@ -7,9 +7,9 @@ mod common;
 
 use common::*;
 use embassy_boot::State;
-use rc_boot::layout::L475;
+use rc_boot::layout::{F429, L475};
 use rc_boot::update::verify_and_mark;
-use rc_boot::BOARD_L475;
+use rc_boot::{BOARD_F429, BOARD_L475, BOOT_BUF_LEN};
 
 /// Erase and write operations `f` does on a copy of `rig`.
 fn count_ops<C: Chip>(rig: &Rig<C>, f: impl FnOnce(&mut Rig<C>)) -> usize {
@@ -194,6 +194,25 @@ fn cut_at_every_step_of_swap_and_revert_l475() {
     assert_eq!(c.swap_ops, 1440);
     assert_eq!(c.cut_points, 3 * (c.swap_ops + 1 + c.revert_ops + 1));
 }
+
+/// The F429's layout on its chip: six 128 KiB pages in ACTIVE, STATE in a 16 KiB sector, the
+/// bootloader's 2 KiB buffer (64 reads and writes a page).
+#[test]
+fn cut_at_every_step_of_swap_and_revert_f429() {
+    let board = Rig::<F4>::on(F429, BOARD_F429, BOOT_BUF_LEN);
+    let c = swap_and_revert(marked_on(board, 11, 12), F429_FOLLOW_EVERY);
+    eprintln!("F429 layout, buffer {BOOT_BUF_LEN}: {c:?}");
+    // 6 pages, two copies each of an erase, 64 writes and a progress word.
+    assert_eq!(c.swap_ops, 6 * 2 * (1 + 64 + 1));
+    assert_eq!(c.revert_ops, c.swap_ops + 3);
+    assert_eq!(c.cut_points, 3 * (c.swap_ops + 1 + c.revert_ops + 1));
+    // The torn last progress word (see `swap_and_revert`): the model does tear.
+    assert!(c.spent_trials >= 1);
+}
+
+/// How often the F429's campaign runs the whole follow-up: a full update of its 768 KiB ACTIVE
+/// costs more than a cut point, and coprime with the 3 tears so that each is followed up.
+const F429_FOLLOW_EVERY: usize = 53;
 
 #[test]
 fn cut_during_confirmation() {
