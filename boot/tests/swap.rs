@@ -6,7 +6,7 @@ mod common;
 
 use common::*;
 use embassy_boot::State;
-use rc_boot::layout::{F429, L475};
+use rc_boot::layout::{LayoutError, F429, F429_SECTOR, F429_SMALL_SECTOR, L475};
 use rc_boot::update::verify_and_mark;
 use rc_boot::{BOARD_F429, BOOT_BUF_LEN};
 
@@ -80,6 +80,37 @@ fn f429_swap_then_confirm_keeps_the_new_application() {
 #[test]
 fn f429_unconfirmed_trial_is_rolled_back() {
     unconfirmed_rolls_back(marked_on(f429(), 3, 4));
+}
+
+/// The F429's layout with DFU one sector short (sectors 18-23), past the layout's own check:
+/// embassy-boot's bootloader refuses it (`assert_partitions`: DFU must be ACTIVE and a page).
+#[test]
+#[should_panic(expected = "dfu.capacity() as u32 - active.capacity() as u32 >= page_size")]
+fn f429_dfu_one_sector_short_is_refused_by_embassy_boot() {
+    let mut layout = F429;
+    layout.dfu.start += F429_SECTOR;
+    assert_eq!(layout.check(), Err(LayoutError::DfuTooSmall));
+    let mut rig = Rig::<F4>::unchecked(layout, BOARD_F429, BOOT_BUF_LEN);
+    rig.flash_active(&app_bytes(1000, 1));
+    let _ = rig.boot();
+}
+
+/// STATE moved to sector 16, past the check against the chip's sectors: 16 KiB-aligned, so the
+/// layout's own check passes, but the sector is 64 KiB. The first mark erases STATE's 16 KiB,
+/// which the chip refuses: no image can ever be marked.
+#[test]
+fn f429_state_on_a_64_kib_sector_cannot_be_marked() {
+    let mut layout = F429;
+    layout.state.start = layout.bank2 + 4 * F429_SMALL_SECTOR;
+    layout.state.end = layout.state.start + F429_SMALL_SECTOR;
+    assert_eq!(layout.check(), Ok(()));
+    let rig = Rig::<F4>::unchecked(layout, BOARD_F429, BOOT_BUF_LEN);
+    assert!(on_sectors(&layout, &rig.flash).is_err());
+    let Err(e) = std::panic::catch_unwind(|| marked_on(rig, 1, 2)) else {
+        panic!("marked on a STATE the chip cannot erase");
+    };
+    let e = e.downcast_ref::<String>().unwrap();
+    assert!(e.contains("Flash(NotAligned)"), "{e}");
 }
 
 #[test]
