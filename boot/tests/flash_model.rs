@@ -136,3 +136,15 @@ fn f429_torn_erase_of_a_big_sector_erases_half_of_it() {
     assert!(f.mem[s..s + half].iter().all(|&b| b == 0xFF));
     assert!(f.mem[s + half..s + 2 * half].iter().all(|&b| b == 0));
 }
+
+/// The check every cut point makes besides ACTIVE's: the settings (next to STATE on the F429)
+/// and the bootloader keep their bytes.
+#[test]
+#[should_panic(expected = "the flash changed outside the partitions at 0x8107ffc")]
+fn a_change_outside_the_partitions_is_caught() {
+    let mut rig = Rig::<F4>::on(F429, rc_boot::BOARD_F429, rc_boot::BOOT_BUF_LEN);
+    rig.check_outside();
+    let at = (F429.settings.end - 4 - F429.flash.start) as usize;
+    rig.flash.mem[at] ^= 1;
+    rig.check_outside();
+}

@@ -25,6 +25,7 @@ fn swap_then_confirm<C: Chip>((mut rig, old, new): (Rig<C>, Vec<u8>, Vec<u8>)) {
         assert_eq!(rig.boot(), Ok(State::Boot));
         assert_eq!(rig.active(), new);
     }
+    rig.check_outside();
 }
 
 /// A marked board: the swap, a reset before the confirmation, the revert; then a new update.
@@ -51,6 +52,7 @@ fn unconfirmed_rolls_back<C: Chip>((mut rig, old, new): (Rig<C>, Vec<u8>, Vec<u8
     assert_eq!(rig.boot(), Ok(State::Swap));
     assert_eq!(rig.active(), newer);
     assert_eq!(&rig.active()[..max / 3], &app_bytes(max / 3, 5)[..]);
+    rig.check_outside();
 }
 
 #[test]

@@ -444,6 +444,9 @@ pub struct Rig<C: Chip = L4> {
     pub boot_buf: usize,
     /// The board id its images are signed for and checked against.
     pub board: u16,
+    /// What the flash holds outside ACTIVE, DFU and STATE (the bootloader, the settings, the
+    /// spare sectors), as offsets and bytes: programmed at the start, and nothing may change it.
+    outside: Rc<Vec<(usize, Vec<u8>)>>,
     chip: PhantomData<fn() -> C>,
 }
 
@@ -473,14 +476,49 @@ impl<C: Chip> Rig<C> {
         assert_eq!(C::SmallPages::ERASE_SIZE, layout.small_page as usize);
         assert_eq!(C::Pages::WRITE_SIZE, layout.word as usize);
         assert_eq!(C::SmallPages::WRITE_SIZE, layout.word as usize);
-        let flash = SimFlash::with_sectors(&C::sectors(&layout), layout.word);
+        let mut flash = SimFlash::with_sectors(&C::sectors(&layout), layout.word);
         assert_eq!(flash.mem.len(), layout.flash.len() as usize);
+        // Everything but the partitions programmed with bytes of its own.
+        let mut parts = [layout.active, layout.dfu, layout.state].map(|r| {
+            let s = r.offset_from(layout.flash.start) as usize;
+            (s, s + r.len() as usize)
+        });
+        parts.sort();
+        let mut outside = Vec::new();
+        let mut at = 0;
+        for (start, end) in parts
+            .into_iter()
+            .chain([(flash.mem.len(), flash.mem.len())])
+        {
+            if at < start {
+                let bytes = app_bytes(start - at, outside.len() as u8 ^ 0x5A);
+                flash.mem[at..start].copy_from_slice(&bytes);
+                outside.push((at, bytes));
+            }
+            at = at.max(end);
+        }
         Rig {
             flash,
             layout,
             boot_buf,
             board,
+            outside: Rc::new(outside),
             chip: PhantomData,
+        }
+    }
+
+    /// Panics unless the bootloader, the settings and the spare sectors hold what they held at
+    /// the start: embassy-boot erases and writes only ACTIVE, DFU and STATE.
+    pub fn check_outside(&self) {
+        for (at, bytes) in self.outside.iter() {
+            let now = &self.flash.mem[*at..*at + bytes.len()];
+            if now != &bytes[..] {
+                let first = now.iter().zip(bytes).position(|(a, b)| a != b).unwrap_or(0);
+                panic!(
+                    "the flash changed outside the partitions at {:#x}",
+                    self.layout.flash.start as usize + at + first
+                );
+            }
         }
     }
 
@@ -685,8 +723,10 @@ pub fn marked_on<C: Chip>(
     (rig, old, new)
 }
 
-/// Panics unless ACTIVE holds exactly `old` or exactly `new`; true for `new`.
+/// Panics unless ACTIVE holds exactly `old` or exactly `new` (and nothing changed outside the
+/// partitions); true for `new`.
 pub fn holds_one_of<C: Chip>(rig: &Rig<C>, old: &[u8], new: &[u8]) -> bool {
+    rig.check_outside();
     let a = rig.active();
     if a == old {
         false
