@@ -7,9 +7,9 @@ mod common;
 
 use common::*;
 use embassy_boot::State;
-use rc_boot::layout::{F429, L475};
+use rc_boot::layout::{F429, F429_SECTOR, L475};
 use rc_boot::update::verify_and_mark;
-use rc_boot::{BOARD_F429, BOARD_L475, BOOT_BUF_LEN};
+use rc_boot::{BOARD_F429, BOOT_BUF_LEN};
 
 /// Erase and write operations `f` does on a copy of `rig`.
 fn count_ops<C: Chip>(rig: &Rig<C>, f: impl FnOnce(&mut Rig<C>)) -> usize {
@@ -216,7 +216,22 @@ const F429_FOLLOW_EVERY: usize = 53;
 
 #[test]
 fn cut_during_confirmation() {
-    let (mut trial, old, new) = marked(small_layout(), 512, 21, 22);
+    cut_confirmation(marked(small_layout(), 512, 21, 22));
+}
+
+/// On the F429, the confirmation erases STATE's 16 KiB sector: cut there too.
+#[test]
+fn cut_during_confirmation_f429() {
+    cut_confirmation(marked_on(
+        Rig::<F4>::on(F429, BOARD_F429, BOOT_BUF_LEN),
+        21,
+        22,
+    ));
+}
+
+/// Cuts during the trial's `mark_booted` on a marked board: the new application is kept or the
+/// old one put back, whole, and a new update goes through.
+fn cut_confirmation<C: Chip>((mut trial, old, new): (Rig<C>, Vec<u8>, Vec<u8>)) {
     assert_eq!(trial.boot(), Ok(State::Swap));
     let ops = count_ops(&trial, |r| r.app(|u| u.mark_booted().unwrap()));
     assert_eq!(ops, 3);
@@ -248,15 +263,44 @@ fn cut_during_confirmation() {
 #[test]
 fn cut_during_transfer_and_mark_keeps_the_old_application() {
     let layout = small_layout();
-    let mut board = Rig::new(layout, 512);
+    let max = layout.max_image() as usize;
+    let (transfer_ops, mark_ops, points) =
+        transfer_and_mark_cuts(Rig::new(layout, 512), max - 96 - 40, 1);
+    assert_eq!(points, 3 * (transfer_ops + mark_ops));
+}
+
+/// On the F429: an image one sector and a bit long, so that the transfer erases two of DFU's
+/// 128 KiB sectors (a chunk straddles the boundary), and the mark erases STATE's 16 KiB one.
+#[test]
+fn cut_during_transfer_and_mark_keeps_the_old_application_f429() {
+    let board = Rig::<F4>::on(F429, BOARD_F429, BOOT_BUF_LEN);
+    let (transfer_ops, mark_ops, points) =
+        transfer_and_mark_cuts(board, F429_SECTOR as usize + 3000, F429_FOLLOW_EVERY);
+    // Two erases, the 232-byte chunks (the one across the sector boundary in two writes).
+    assert_eq!(
+        transfer_ops,
+        2 + (F429_SECTOR as usize + 3000 + 96).div_ceil(232) + 1
+    );
+    assert_eq!(points, 3 * (transfer_ops + mark_ops));
+}
+
+/// Cuts at every operation of a transfer of an image of `app_len` bytes into a fresh `board`'s
+/// DFU, and of its mark, with every tear: the reboot runs the old application, and (every
+/// `follow_every` cut points in the transfer, at each in the mark) the image sent again from the
+/// start goes through. Returns the transfer's operations, the mark's and the cut points.
+fn transfer_and_mark_cuts<C: Chip>(
+    mut board: Rig<C>,
+    app_len: usize,
+    follow_every: usize,
+) -> (usize, usize, usize) {
+    let (layout, id) = (board.layout, board.board);
     board.flash_active(&app_bytes(layout.max_image() as usize - 100, 31));
     let old = board.active();
     let max = layout.max_image() as usize;
-    let image = signed(&app_bytes(max - 96 - 40, 32), BOARD_L475, &test_key());
+    let image = signed(&app_bytes(app_len, 32), id, &test_key());
     let key = test_key().public_key();
-    let mark = |r: &mut Rig| {
-        r.app(|u| verify_and_mark(u, image.len() as u32, BOARD_L475, max as u32, &key))
-    };
+    let mark =
+        |r: &mut Rig<C>| r.app(|u| verify_and_mark(u, image.len() as u32, id, max as u32, &key));
 
     let transfer_ops = count_ops(&board, |r| r.transfer(&image).unwrap());
     let mut transferred = board.clone();
@@ -283,15 +327,19 @@ fn cut_during_transfer_and_mark_keeps_the_old_application() {
                 assert!(cut, "{what}");
                 assert_eq!(rig.reboot_until_ok(3), State::Boot, "{what}");
                 assert_eq!(rig.active(), old, "{what}");
+                rig.check_outside();
+                points += 1;
+                if points % follow_every != 0 && phase == "transfer" {
+                    continue;
+                }
                 // Sent again from the start, the image goes through.
                 rig.transfer(&image).unwrap();
                 mark(&mut rig).unwrap_or_else(|e| panic!("{what}: {e:?}"));
                 assert_eq!(rig.boot(), Ok(State::Swap), "{what}");
                 assert_eq!(&rig.active()[..image.len()], &image[..], "{what}");
-                points += 1;
             }
         }
     }
     eprintln!("transfer: {transfer_ops} operations, mark: {mark_ops}; {points} cut points checked");
-    assert_eq!(points, 3 * (transfer_ops + mark_ops));
+    (transfer_ops, mark_ops, points)
 }
