@@ -7,12 +7,12 @@ mod common;
 
 use common::*;
 use embassy_boot::State;
-use rc_boot::layout::{Layout, L475};
+use rc_boot::layout::{F429, F429_SECTOR, L475};
 use rc_boot::update::verify_and_mark;
-use rc_boot::BOARD_L475;
+use rc_boot::{BOARD_F429, BOOT_BUF_LEN};
 
 /// Erase and write operations `f` does on a copy of `rig`.
-fn count_ops(rig: &Rig, f: impl FnOnce(&mut Rig)) -> usize {
+fn count_ops<C: Chip>(rig: &Rig<C>, f: impl FnOnce(&mut Rig<C>)) -> usize {
     let mut r = rig.clone();
     r.flash.arm(usize::MAX, Tear::Nothing);
     f(&mut r);
@@ -27,7 +27,7 @@ enum Holds {
     New,
 }
 
-fn holds(rig: &Rig, old: &[u8], new: &[u8], what: &str) -> Holds {
+fn holds<C: Chip>(rig: &Rig<C>, old: &[u8], new: &[u8], what: &str) -> Holds {
     let r = std::panic::catch_unwind(|| holds_one_of(rig, old, new));
     match r {
         Ok(false) => Holds::Old,
@@ -48,8 +48,12 @@ struct Counts {
 /// Cuts during the swap and during the revert, at every operation and every tear.
 /// `follow_every`: how often (in cut points) the whole follow-up (confirm, rollback, a new
 /// update) is run after the recovery; the recovery itself is checked at every point.
-fn swap_and_revert(layout: Layout, buf: usize, follow_every: usize) -> Counts {
-    let (marked, old, new) = marked(layout, buf, 11, 12);
+/// `(marked, old, new)`: a board with an image marked, from [`marked_on`].
+fn swap_and_revert<C: Chip>(
+    (marked, old, new): (Rig<C>, Vec<u8>, Vec<u8>),
+    follow_every: usize,
+) -> Counts {
+    let (layout, buf) = (marked.layout, marked.boot_buf);
     let mut counts = Counts {
         swap_ops: count_ops(&marked, |r| assert_eq!(r.boot(), Ok(State::Swap))),
         ..Counts::default()
@@ -158,14 +162,14 @@ fn swap_and_revert(layout: Layout, buf: usize, follow_every: usize) -> Counts {
 }
 
 /// A new image transferred, marked, swapped in and confirmed: the board is not stuck.
-fn update_again(rig: &mut Rig, what: &str) {
-    let layout = rig.layout;
+fn update_again<C: Chip>(rig: &mut Rig<C>, what: &str) {
+    let (layout, board) = (rig.layout, rig.board);
     let max = layout.max_image() as usize;
     let app = app_bytes(max / 2 + 5, 99);
-    let image = signed(&app, BOARD_L475, &test_key());
+    let image = signed(&app, board, &test_key());
     rig.transfer(&image).unwrap();
     let key = test_key().public_key();
-    rig.app(|u| verify_and_mark(u, image.len() as u32, BOARD_L475, max as u32, &key))
+    rig.app(|u| verify_and_mark(u, image.len() as u32, board, max as u32, &key))
         .unwrap_or_else(|e| panic!("{what}: mark refused: {e:?}"));
     assert_eq!(rig.boot(), Ok(State::Swap), "{what}");
     assert_eq!(&rig.active()[..app.len()], &app[..], "{what}");
@@ -177,7 +181,7 @@ fn update_again(rig: &mut Rig, what: &str) {
 #[test]
 fn cut_at_every_step_of_swap_and_revert_small() {
     for buf in [512, 2048] {
-        let c = swap_and_revert(small_layout(), buf, 1);
+        let c = swap_and_revert(marked(small_layout(), buf, 11, 12), 1);
         eprintln!("small layout, buffer {buf}: {c:?}");
         assert_eq!(c.cut_points, 3 * (c.swap_ops + 1 + c.revert_ops + 1));
     }
@@ -185,15 +189,49 @@ fn cut_at_every_step_of_swap_and_revert_small() {
 
 #[test]
 fn cut_at_every_step_of_swap_and_revert_l475() {
-    let c = swap_and_revert(L475, 2048, 37);
+    let c = swap_and_revert(marked(L475, 2048, 11, 12), 37);
     eprintln!("L475 layout, buffer 2048: {c:?}");
     assert_eq!(c.swap_ops, 1440);
     assert_eq!(c.cut_points, 3 * (c.swap_ops + 1 + c.revert_ops + 1));
 }
 
+/// The F429's layout on its chip: six 128 KiB pages in ACTIVE, STATE in a 16 KiB sector, the
+/// bootloader's 2 KiB buffer (64 reads and writes a page).
+#[test]
+fn cut_at_every_step_of_swap_and_revert_f429() {
+    let board = Rig::<F4>::on(F429, BOARD_F429, BOOT_BUF_LEN);
+    let c = swap_and_revert(marked_on(board, 11, 12), F429_FOLLOW_EVERY);
+    eprintln!("F429 layout, buffer {BOOT_BUF_LEN}: {c:?}");
+    // 6 pages, two copies each of an erase, 64 writes and a progress word.
+    assert_eq!(c.swap_ops, 6 * 2 * (1 + 64 + 1));
+    assert_eq!(c.revert_ops, c.swap_ops + 3);
+    assert_eq!(c.cut_points, 3 * (c.swap_ops + 1 + c.revert_ops + 1));
+    // The torn last progress word (see `swap_and_revert`): the model does tear.
+    assert!(c.spent_trials >= 1);
+}
+
+/// How often the F429's campaign runs the whole follow-up: a full update of its 768 KiB ACTIVE
+/// costs more than a cut point, and coprime with the 3 tears so that each is followed up.
+const F429_FOLLOW_EVERY: usize = 53;
+
 #[test]
 fn cut_during_confirmation() {
-    let (mut trial, old, new) = marked(small_layout(), 512, 21, 22);
+    cut_confirmation(marked(small_layout(), 512, 21, 22));
+}
+
+/// On the F429, the confirmation erases STATE's 16 KiB sector: cut there too.
+#[test]
+fn cut_during_confirmation_f429() {
+    cut_confirmation(marked_on(
+        Rig::<F4>::on(F429, BOARD_F429, BOOT_BUF_LEN),
+        21,
+        22,
+    ));
+}
+
+/// Cuts during the trial's `mark_booted` on a marked board: the new application is kept or the
+/// old one put back, whole, and a new update goes through.
+fn cut_confirmation<C: Chip>((mut trial, old, new): (Rig<C>, Vec<u8>, Vec<u8>)) {
     assert_eq!(trial.boot(), Ok(State::Swap));
     let ops = count_ops(&trial, |r| r.app(|u| u.mark_booted().unwrap()));
     assert_eq!(ops, 3);
@@ -225,15 +263,44 @@ fn cut_during_confirmation() {
 #[test]
 fn cut_during_transfer_and_mark_keeps_the_old_application() {
     let layout = small_layout();
-    let mut board = Rig::new(layout, 512);
+    let max = layout.max_image() as usize;
+    let (transfer_ops, mark_ops, points) =
+        transfer_and_mark_cuts(Rig::new(layout, 512), max - 96 - 40, 1);
+    assert_eq!(points, 3 * (transfer_ops + mark_ops));
+}
+
+/// On the F429: an image one sector and a bit long, so that the transfer erases two of DFU's
+/// 128 KiB sectors (a chunk straddles the boundary), and the mark erases STATE's 16 KiB one.
+#[test]
+fn cut_during_transfer_and_mark_keeps_the_old_application_f429() {
+    let board = Rig::<F4>::on(F429, BOARD_F429, BOOT_BUF_LEN);
+    let (transfer_ops, mark_ops, points) =
+        transfer_and_mark_cuts(board, F429_SECTOR as usize + 3000, F429_FOLLOW_EVERY);
+    // Two erases, the 232-byte chunks (the one across the sector boundary in two writes).
+    assert_eq!(
+        transfer_ops,
+        2 + (F429_SECTOR as usize + 3000 + 96).div_ceil(232) + 1
+    );
+    assert_eq!(points, 3 * (transfer_ops + mark_ops));
+}
+
+/// Cuts at every operation of a transfer of an image of `app_len` bytes into a fresh `board`'s
+/// DFU, and of its mark, with every tear: the reboot runs the old application, and (every
+/// `follow_every` cut points in the transfer, at each in the mark) the image sent again from the
+/// start goes through. Returns the transfer's operations, the mark's and the cut points.
+fn transfer_and_mark_cuts<C: Chip>(
+    mut board: Rig<C>,
+    app_len: usize,
+    follow_every: usize,
+) -> (usize, usize, usize) {
+    let (layout, id) = (board.layout, board.board);
     board.flash_active(&app_bytes(layout.max_image() as usize - 100, 31));
     let old = board.active();
     let max = layout.max_image() as usize;
-    let image = signed(&app_bytes(max - 96 - 40, 32), BOARD_L475, &test_key());
+    let image = signed(&app_bytes(app_len, 32), id, &test_key());
     let key = test_key().public_key();
-    let mark = |r: &mut Rig| {
-        r.app(|u| verify_and_mark(u, image.len() as u32, BOARD_L475, max as u32, &key))
-    };
+    let mark =
+        |r: &mut Rig<C>| r.app(|u| verify_and_mark(u, image.len() as u32, id, max as u32, &key));
 
     let transfer_ops = count_ops(&board, |r| r.transfer(&image).unwrap());
     let mut transferred = board.clone();
@@ -260,15 +327,19 @@ fn cut_during_transfer_and_mark_keeps_the_old_application() {
                 assert!(cut, "{what}");
                 assert_eq!(rig.reboot_until_ok(3), State::Boot, "{what}");
                 assert_eq!(rig.active(), old, "{what}");
+                rig.check_outside();
+                points += 1;
+                if points % follow_every != 0 && phase == "transfer" {
+                    continue;
+                }
                 // Sent again from the start, the image goes through.
                 rig.transfer(&image).unwrap();
                 mark(&mut rig).unwrap_or_else(|e| panic!("{what}: {e:?}"));
                 assert_eq!(rig.boot(), Ok(State::Swap), "{what}");
                 assert_eq!(&rig.active()[..image.len()], &image[..], "{what}");
-                points += 1;
             }
         }
     }
     eprintln!("transfer: {transfer_ops} operations, mark: {mark_ops}; {points} cut points checked");
-    assert_eq!(points, 3 * (transfer_ops + mark_ops));
+    (transfer_ops, mark_ops, points)
 }

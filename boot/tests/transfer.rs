@@ -1,14 +1,15 @@
 //! The application's side: an image transferred into DFU, checked and marked through
-//! embassy-boot's `verify_and_mark_updated` (via `rc_boot::update::verify_and_mark`).
+//! embassy-boot's `verify_and_mark_updated` (via `rc_boot::update::verify_and_mark`); on the
+//! L475's layouts, and on the F429's for its board id and largest image.
 
 mod common;
 
 use common::*;
 use embassy_boot::{FirmwareUpdaterError, State};
 use rc_boot::image::{split, ImageError, Trailer, TRAILER_LEN};
-use rc_boot::layout::{Layout, L475};
+use rc_boot::layout::{Layout, F429, L475};
 use rc_boot::update::{verify_and_mark, UpdateError, Verifier, VerifyError};
-use rc_boot::BOARD_L475;
+use rc_boot::{BOARD_F429, BOARD_L475, BOOT_BUF_LEN};
 
 /// A board running `old`, with `image` transferred into DFU.
 fn board(layout: Layout, old: &[u8], image: &[u8]) -> Rig {
@@ -246,4 +247,73 @@ fn stepwise_verified_image_marked_directly_swaps_in() {
     rig.mark_updated_unchecked();
     assert_eq!(rig.boot(), Ok(State::Swap));
     assert_eq!(&rig.active()[..app.len()], &app[..]);
+}
+
+/// The F429's board (its sectors, its id), running `old`, with `image` transferred into DFU.
+fn f429_board(old: &[u8], image: &[u8]) -> Rig<F4> {
+    let mut rig = Rig::on(F429, BOARD_F429, BOOT_BUF_LEN);
+    rig.flash_active(old);
+    rig.transfer(image).unwrap();
+    rig
+}
+
+fn f429_mark(rig: &mut Rig<F4>, image_len: usize) -> Result<Trailer, UpdateError> {
+    let key = test_key().public_key();
+    rig.app(|u| verify_and_mark(u, image_len as u32, BOARD_F429, F429.max_image(), &key))
+}
+
+#[test]
+fn f429_largest_image_is_marked_for_the_swap() {
+    // The largest the F429 takes: 768 KiB, so DFU's six first sectors (the transfer erases
+    // each as it reaches it) hold it.
+    let max = F429.max_image() as usize;
+    assert_eq!(max, 6 * 128 * 1024);
+    let app = app_bytes(max - TRAILER_LEN - 5, 1);
+    let image = signed(&app, BOARD_F429, &test_key());
+    assert!(image.len() <= max && image.len() > max - 8 - TRAILER_LEN);
+    let mut rig = f429_board(&app_bytes(1000, 2), &image);
+    let t = f429_mark(&mut rig, image.len()).unwrap();
+    assert_eq!(t.app_len as usize, app.len());
+    assert_eq!(rig.app(|u| u.get_state().unwrap()), State::Swap);
+    assert_eq!(rig.boot(), Ok(State::Swap));
+    assert_eq!(&rig.active()[..image.len()], &image[..]);
+    rig.check_outside();
+}
+
+#[test]
+fn f429_refuses_another_boards_image_and_one_past_active() {
+    let key = test_key().public_key();
+    // The L475's image on the F429, and the F429's on the L475.
+    let image = signed(&app_bytes(4000, 1), BOARD_L475, &test_key());
+    let mut rig = f429_board(&app_bytes(1000, 2), &image);
+    let e = f429_mark(&mut rig, image.len()).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            UpdateError::Image(ImageError::WrongBoard { found: BOARD_L475 })
+        ),
+        "{e:?}"
+    );
+    let image = signed(&app_bytes(4000, 1), BOARD_F429, &test_key());
+    let mut l475 = board(small_layout(), &app_bytes(1000, 2), &image);
+    let e = refused(&mut l475, image.len(), &key);
+    assert!(
+        matches!(
+            e,
+            UpdateError::Image(ImageError::WrongBoard { found: BOARD_F429 })
+        ),
+        "{e:?}"
+    );
+    // One word past ACTIVE: it fits DFU (a sector larger), not ACTIVE.
+    let app = app_bytes(F429.max_image() as usize - TRAILER_LEN + 8, 3);
+    let image = signed(&app, BOARD_F429, &test_key());
+    assert!(image.len() > F429.max_image() as usize && image.len() <= F429.dfu.len() as usize);
+    let mut rig = f429_board(&app_bytes(1000, 2), &image);
+    let e = f429_mark(&mut rig, image.len()).unwrap_err();
+    assert!(
+        matches!(e, UpdateError::Image(ImageError::TooLarge)),
+        "{e:?}"
+    );
+    assert_eq!(rig.boot(), Ok(State::Boot));
+    assert_eq!(&rig.active()[..1000], &app_bytes(1000, 2)[..]);
 }
