@@ -295,6 +295,47 @@ pub const F429_WORD: u32 = 4;
 /// The F429's second bank (its flash is 2 MiB in two banks of 1 MiB).
 pub const F429_BANK2: u32 = FLASH_BASE + 0x10_0000;
 
+/// The F429 sector that holds `addr`: its start and size (RM0090, "Flash module organization":
+/// in each bank four of 16 KiB, one of 64 KiB, seven of 128 KiB). `None` outside the flash.
+pub const fn f429_sector(addr: u32) -> Option<(u32, u32)> {
+    if addr < FLASH_BASE || addr >= FLASH_BASE + 0x20_0000 {
+        return None;
+    }
+    let bank = if addr >= F429_BANK2 {
+        F429_BANK2
+    } else {
+        FLASH_BASE
+    };
+    let offset = addr - bank;
+    Some(if offset < 4 * F429_SMALL_SECTOR {
+        (
+            bank + offset / F429_SMALL_SECTOR * F429_SMALL_SECTOR,
+            F429_SMALL_SECTOR,
+        )
+    } else if offset < 0x2_0000 {
+        (bank + 4 * F429_SMALL_SECTOR, 0x1_0000)
+    } else {
+        (
+            bank + 0x2_0000 + (offset - 0x2_0000) / F429_SECTOR * F429_SECTOR,
+            F429_SECTOR,
+        )
+    })
+}
+
+/// Whether `region` is made of whole F429 sectors of `unit` bytes each: what the chip erases
+/// when a partition of that erase unit asks (a 16 KiB-aligned STATE in the 64 KiB sector 16
+/// could never be erased).
+pub const fn f429_sectors_of(region: Region, unit: u32) -> bool {
+    let mut at = region.start;
+    while at < region.end {
+        match f429_sector(at) {
+            Some((start, size)) if start == at && size == unit => at += size,
+            _ => return false,
+        }
+    }
+    at == region.end && region.start < region.end
+}
+
 /// The STM32F429ZI's layout (NUCLEO-F429ZI; see the module's second table).
 pub const F429: Layout = Layout {
     flash: Region {
@@ -343,6 +384,14 @@ const _: () = assert!(F429.dfu.start == 0x0812_0000 && F429.dfu.end == 0x0820_00
 const _: () = assert!(F429.state.start == 0x0810_8000 && F429.state.end == 0x0810_C000);
 const _: () = assert!(F429.settings.start == 0x0810_0000 && F429.settings.end == 0x0810_8000);
 const _: () = assert!(F429.state_needed() == 104);
+// Layout::check knows one unit per region; the chip's sectors say which it is.
+const _: () = assert!(
+    f429_sectors_of(F429.active, F429.page)
+        && f429_sectors_of(F429.dfu, F429.page)
+        && f429_sectors_of(F429.state, F429.small_page)
+        && f429_sectors_of(F429.settings, F429.small_page),
+    "an F429 region is not made of the chip's sectors of its erase unit"
+);
 
 #[cfg(test)]
 mod tests {
@@ -386,6 +435,34 @@ mod tests {
             Err(LayoutError::NotPages)
         );
         assert_eq!(with(&|l| l.small_page = 48 * 1024), Err(LayoutError::Units));
+    }
+
+    #[test]
+    fn f429_sectors_are_the_chips() {
+        assert_eq!(f429_sector(0x0800_0000), Some((0x0800_0000, 0x4000)));
+        assert_eq!(f429_sector(0x0801_3FFF), Some((0x0801_0000, 0x1_0000)));
+        assert_eq!(f429_sector(0x080F_FFFF), Some((0x080E_0000, 0x2_0000)));
+        assert_eq!(f429_sector(0x0810_C000), Some((0x0810_C000, 0x4000)));
+        assert_eq!(f429_sector(0x0812_0000), Some((0x0812_0000, 0x2_0000)));
+        assert_eq!(f429_sector(0x0820_0000), None);
+        // STATE on a 16 KiB boundary inside the 64 KiB sector 16: Layout::check takes it, the
+        // chip does not.
+        let state = Region {
+            start: 0x0811_0000,
+            end: 0x0811_4000,
+        };
+        let mut moved = F429;
+        moved.state = state;
+        assert_eq!(moved.check(), Ok(()));
+        assert!(!f429_sectors_of(state, F429_SMALL_SECTOR));
+        // ACTIVE from sector 4 (64 KiB) is not 128 KiB sectors.
+        assert!(!f429_sectors_of(
+            Region {
+                start: 0x0801_0000,
+                end: 0x0808_0000
+            },
+            F429_SECTOR
+        ));
     }
 
     #[test]
