@@ -1413,3 +1413,246 @@ fn sign_refuses_an_application_that_does_not_hold_the_key() {
     let ok = sign("with", &without);
     assert_eq!(ok.status.code(), Some(0), "{}", text(&ok));
 }
+
+// ---- The same update on an F429 board (`--board-id f429`): its 2 MiB flash, 128 KiB sectors
+// for ACTIVE (0x0802_0000) and DFU (0x0812_0000), a 16 KiB STATE sector (0x0810_8000), 4-byte
+// words, and images signed `--board f429` of up to 768 KiB.
+
+/// ACTIVE, DFU and STATE of the F429 as offsets in its flash file (rc_boot::layout::F429).
+const F429_ACTIVE: usize = 0x2_0000;
+const F429_DFU: usize = 0x12_0000;
+const F429_STATE: usize = 0x10_8000;
+/// The F429's embassy-boot page: one 128 KiB sector.
+const F429_SECTOR: usize = 128 * 1024;
+
+#[test]
+fn f429_update_restart_runs_the_new_version_on_trial_then_confirmed_over_rtu_and_tcp() {
+    let dir = Scratch::new("f429-update-restart");
+    let flash = dir.path("flash.bin");
+    let gw = Board::start(&flash, &["--board-id", "f429"]);
+    assert_eq!(gw.running(), pair(BUILT_IN, "confirmed"));
+    let idle = gw.status();
+    assert_eq!(
+        (&idle["state"], &idle["partition"], &idle["board"]),
+        (
+            &serde_json::json!("idle"),
+            &serde_json::json!(768 * 1024),
+            &serde_json::json!(0x0429)
+        ),
+        "{idle}"
+    );
+    // The whole 2 MiB, erased.
+    let f = std::fs::read(&flash).expect("flash");
+    assert_eq!(f.len(), 2 * 1024 * 1024);
+    assert!(f.iter().all(|&b| b == 0xFF));
+    // Over RTU: sent into DFU, checked and marked in STATE.
+    let v1 = signed(
+        &dir,
+        "v1.img",
+        &app(20_001, 11),
+        "1.2.3",
+        &["--board", "f429"],
+    );
+    let v1_bytes = std::fs::read(&v1).expect("image");
+    let out = ok(&gw.rtu(), &["update", &v1]);
+    assert!(out.contains("marked 1.2.3"), "{out}");
+    let f = std::fs::read(&flash).expect("flash");
+    assert!(
+        f[F429_DFU..F429_DFU + v1_bytes.len()] == v1_bytes[..],
+        "DFU holds v1"
+    );
+    // The rest of DFU's first sector is erased, and so is everything outside DFU and STATE.
+    assert!(f[F429_DFU + v1_bytes.len()..F429_DFU + F429_SECTOR]
+        .iter()
+        .all(|&b| b == 0xFF));
+    assert!(f[..F429_STATE].iter().all(|&b| b == 0xFF));
+    assert!(f[F429_STATE + 16 * 1024..F429_DFU]
+        .iter()
+        .all(|&b| b == 0xFF));
+    assert!(
+        f[F429_STATE..F429_STATE + 16].iter().any(|&b| b != 0xFF),
+        "the swap mark"
+    );
+    // Restart over RTU: swapped in, on trial; rcgw's reads confirm it.
+    let out = ok(&gw.rtu(), &["restart"]);
+    assert!(
+        out.contains("running 1.2.3, on trial, confirmed now"),
+        "{out}"
+    );
+    assert_eq!(gw.running(), pair("1.2.3", "confirmed"));
+    let f = std::fs::read(&flash).expect("flash");
+    assert!(
+        f[F429_ACTIVE..F429_ACTIVE + v1_bytes.len()] == v1_bytes[..],
+        "ACTIVE holds v1"
+    );
+    // Over TCP: the next version, its restart over TCP.
+    let v2 = signed(
+        &dir,
+        "v2.img",
+        &app(30_003, 12),
+        "1.3.0",
+        &["--board", "f429"],
+    );
+    let v2_bytes = std::fs::read(&v2).expect("image");
+    let done = json(&gw.tcp(), &["update", &v2]);
+    assert_eq!(done["marked"], "1.3.0", "{done}");
+    let r = json(&gw.tcp(), &["restart"]);
+    assert_eq!(
+        (&r["version"], &r["boot"], &r["confirmed"]),
+        (
+            &serde_json::json!("1.3.0"),
+            &serde_json::json!("on trial"),
+            &serde_json::json!(true)
+        ),
+        "{r}"
+    );
+    assert_eq!(gw.running(), pair("1.3.0", "confirmed"));
+    // embassy-boot swapped in 128 KiB pages: v2 in ACTIVE, and v1 (ACTIVE's first sector) kept
+    // one whole sector up in DFU, where a revert would take it from.
+    let f = std::fs::read(&flash).expect("flash");
+    assert!(f[F429_ACTIVE..F429_ACTIVE + v2_bytes.len()] == v2_bytes[..]);
+    let kept = F429_DFU + F429_SECTOR;
+    assert!(
+        f[kept..kept + v1_bytes.len()] == v1_bytes[..],
+        "DFU's second sector holds the previous ACTIVE"
+    );
+    // Confirmed: it stays at the next start.
+    let again = json(&gw.rtu(), &["restart"]);
+    assert_eq!(
+        (&again["version"], &again["boot"]),
+        (&serde_json::json!("1.3.0"), &serde_json::json!("confirmed")),
+        "{again}"
+    );
+}
+
+#[test]
+fn f429_a_trial_never_confirmed_is_rolled_back_to_the_old_version() {
+    let dir = Scratch::new("f429-rollback");
+    let flash = dir.path("flash.bin");
+    let mut gw = Board::start(&flash, &["--board-id", "0x0429"]);
+    let v1 = signed(
+        &dir,
+        "v1.img",
+        &app(12_000, 13),
+        "2.0.0",
+        &["--board", "f429"],
+    );
+    json(&gw.rtu(), &["update", &v1]);
+    // Two restarts with no Modbus request between: the trial never passes.
+    gw.power_cycle();
+    gw.power_cycle();
+    assert_eq!(gw.running(), pair(BUILT_IN, "rolled back"));
+    let f = std::fs::read(&flash).expect("flash");
+    assert!(
+        f[F429_ACTIVE..F429_ACTIVE + F429_SECTOR]
+            .iter()
+            .all(|&b| b == 0xFF),
+        "ACTIVE back to what it was: erased"
+    );
+    let r = ok(&gw.rtu(), &["restart"]);
+    assert!(r.contains(&format!("running {BUILT_IN}, confirmed")), "{r}");
+    // A version that confirms, then one whose trial is cut by a restart: back to the first.
+    let v2 = signed(
+        &dir,
+        "v2.img",
+        &app(12_000, 14),
+        "2.0.1",
+        &["--board", "f429"],
+    );
+    json(&gw.rtu(), &["update", &v2]);
+    let r = ok(&gw.rtu(), &["restart"]);
+    assert!(r.contains("running 2.0.1, on trial, confirmed now"), "{r}");
+    let v3 = signed(
+        &dir,
+        "v3.img",
+        &app(12_000, 15),
+        "2.1.0",
+        &["--board", "f429"],
+    );
+    json(&gw.tcp(), &["update", &v3]);
+    gw.power_cycle();
+    let r = ok(&gw.rtu(), &["restart"]);
+    assert!(
+        r.contains("running 2.0.1, rolled back: the new image did not confirm"),
+        "{r}"
+    );
+    let v2_bytes = std::fs::read(&v2).expect("image");
+    let f = std::fs::read(&flash).expect("flash");
+    assert!(f[F429_ACTIVE..F429_ACTIVE + v2_bytes.len()] == v2_bytes[..]);
+}
+
+#[test]
+fn an_f429_host_refuses_an_l475_image_before_sending() {
+    let dir = Scratch::new("f429-refused");
+    let flash = dir.path("flash.bin");
+    let gw = Board::start(&flash, &["--board-id", "F429"]);
+    // Signed for the L475 (rcgw sign's default board): named both, nothing sent.
+    let l475 = signed(&dir, "l475.img", &app(9_000, 16), "3.0.0", &[]);
+    fails(
+        &gw.rtu(),
+        &["update", &l475],
+        2,
+        &["board 0x0475", "board 0x0429"],
+    );
+    fails(
+        &gw.tcp(),
+        &["update", &l475],
+        2,
+        &["board 0x0475", "board 0x0429"],
+    );
+    // Larger than the F429's ACTIVE (768 KiB), though it would fit its DFU.
+    let large = signed(
+        &dir,
+        "large.img",
+        &app(768 * 1024, 17),
+        "3.0.0",
+        &["--board", "f429"],
+    );
+    fails(&gw.rtu(), &["update", &large], 2, &["786528", "786432"]);
+    assert_eq!(gw.status()["state"], "idle", "nothing was sent");
+    // The F429's own goes through.
+    let good = signed(
+        &dir,
+        "good.img",
+        &app(9_000, 16),
+        "3.0.0",
+        &["--board", "f429"],
+    );
+    assert_eq!(json(&gw.rtu(), &["update", &good])["marked"], "3.0.0");
+    let r = ok(&gw.rtu(), &["restart"]);
+    assert!(r.contains("running 3.0.0, on trial"), "{r}");
+}
+
+#[test]
+fn the_host_refuses_a_board_id_without_a_layout() {
+    let dir = Scratch::new("board-unknown");
+    let flash = dir.path("flash.bin");
+    let out = Command::new(env!("CARGO_BIN_EXE_rc-gateway-host"))
+        .args(["--plc-pty", "--sim", "1", "--no-control", "--dfu", &flash])
+        .args(["--board-id", "0x1234"])
+        .stdin(Stdio::null())
+        .output()
+        .expect("run rc-gateway-host");
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("0x1234") && stderr.contains("l475") && stderr.contains("f429"),
+        "{}",
+        text(&out)
+    );
+    assert!(!std::path::Path::new(&flash).exists(), "no flash file made");
+    // A file of the other board's size is refused too: the L475's 1 MiB is no F429 flash.
+    std::fs::write(&flash, vec![0xFFu8; 1024 * 1024]).expect("write");
+    let out = Command::new(env!("CARGO_BIN_EXE_rc-gateway-host"))
+        .args(["--plc-pty", "--sim", "1", "--no-control", "--dfu", &flash])
+        .args(["--board-id", "f429"])
+        .stdin(Stdio::null())
+        .output()
+        .expect("run rc-gateway-host");
+    assert_ne!(out.status.code(), Some(0), "{}", text(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("2097152"),
+        "{}",
+        text(&out)
+    );
+}

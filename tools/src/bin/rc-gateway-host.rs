@@ -170,18 +170,21 @@ struct Cli {
     /// Ignore standard input (the default with --bus).
     #[arg(long, overrides_with = "control")]
     no_control: bool,
-    /// The board's flash in this file (the L475's 1 MiB, created erased), with a bootloader:
-    /// `rcgw update` sends a signed image into its DFU partition, a restart (RESTART, FACTORY,
-    /// the `restart` control line) runs embassy-boot's prepare_boot on it (a marked image
-    /// swapped in on trial, an unconfirmed trial rolled back) and the gateway then runs the
-    /// version of the image in ACTIVE.
+    /// The board's flash in this file (the whole flash of --board-id's board: the L475's 1 MiB,
+    /// the F429's 2 MiB; created erased, at rc-boot's layout and in the board's erase and write
+    /// units), with a bootloader: `rcgw update` sends a signed image into its DFU partition, a
+    /// restart (RESTART, FACTORY, the `restart` control line) runs embassy-boot's prepare_boot
+    /// on it (a marked image swapped in on trial, an unconfirmed trial rolled back) and the
+    /// gateway then runs the version of the image in ACTIVE.
     #[arg(long, value_name = "PATH")]
     dfu: Option<PathBuf>,
     /// --dfu: the public key (32 raw bytes, `rcgw key new`'s NAME.pub) the firmware verifies
     /// images with. Default: the public TEST key (a warning is printed).
     #[arg(long, value_name = "PATH.pub", requires = "dfu")]
     update_key: Option<PathBuf>,
-    /// --dfu: the board id an image must name (decimal, or hex with 0x).
+    /// --dfu: the board, l475 (0x0475) or f429 (0x0429; the NUCLEO-F429ZI), or its id (decimal,
+    /// or hex with 0x): an image must name it, and it chooses the flash's layout (another id is
+    /// refused).
     #[arg(long, default_value = "0x0475", value_name = "ID", value_parser = parse_board, requires = "dfu")]
     board_id: u16,
 }
@@ -198,12 +201,19 @@ fn read_key(path: &std::path::Path) -> Result<[u8; 32], String> {
     })
 }
 
+/// A board: its name (as `rcgw sign --board` takes it) or its id.
 fn parse_board(text: &str) -> Result<u16, String> {
+    match text.to_ascii_lowercase().as_str() {
+        "l475" => return Ok(rc_boot::BOARD_L475),
+        "f429" => return Ok(rc_boot::BOARD_F429),
+        _ => {}
+    }
     let parsed = match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
         Some(hex) => u16::from_str_radix(hex, 16),
         None => text.parse(),
     };
-    parsed.map_err(|_| format!("{text:?}: a board id is 0-65535 (or 0x0000-0xFFFF)"))
+    parsed
+        .map_err(|_| format!("{text:?}: a board is l475, f429 or an id 0-65535 (or 0x0000-0xFFFF)"))
 }
 
 #[derive(Clone, Copy, Debug)]
