@@ -480,6 +480,28 @@ fn no_transfer_while_a_save_is_pending() {
 }
 
 #[test]
+fn no_save_nor_factory_reset_while_a_flash_job_is_under_way() {
+    let mut rig = rig();
+    let image = image(1_000);
+    rig.dfu.hold = true;
+    rig.hold_saves = true;
+    Link::Rtu.begin(&mut rig, &image, BOARD).unwrap();
+    assert_eq!(rig.dfu.held, Some(Job::Erase(1_000)));
+    // The erase runs (on the F429 by itself, seconds): the settings pages wait (04, ask again).
+    assert_eq!(Link::Rtu.write(&mut rig, G_SAVE, &[1]), Err(4));
+    assert_eq!(Link::Rtu.write(&mut rig, G_FACTORY, &[FACTORY_KEY]), Err(4));
+    rig.release_job();
+    rig.run_for(5 * MS);
+    // The erase done, a SAVE is taken again (and then holds the transfer off in turn).
+    Link::Rtu.write(&mut rig, G_SAVE, &[1]).unwrap();
+    assert_eq!(Link::Rtu.chunk(&mut rig, &image, 0), Err(4));
+    assert_eq!(
+        Link::Rtu.status(&mut rig).error,
+        UpdateError::SavePending as u16
+    );
+}
+
+#[test]
 fn the_bus_and_the_stop_input_are_served_while_a_flash_job_is_under_way() {
     let mut rig = rig();
     let image = image(1_000);

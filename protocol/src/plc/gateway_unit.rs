@@ -214,6 +214,16 @@ impl Gateway {
     /// FAILSAFE's acknowledgement only once its cause is gone (the stop input inactive); a
     /// PIOPAT the board has the ports for; and the rules across settings, [`admit`](super::write::admit)'s.
     fn admit(&self, write: GatewayWrite) -> Result<(), Refused> {
+        // A SAVE or a factory reset erases settings pages: not while an update's flash job
+        // runs (the F429 erases a 128 KiB sector of the same bank by itself, 1-2 s, which the
+        // store would have to wait out with the gateway task stopped). Ask again (04), as an
+        // update waits for a pending SAVE.
+        #[cfg(feature = "update")]
+        if matches!(write, GatewayWrite::Save | GatewayWrite::FactoryReset)
+            && self.update.flash_busy()
+        {
+            return Err(Refused::Busy);
+        }
         let admitted = match write {
             GatewayWrite::Apply => self.bus_idle(),
             // As a safety relay's reset: only once the cause is gone (`failsafe`).

@@ -238,6 +238,15 @@ impl Update {
         self.target = Some(target);
     }
 
+    /// A flash job under way (an erase, a chunk's write, the check and mark): the settings
+    /// store's SAVE and factory reset wait for it (04).
+    pub fn flash_busy(&self) -> bool {
+        matches!(
+            self.state,
+            UpdateState::Erasing | UpdateState::Writing | UpdateState::Finishing
+        )
+    }
+
     /// The state.
     pub fn state(&self) -> UpdateState {
         self.state
