@@ -66,7 +66,13 @@ const WRITE_CHUNK: usize = 2048;
 #[entry]
 fn main() -> ! {
     data_cache(false);
+    // A watchdog that runs from power-up (the hardware-watchdog option) has its reset timeout,
+    // about 0.5 s: shorter than one 128 KiB sector's erase. Its timeout is set to about 8 s at
+    // once (it stays stopped in software mode until [`watchdog`] starts it).
+    watchdog_timeout();
     pet();
+    #[cfg(feature = "board-f429")]
+    hold_pa12_low();
     // SAFETY: the bootloader is the only code running, and the flash is its only peripheral.
     let flash = Flash::new_blocking(unsafe { embassy_stm32::peripherals::FLASH::steal() });
     let flash = Mutex::<NoopRawMutex, _>::new(RefCell::new(Watched(flash)));
@@ -162,7 +168,7 @@ impl<const ERASE: usize> NorFlash for Part<'_, ERASE> {
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
         let at = self.at(from, to.saturating_sub(from) as usize)?;
-        if !from.is_multiple_of(ERASE as u32) || !to.is_multiple_of(ERASE as u32) {
+        if from > to || !from.is_multiple_of(ERASE as u32) || !to.is_multiple_of(ERASE as u32) {
             return Err(PartError::Flash(embassy_stm32::flash::Error::Unaligned));
         }
         self.flash
@@ -224,6 +230,7 @@ impl Watched {
         let mut at = from;
         while at < to {
             pet();
+            x32();
             self.0.blocking_erase(at, at + unit)?;
             at += unit;
         }
@@ -231,17 +238,31 @@ impl Watched {
     }
 }
 
+/// The F4's erase at x32 (FLASH_CR.PSIZE, in the unlocked register; embassy-stm32 0.6 leaves it
+/// as it finds it, and its writes leave it at x8): a 128 KiB sector in 1-2 s instead of 2-4 s
+/// (STM32F429 datasheet, 2.7-3.6 V). The L4 has no PSIZE.
+fn x32() {
+    #[cfg(feature = "board-f429")]
+    {
+        let flash = pac::FLASH;
+        if flash.cr().read().lock() {
+            flash.keyr().write_value(0x4567_0123);
+            flash.keyr().write_value(0xCDEF_89AB);
+        }
+        flash
+            .cr()
+            .modify(|w| w.set_psize(pac::flash::vals::Psize::PSIZE32));
+    }
+}
+
 /// Starts the IWDG at about 8 s (LSI 32 kHz / 64, 4095 counts): long enough for any start-up,
 /// short enough that a firmware on trial that hangs goes back to the old one by itself. The
 /// firmware's own `start_watchdog` sets its timeout over this one.
 fn watchdog() {
-    use pac::iwdg::vals::{Key, Pr};
+    use pac::iwdg::vals::Key;
     let iwdg = pac::IWDG;
     iwdg.kr().write(|w| w.set_key(Key::START));
-    iwdg.kr().write(|w| w.set_key(Key::ENABLE));
-    // PR 4: LSI / 64.
-    iwdg.pr().write(|w| w.set_pr(Pr::from_bits(4)));
-    iwdg.rlr().write(|w| w.set_rl(4095));
+    watchdog_timeout();
     // The new values reach the IWDG's clock domain within a few LSI cycles (a bounded wait:
     // QEMU models no IWDG and reads its registers as 0).
     for _ in 0..100_000 {
@@ -251,6 +272,32 @@ fn watchdog() {
         }
     }
     pet();
+}
+
+/// The IWDG's timeout, about 8 s (PR 4: LSI / 64; 4095 counts), written whether it runs or not.
+fn watchdog_timeout() {
+    use pac::iwdg::vals::{Key, Pr};
+    let iwdg = pac::IWDG;
+    iwdg.kr().write(|w| w.set_key(Key::ENABLE));
+    iwdg.pr().write(|w| w.set_pr(Pr::from_bits(4)));
+    iwdg.rlr().write(|w| w.set_rl(4095));
+}
+
+/// STM32F42x/43x errata 2.2.11: on silicon before revision 3 a read of bank 2 (STATE, DFU) may
+/// return wrong data while PA12 toggles, and embassy-stm32 panics on such a read unless PA12 is
+/// an output, low, pulled down (the application does the same: `src/board/f429.rs`). GPIOA's
+/// clock first: the bootloader does not run `embassy_stm32::init`.
+#[cfg(feature = "board-f429")]
+fn hold_pa12_low() {
+    use pac::gpio::vals::{Moder, Pupdr};
+    const PIN: usize = 12;
+    pac::RCC.ahb1enr().modify(|w| w.set_gpioaen(true));
+    // Two AHB cycles before the port answers (RM0090, RCC): the read-back orders it.
+    let _ = pac::RCC.ahb1enr().read();
+    let gpioa = pac::GPIOA;
+    gpioa.bsrr().write(|w| w.set_br(PIN, true));
+    gpioa.pupdr().modify(|w| w.set_pupdr(PIN, Pupdr::PULL_DOWN));
+    gpioa.moder().modify(|w| w.set_moder(PIN, Moder::OUTPUT));
 }
 
 /// Restarts the IWDG's count (nothing if it was never started).

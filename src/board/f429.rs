@@ -160,6 +160,10 @@ impl SettingsSectors {
                 return ended.map_err(nb::Error::Other);
             }
         }
+        // RM0090's sequence starts with no operation under way.
+        if FLASH.sr().read().bsy() {
+            return Err(nb::Error::WouldBlock);
+        }
         if !(LARGE_FROM..BANK_LEN).contains(&offset) || !(offset - LARGE_FROM).is_multiple_of(LARGE)
         {
             return Err(nb::Error::Other(Error::Unaligned));
