@@ -28,8 +28,9 @@ cargo clippy -p rc-gateway --target thumbv7em-none-eabihf --locked -- -D warning
 step "clippy: firmware for the STM32F103C8 board (thumbv7m-none-eabi), warnings denied"
 cargo clippy -p rc-gateway --target thumbv7m-none-eabi --no-default-features --features hw,board-f103 --locked -- -D warnings
 
-step "clippy: the L475's bootloader (rc-bootloader) for thumbv7em-none-eabihf, warnings denied"
+step "clippy: the bootloaders (rc-bootloader, L475 and F429) for thumbv7em-none-eabihf, warnings denied"
 cargo clippy -p rc-bootloader --target thumbv7em-none-eabihf --locked -- -D warnings
+cargo clippy -p rc-bootloader --target thumbv7em-none-eabihf --no-default-features --features board-f429 --locked -- -D warnings
 
 step "clippy: the network side for thumbv7em-none-eabihf (rc-net, the LAN9118 driver, the mps2-an386 build, the emulators' SysTick time driver), warnings denied"
 cargo clippy -p rc-net -p lan9118 -p rc-gateway-mps2 -p systick-time --target thumbv7em-none-eabihf --locked -- -D warnings
