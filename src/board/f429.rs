@@ -168,10 +168,7 @@ impl SettingsSectors {
         {
             return Err(nb::Error::Other(Error::Unaligned));
         }
-        if FLASH.cr().read().lock() {
-            FLASH.keyr().write_value(0x4567_0123);
-            FLASH.keyr().write_value(0xCDEF_89AB);
-        }
+        unlock();
         // Clears the error flags (written back as read: they clear on a 1).
         FLASH.sr().modify(|_| {});
         let dcache = FLASH.acr().read().dcen();
@@ -270,10 +267,7 @@ impl embedded_storage::nor_flash::NorFlash for SettingsSectors {
         let mut sector = BANK_2 + from;
         while sector < BANK_2 + to {
             super::pet_watchdog();
-            if FLASH.cr().read().lock() {
-                FLASH.keyr().write_value(0x4567_0123);
-                FLASH.keyr().write_value(0xCDEF_89AB);
-            }
+            unlock();
             FLASH.cr().modify(|w| w.set_psize(Psize::PSIZE32));
             let result = self.flash.blocking_erase(sector, sector + SECTOR);
             FLASH.cr().modify(|w| w.set_lock(true));
@@ -281,6 +275,15 @@ impl embedded_storage::nor_flash::NorFlash for SettingsSectors {
             sector += SECTOR;
         }
         Ok(())
+    }
+}
+
+/// Unlocks FLASH_CR (RM0090, "Unlocking the Flash control register": its two keys), if locked.
+fn unlock() {
+    let flash = embassy_stm32::pac::FLASH;
+    if flash.cr().read().lock() {
+        flash.keyr().write_value(0x4567_0123);
+        flash.keyr().write_value(0xCDEF_89AB);
     }
 }
 

@@ -248,7 +248,8 @@ impl Dfu {
 
     /// With a job under way, when its next step is due: at once, or (the flash erasing a sector
     /// without waiting: the F429) after [`ERASE_LOOK`], so that the gateway task sleeps in
-    /// between and the executor's other tasks run.
+    /// between instead of looking at FLASH_SR on every pass for a second or two (the other tasks
+    /// run either way: the wait yields even when it is due at once).
     pub fn step_in(&self) -> protocol::time::Duration {
         if self.erasing {
             ERASE_LOOK
