@@ -72,6 +72,40 @@ pub struct Figures {
     pub stops_us: Vec<f64>,
     /// Stops that never reached their axis (should be none).
     pub stops_lost: usize,
+    /// Where the bus went in the window.
+    pub mix: Mix,
+}
+
+/// What the bus carried in the window, by kind: the budget the two targets share (issue 34).
+/// Every frame is one transaction.
+#[derive(Debug, Default, PartialEq)]
+pub struct Mix {
+    /// Moves that started in the window.
+    pub moves: usize,
+    /// Status polls of the movers.
+    pub mover_status: usize,
+    /// Position reads (R4) of the movers.
+    pub mover_reads: usize,
+    /// Every other command to a mover (`v`, `a`, `Q3`, `T`, `d`...).
+    pub mover_commands: usize,
+    /// Status polls of the idle axes.
+    pub idle_status: usize,
+    /// Every command in the window.
+    pub frames: usize,
+}
+
+impl Mix {
+    /// Per move: status polls, position reads, other commands; and the idle axes' share of
+    /// the bus.
+    pub fn per_move(&self) -> [f64; 4] {
+        let moves = self.moves.max(1) as f64;
+        [
+            self.mover_status as f64 / moves,
+            self.mover_reads as f64 / moves,
+            self.mover_commands as f64 / moves,
+            self.idle_status as f64 / self.frames.max(1) as f64,
+        ]
+    }
 }
 
 /// Works the figures out of the event log `text`: moves of `movers` that started in
@@ -94,6 +128,25 @@ pub fn figures(
         return Err("no command in the window: the gateway never polled".into());
     }
     let t = (to - from) as f64 / commands as f64;
+
+    let mut mix = Mix::default();
+    for e in &events {
+        match e {
+            Event::Request { at, axis, code } if inside(*at) => {
+                mix.frames += 1;
+                let counter = match (movers.contains(axis), code.as_str()) {
+                    (true, "Status") => &mut mix.mover_status,
+                    (true, "ReadMemory") => &mut mix.mover_reads,
+                    (true, _) => &mut mix.mover_commands,
+                    (false, "Status") => &mut mix.idle_status,
+                    (false, _) => continue,
+                };
+                *counter += 1;
+            }
+            Event::Move { start, .. } if inside(*start) => mix.moves += 1,
+            _ => {}
+        }
+    }
 
     let mut complete = Vec::new();
     for &m in movers {
@@ -165,6 +218,7 @@ pub fn figures(
         idle_age,
         stops_us,
         stops_lost,
+        mix,
     })
 }
 
@@ -212,6 +266,14 @@ impl Figures {
         row(&mut out, "idle status age, cycles", &self.idle_all());
         let stops_ms: Vec<f64> = self.stops_us.iter().map(|us| us / 1e3).collect();
         row(&mut out, "stop write->d, ms", &stops_ms);
+        let [status, reads, commands, idle] = self.mix.per_move();
+        let _ = writeln!(
+            out,
+            "  bus per move: {status:.2} status polls, {reads:.2} position reads, \
+             {commands:.2} other commands ({:.1} T); idle axes' status polls: {:.0} % of it",
+            status + reads + commands,
+            idle * 100.0
+        );
         if self.stops_lost > 0 {
             let _ = writeln!(out, "  STOPS LOST: {}", self.stops_lost);
         }
@@ -231,6 +293,7 @@ mod tests {
             log += &format!("REQ {} 3 Status\n", 1_000 + 10 * k);
         }
         log += "MOVE 1005 0 1040\nREP 1030 0 Status 1\nREP 1050 0 Status 0\nREP 1065 0 Status 1\n";
+
         let f = figures(&log, (1_000, 1_100), &[0], 4, &[(1_000, 0)]).unwrap();
         assert_eq!(f.transaction_us, 10.0);
         assert_eq!(f.complete, vec![(0, vec![2.5])]);
@@ -238,5 +301,29 @@ mod tests {
         assert_eq!(f.idle_age.iter().find(|(a, _)| *a == 3).unwrap().1[0], 0.25);
         assert_eq!(f.stops_lost, 1);
         assert_eq!(percentiles(&[1.0, 2.0, 3.0, 4.0]), [2.0, 4.0, 4.0]);
+    }
+
+    #[test]
+    fn the_bus_is_counted_by_kind_within_the_window() {
+        let mut log = String::new();
+        for k in 0..10 {
+            log += &format!("REQ {} 3 Status\n", 1_000 + 10 * k);
+        }
+        // A mover's move, a read, a command and a poll; one poll after the window, one move
+        // before it, and a read of an idle axis (counted in the frames only).
+        log += "MOVE 1005 0 1040\nMOVE 900 0 950\n";
+        log += "REQ 1003 0 ReadMemory\nREQ 1004 0 MoveAbsolute\nREQ 1006 0 Status\n";
+        log += "REQ 1200 0 Status\nREQ 1007 3 ReadMemory\n";
+        let f = figures(&log, (1_000, 1_100), &[0], 4, &[]).unwrap();
+        let mix = Mix {
+            moves: 1,
+            mover_status: 1,
+            mover_reads: 1,
+            mover_commands: 1,
+            idle_status: 10,
+            frames: 14,
+        };
+        assert_eq!(f.mix, mix);
+        assert_eq!(mix.per_move(), [1.0, 1.0, 1.0, 10.0 / 14.0]);
     }
 }

@@ -393,6 +393,12 @@ fn json_run(case: Case, f: &Figures) -> serde_json::Value {
         "stop_p50_ms": stop_p50 / 1e3,
         "stop_max_ms": stop_max / 1e3,
         "stops_lost": f.stops_lost,
+        "per_move": {
+            "status_polls": f.mix.per_move()[0],
+            "position_reads": f.mix.per_move()[1],
+            "other_commands": f.mix.per_move()[2],
+        },
+        "idle_status_share": f.mix.per_move()[3],
     })
 }
 
