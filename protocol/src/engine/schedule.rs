@@ -49,10 +49,14 @@
 //! its band (the 3.6-3.7 T p99 of the real-time runs, against a target of 3). Two movers each
 //! polled every other transaction would take the whole bus while their windows overlap, holding
 //! job frames and idle axes off; estimates within a transaction would keep the windows apart.
-//! And four movers cost some 13 transactions a move (two commands, four or five position reads,
-//! six or seven status polls), more than a round leaves the twelve idle axes for a status age
-//! under two cycles in real time (2.4-2.9 there; 1.9 in virtual time, where moves rest between
-//! runs).
+//! And four movers cost some 12 transactions a move (two commands, four position reads, six
+//! status polls: `rt-bench`'s `bus per move`), more than a round leaves the twelve idle axes for a
+//! status age under two cycles in real time (2.4-2.9 there; 1.9 in virtual time, where moves rest
+//! between runs). Why the windows overlap: the estimates are early by 4-5 T on a full bus, where a
+//! move's start point is dropped because the last move's settle reads have not agreed yet; kept,
+//! the estimate aims a quarter of the braking before the stop, which is early or late depending on
+//! the position band and the deceleration, which the gateway does not know (docs/performance.md,
+//! "Where the bus goes").
 //!
 //! [`Config::position_reads_per_cycle`]: super::Config::position_reads_per_cycle
 //! [`Config::probe_interval`]: super::Config::probe_interval
