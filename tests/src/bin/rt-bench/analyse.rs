@@ -90,7 +90,7 @@ pub struct Mix {
     pub mover_commands: usize,
     /// Status polls of the idle axes.
     pub idle_status: usize,
-    /// Every command in the window.
+    /// Every command in the window (what the run's T is measured over).
     pub frames: usize,
 }
 
@@ -129,11 +129,13 @@ pub fn figures(
     }
     let t = (to - from) as f64 / commands as f64;
 
-    let mut mix = Mix::default();
+    let mut mix = Mix {
+        frames: commands,
+        ..Mix::default()
+    };
     for e in &events {
         match e {
             Event::Request { at, axis, code } if inside(*at) => {
-                mix.frames += 1;
                 let counter = match (movers.contains(axis), code.as_str()) {
                     (true, "Status") => &mut mix.mover_status,
                     (true, "ReadMemory") => &mut mix.mover_reads,
@@ -285,15 +287,18 @@ impl Figures {
 mod tests {
     use super::*;
 
+    /// Axis 3 polled every 10 µs from 1,000 µs, ten times.
+    fn idle_polls() -> String {
+        (0..10)
+            .map(|k| format!("REQ {} 3 Status\n", 1_000 + 10 * k))
+            .collect()
+    }
+
     #[test]
     fn a_move_is_measured_from_in_band_to_the_first_pfin_reply() {
         // 10 commands in 100 µs: T = 10 µs.
-        let mut log = String::new();
-        for k in 0..10 {
-            log += &format!("REQ {} 3 Status\n", 1_000 + 10 * k);
-        }
+        let mut log = idle_polls();
         log += "MOVE 1005 0 1040\nREP 1030 0 Status 1\nREP 1050 0 Status 0\nREP 1065 0 Status 1\n";
-
         let f = figures(&log, (1_000, 1_100), &[0], 4, &[(1_000, 0)]).unwrap();
         assert_eq!(f.transaction_us, 10.0);
         assert_eq!(f.complete, vec![(0, vec![2.5])]);
@@ -305,10 +310,7 @@ mod tests {
 
     #[test]
     fn the_bus_is_counted_by_kind_within_the_window() {
-        let mut log = String::new();
-        for k in 0..10 {
-            log += &format!("REQ {} 3 Status\n", 1_000 + 10 * k);
-        }
+        let mut log = idle_polls();
         // A mover's move, a read, a command and a poll; one poll after the window, one move
         // before it, and a read of an idle axis (counted in the frames only).
         log += "MOVE 1005 0 1040\nMOVE 900 0 950\n";

@@ -383,6 +383,7 @@ fn json_run(case: Case, f: &Figures) -> serde_json::Value {
         .collect();
     let [_, idle_p99, idle_max] = percentiles(&f.idle_all());
     let [stop_p50, _, stop_max] = percentiles(&f.stops_us);
+    let [status, reads, commands, idle_share] = f.mix.per_move();
     serde_json::json!({
         "run": case.name(),
         "transaction_ms": f.transaction_us / 1e3,
@@ -394,11 +395,11 @@ fn json_run(case: Case, f: &Figures) -> serde_json::Value {
         "stop_max_ms": stop_max / 1e3,
         "stops_lost": f.stops_lost,
         "per_move": {
-            "status_polls": f.mix.per_move()[0],
-            "position_reads": f.mix.per_move()[1],
-            "other_commands": f.mix.per_move()[2],
+            "status_polls": status,
+            "position_reads": reads,
+            "other_commands": commands,
         },
-        "idle_status_share": f.mix.per_move()[3],
+        "idle_status_share": idle_share,
     })
 }
 
