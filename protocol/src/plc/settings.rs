@@ -245,46 +245,29 @@ impl Settings {
         }
         let r = Reader(body);
         let bad = |at: usize| SettingsError::Field(u8::try_from(at).unwrap_or(u8::MAX));
-        let unit = r.u8(1).and_then(UnitId::new).ok_or(bad(1))?;
-        let baud = r.u32(2).and_then(PlcBaud::new).ok_or(bad(2))?;
-        let parity = r
-            .u8(6)
-            .and_then(|c| Parity::from_code(c.into()))
-            .ok_or(bad(6))?;
-        let watchdog = r.u16(7).and_then(WatchdogTime::from_millis).ok_or(bad(7))?;
-        let watchdog_action = r
-            .u8(9)
-            .and_then(|c| WatchdogAction::from_code(c.into()))
-            .ok_or(bad(9))?;
-        let bus_baud = r
-            .u8(10)
-            .and_then(|code| Baud::from_brsl(code.into()))
-            .ok_or(bad(10))?;
-        let rtim = r.u8(11).and_then(Rtim::new).ok_or(bad(11))?;
-        let retries = r.u8(12).filter(|&n| n <= MAX_RETRIES).ok_or(bad(12))?;
+        let unit = UnitId::new(r.u8(1)).ok_or(bad(1))?;
+        let baud = PlcBaud::new(r.u32(2)).ok_or(bad(2))?;
+        let parity = Parity::from_code(r.u8(6).into()).ok_or(bad(6))?;
+        let watchdog = WatchdogTime::from_millis(r.u16(7)).ok_or(bad(7))?;
+        let watchdog_action = WatchdogAction::from_code(r.u8(9).into()).ok_or(bad(9))?;
+        let bus_baud = Baud::from_brsl(r.u8(10).into()).ok_or(bad(10))?;
+        let rtim = Rtim::new(r.u8(11)).ok_or(bad(11))?;
+        let retries = Some(r.u8(12))
+            .filter(|&n| n <= MAX_RETRIES)
+            .ok_or(bad(12))?;
         let pio_axis = match r.u8(13) {
-            Some(0xFF) => None,
-            Some(a) => Some(Axis::new(a).ok_or(bad(13))?),
-            None => return Err(bad(13)),
+            0xFF => None,
+            a => Some(Axis::new(a).ok_or(bad(13))?),
         };
-        let axes = AxisSet(r.u16(14).ok_or(bad(14))?);
+        let axes = AxisSet(r.u16(14));
         let mut axis_config = crate::AxisMap::new(AxisConfig::DEFAULT);
         for (axis, slot) in axis_config.iter_mut() {
             let at = AXES_AT + AXIS_LEN * usize::from(axis.get());
-            let lead = r.u16(at).and_then(Lead::from_hundredths).ok_or(bad(at))?;
-            let pulses = r
-                .u16(at + 2)
-                .and_then(core::num::NonZeroU16::new)
-                .ok_or(bad(at + 2))?;
-            let home = r
-                .u8(at + 4)
-                .and_then(|c| home_of(c.into()))
-                .ok_or(bad(at + 4))?;
-            let complement = r
-                .u8(at + 5)
-                .and_then(|c| complement_of(c.into()))
-                .ok_or(bad(at + 5))?;
-            let stroke = r.u32(at + 6).and_then(stroke_of).ok_or(bad(at + 6))?;
+            let lead = Lead::from_hundredths(r.u16(at)).ok_or(bad(at))?;
+            let pulses = core::num::NonZeroU16::new(r.u16(at + 2)).ok_or(bad(at + 2))?;
+            let home = home_of(r.u8(at + 4).into()).ok_or(bad(at + 4))?;
+            let complement = complement_of(r.u8(at + 5).into()).ok_or(bad(at + 5))?;
+            let stroke = stroke_of(r.u32(at + 6)).ok_or(bad(at + 6))?;
             slot.scale.lead = lead;
             slot.scale.pulses_per_rev = pulses;
             slot.scale.home = home;
@@ -295,47 +278,31 @@ impl Settings {
             let jog = (JogSpeed::DEFAULT, InchStep::DEFAULT);
             (Pattern::Positioning, StartMode::Level, jog.0, jog.1)
         } else {
-            let pattern = r
-                .u8(PIO_AT)
-                .and_then(|c| Pattern::from_code(c.into()))
-                .ok_or(bad(PIO_AT))?;
-            let start = r
-                .u8(PIO_AT + 1)
-                .and_then(|c| StartMode::from_code(c.into()))
-                .ok_or(bad(PIO_AT + 1))?;
-            let jog = r
-                .u16(PIO_AT + 2)
-                .and_then(JogSpeed::from_hundredths)
-                .ok_or(bad(PIO_AT + 2))?;
-            let inch = r
-                .u16(PIO_AT + 4)
-                .and_then(InchStep::from_hundredths)
-                .ok_or(bad(PIO_AT + 4))?;
+            let pattern = Pattern::from_code(r.u8(PIO_AT).into()).ok_or(bad(PIO_AT))?;
+            let start = StartMode::from_code(r.u8(PIO_AT + 1).into()).ok_or(bad(PIO_AT + 1))?;
+            let jog = JogSpeed::from_hundredths(r.u16(PIO_AT + 2)).ok_or(bad(PIO_AT + 2))?;
+            let inch = InchStep::from_hundredths(r.u16(PIO_AT + 4)).ok_or(bad(PIO_AT + 4))?;
             (pattern, start, jog, inch)
         };
         let (axis_base, net) = if len == RECORD_LEN {
-            let base = r.u8(NET_AT).and_then(AxisBase::new).ok_or(bad(NET_AT))?;
-            let prefix = r
-                .u8(NET_AT + 5)
+            let base = AxisBase::new(r.u8(NET_AT)).ok_or(bad(NET_AT))?;
+            let prefix = Some(r.u8(NET_AT + 5))
                 .filter(|&p| prefix_ok(p.into()))
                 .ok_or(bad(NET_AT + 5))?;
-            let max_connections = r
-                .u8(NET_AT + 10)
+            let max_connections = Some(r.u8(NET_AT + 10))
                 .filter(|&n| max_connections_ok(n.into()))
                 .ok_or(bad(NET_AT + 10))?;
-            let idle_s = r
-                .u16(NET_AT + 11)
+            let idle_s = Some(r.u16(NET_AT + 11))
                 .filter(|&s| idle_ok(s))
                 .ok_or(bad(NET_AT + 11))?;
-            let address = |at: usize| r.array(at).map(Ipv4).ok_or(bad(at));
             let mut allow = [Ipv4::UNSPECIFIED; 4];
             for (at, slot) in (NET_AT + 13..).step_by(4).zip(allow.iter_mut()) {
-                *slot = address(at)?;
+                *slot = Ipv4(r.array(at));
             }
             let net = NetConfig {
-                ip: address(NET_AT + 1)?,
+                ip: Ipv4(r.array(NET_AT + 1)),
                 prefix,
-                router: address(NET_AT + 6)?,
+                router: Ipv4(r.array(NET_AT + 6)),
                 policy: Policy {
                     allow,
                     max_connections,
@@ -389,22 +356,31 @@ impl Fields<'_> {
 }
 
 /// Reads fields at their offsets.
+/// The fields of a record's body. [`Settings::decode`] has checked the body's length against its
+/// format before it reads a field, and reads only the fields of that format: no read can miss,
+/// so each gives its value rather than an `Option` every field would unwrap again (a read past
+/// the end, which none is, would give zeros).
 struct Reader<'a>(&'a [u8]);
 
 impl Reader<'_> {
-    fn array<const N: usize>(&self, at: usize) -> Option<[u8; N]> {
-        self.0.get(at..at + N)?.try_into().ok()
+    /// The `N` bytes at `at`.
+    fn array<const N: usize>(&self, at: usize) -> [u8; N] {
+        let mut out = [0; N];
+        if let Some(bytes) = self.0.get(at..at + N) {
+            out.copy_from_slice(bytes);
+        }
+        out
     }
 
-    fn u8(&self, at: usize) -> Option<u8> {
-        self.0.get(at).copied()
+    fn u8(&self, at: usize) -> u8 {
+        self.0.get(at).copied().unwrap_or(0)
     }
 
-    fn u16(&self, at: usize) -> Option<u16> {
-        self.array(at).map(u16::from_le_bytes)
+    fn u16(&self, at: usize) -> u16 {
+        u16::from_le_bytes(self.array(at))
     }
 
-    fn u32(&self, at: usize) -> Option<u32> {
-        self.array(at).map(u32::from_le_bytes)
+    fn u32(&self, at: usize) -> u32 {
+        u32::from_le_bytes(self.array(at))
     }
 }
