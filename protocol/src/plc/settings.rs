@@ -355,7 +355,6 @@ impl Fields<'_> {
     }
 }
 
-/// Reads fields at their offsets.
 /// The fields of a record's body. [`Settings::decode`] has checked the body's length against its
 /// format before it reads a field, and reads only the fields of that format: no read can miss,
 /// so each gives its value rather than an `Option` every field would unwrap again (a read past
