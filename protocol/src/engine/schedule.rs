@@ -56,7 +56,11 @@
 //! move's start point is dropped because the last move's settle reads have not agreed yet; kept,
 //! the estimate aims a quarter of the braking before the stop, which is early or late depending on
 //! the position band and the deceleration, which the gateway does not know (docs/performance.md,
-//! "Where the bus goes").
+//! "Where the bus goes"). Kept at RTIM 7, it is worse: a mover's position is read once a cycle,
+//! once in a 290 ms move, and from one read with its start point the estimate is the provisional
+//! one (the speed of an axis still accelerating), 7 T early, with no read after it to correct it;
+//! an estimate right from one read in the cruise needs the acceleration time, which a direct
+//! move's `v` command gives (docs/performance.md, "Which part of the prototype does what").
 //!
 //! [`Config::position_reads_per_cycle`]: super::Config::position_reads_per_cycle
 //! [`Config::probe_interval`]: super::Config::probe_interval
