@@ -112,7 +112,7 @@ fn start() -> Started {
     // The emulator's timing: no wire timing on the bus, reply slack, the PLC line's frame gap
     // (nothing on the board).
     emu::loosen_timing(&mut config);
-    let mut parts = bring_up(config.plc);
+    let mut parts = bring_up(config.settings.plc);
     let mut booted = protocol::plc::Boot::DEFAULT;
     if let Some(Parts {
         board,
@@ -135,7 +135,7 @@ fn start() -> Started {
     }
     #[cfg(feature = "net")]
     if let Some(parts) = parts.as_deref_mut() {
-        parts.net = config.net;
+        parts.net = config.settings.net;
     }
     Started {
         parts,

@@ -26,6 +26,6 @@ pub static IDENTITY: Identity = Identity {
 /// enables more axes in AXISCFG and applies them with APPLY.
 pub const fn default_config() -> GatewayConfig {
     let mut config = GatewayConfig::new(AxisSet::first(1));
-    config.pio_axis = Axis::new(0);
+    config.settings.pio_axis = Axis::new(0);
     config
 }

@@ -4,8 +4,9 @@
 //! tasks, pipes and buffers), so what the emulator suite proves over TCP is the board's code;
 //! not the STM32's Ethernet MAC, its PHY or its driver (embassy-stm32's `eth`).
 //!
-//! - IPv4 from the node's settings ([`GatewayConfig::net`]); this build sets 10.0.2.15/24,
-//!   router 10.0.2.2, the addresses of QEMU's user-mode network
+//! - IPv4 from the node's settings
+//!   ([`GatewaySettings::net`](protocol::plc::GatewaySettings::net)); this build sets
+//!   10.0.2.15/24, router 10.0.2.2, the addresses of QEMU's user-mode network
 //!   (`-nic user,hostfwd=tcp:127.0.0.1:PORT-:502`).
 //! - TCP port 502, [`rc_net::SOCKETS`] sockets, each served by its own task ([`rc_net::serve`]);
 //!   the gateway task owns the node and answers them.
@@ -70,9 +71,9 @@ static NODE: StaticCell<Node> = StaticCell::new();
 fn config() -> GatewayConfig {
     let mut config = GatewayConfig::new(AxisSet::first(2));
     config.bus.establish = false;
-    config.net.ip = Ipv4([10, 0, 2, 15]);
-    config.net.prefix = 24;
-    config.net.router = Ipv4([10, 0, 2, 2]);
+    config.settings.net.ip = Ipv4([10, 0, 2, 15]);
+    config.settings.net.prefix = 24;
+    config.settings.net.router = Ipv4([10, 0, 2, 2]);
     config
 }
 
@@ -90,7 +91,7 @@ fn main() -> ! {
 
 /// The network settings as embassy-net takes them.
 fn ip_config(config: &GatewayConfig) -> Config {
-    let net = config.net;
+    let net = config.settings.net;
     let [a, b, c, d] = net.ip.0;
     let router = (net.router != Ipv4::UNSPECIFIED).then(|| {
         let [a, b, c, d] = net.router.0;

@@ -372,7 +372,7 @@ fn the_diagnostic_register_says_what_needs_attention() {
 #[test]
 fn listen_only_silences_the_node_but_keeps_the_watchdog_fed() {
     let mut rig = Rig::ready(1, |c| {
-        c.watchdog = protocol::plc::WatchdogTime::from_millis(300).unwrap()
+        c.settings.watchdog = protocol::plc::WatchdogTime::from_millis(300).unwrap()
     });
     let listen = Request::Diagnostic {
         sub: Diagnostic::ForceListenOnly,

@@ -227,7 +227,7 @@ fn turns_are_taken_between_connections() {
 
 #[test]
 fn a_client_not_allowed_is_refused_and_counted() {
-    let mut rig = Rig::ready(1, |c| c.net.policy.allow[1] = PLC);
+    let mut rig = Rig::ready(1, |c| c.settings.net.policy.allow[1] = PLC);
     assert!(!rig.connect(0, Ipv4([192, 168, 1, 66])));
     assert_eq!(
         rig.node
@@ -243,7 +243,7 @@ fn a_client_not_allowed_is_refused_and_counted() {
 
 #[test]
 fn beyond_the_limit_a_new_client_replaces_the_one_idle_longest() {
-    let mut rig = Rig::ready(1, |c| c.net.policy.max_connections = 2);
+    let mut rig = Rig::ready(1, |c| c.settings.net.policy.max_connections = 2);
     assert!(rig.connect(0, PLC));
     rig.run_for(10 * MS);
     assert!(rig.connect(1, PLC));
@@ -294,7 +294,7 @@ fn in_a_burst_of_connects_each_new_client_replaces_the_one_idle_longest() {
 
 #[test]
 fn a_silent_connection_is_closed_after_the_idle_time() {
-    let mut rig = Rig::ready(1, |c| c.net.policy.idle_s = 2);
+    let mut rig = Rig::ready(1, |c| c.settings.net.policy.idle_s = 2);
     assert!(rig.connect(0, PLC));
     assert!(rig.connect(1, PLC));
     for _ in 0..4 {
@@ -343,7 +343,9 @@ fn a_bad_length_closes_the_connection_and_another_protocol_is_skipped() {
 
 #[test]
 fn requests_over_tcp_feed_the_watchdog() {
-    let mut rig = Rig::ready(1, |c| c.watchdog = WatchdogTime::from_millis(200).unwrap());
+    let mut rig = Rig::ready(1, |c| {
+        c.settings.watchdog = WatchdogTime::from_millis(200).unwrap()
+    });
     rig.write(63, G_FAILSAFE, &[0]).unwrap();
     assert!(rig.connect(0, PLC));
     for _ in 0..10 {
@@ -386,7 +388,7 @@ fn the_network_registers_are_checked_stored_and_read_back() {
     rig.write(63, G_NET, &[0x0A00, 0x0002, 16]).unwrap();
     rig.write(63, G_NET + 8, &[0xC0A8, 0x010A]).unwrap();
     assert_eq!(rig.read(63, G_NET, 3), Ok(vec![0x0A00, 0x0002, 16]));
-    let net = rig.node.gateway().config().net;
+    let net = rig.node.gateway().config().settings.net;
     assert_eq!(
         (net.ip, net.prefix, net.policy.allow[0]),
         (Ipv4([10, 0, 0, 2]), 16, PLC)
@@ -400,7 +402,7 @@ fn the_network_registers_are_checked_stored_and_read_back() {
         panic!("a save");
     };
     let settings = protocol::plc::settings::Settings::decode(&record).unwrap();
-    assert_eq!(settings.net, net);
+    assert_eq!(settings.gateway.net, net);
 }
 
 #[test]

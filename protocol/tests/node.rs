@@ -104,8 +104,8 @@ const CAUSE_WATCHDOG_BIT: u16 = protocol::plc::CAUSE_WATCHDOG;
 fn the_pio_drives_its_axis_and_shows_safe_outputs_until_it_answers() {
     let mut config = GatewayConfig::new(AxisSet::first(1));
     config.bus.establish = false;
-    config.pio_axis = Some(axis(0));
-    config.watchdog = WatchdogTime::OFF;
+    config.settings.pio_axis = Some(axis(0));
+    config.settings.watchdog = WatchdogTime::OFF;
     let mut rig = Rig::new(config, &[0]);
     rig.bus.fake(0).silent = true;
     rig.bus.fake(0).homed = true;
@@ -327,7 +327,9 @@ fn read_only_gateway_registers_refuse_writes_with_03() {
 /// FC08 (diagnostics echo) did not feed the PLC watchdog.
 #[test]
 fn an_echo_request_feeds_the_watchdog() {
-    let mut rig = Rig::ready(1, |c| c.watchdog = WatchdogTime::from_millis(200).unwrap());
+    let mut rig = Rig::ready(1, |c| {
+        c.settings.watchdog = WatchdogTime::from_millis(200).unwrap()
+    });
     assert_eq!(rig.read(63, G_FAILSAFE, 1), Ok(vec![0]));
     for _ in 0..10 {
         rig.run_for(100 * MS);
@@ -516,8 +518,8 @@ fn a_request_whose_rest_waited_through_a_bus_send_is_answered() {
 #[test]
 fn a_pio_pattern_needs_the_boards_ports_and_a_refused_strobe_shows_in_cmst() {
     let mut rig = Rig::ready(1, |c| {
-        c.pio_axis = Some(axis(0));
-        c.watchdog = WatchdogTime::OFF;
+        c.settings.pio_axis = Some(axis(0));
+        c.settings.watchdog = WatchdogTime::OFF;
         c.pio_ports = Ports {
             inputs: Pattern::Positioning.inputs(),
             outputs: Pattern::Positioning.outputs(),
@@ -563,9 +565,9 @@ fn a_pio_pattern_needs_the_boards_ports_and_a_refused_strobe_shows_in_cmst() {
 #[test]
 fn a_pattern_change_stops_a_move_the_pio_holds() {
     let mut rig = Rig::ready(1, |c| {
-        c.pio_axis = Some(axis(0));
-        c.watchdog = WatchdogTime::OFF;
-        c.pio_pattern = Pattern::Solenoid7;
+        c.settings.pio_axis = Some(axis(0));
+        c.settings.watchdog = WatchdogTime::OFF;
+        c.settings.pio_pattern = Pattern::Solenoid7;
     });
     rig.bus.fake(0).homed = true;
     let run = |rig: &mut Rig, inputs: PioInputs, ms: u64| {

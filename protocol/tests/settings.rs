@@ -22,21 +22,21 @@ use support::*;
 
 fn config() -> GatewayConfig {
     let mut c = GatewayConfig::new(AxisSet::first(3));
-    c.axes[axis(2)].scale.lead = Lead::from_hundredths(1200).unwrap();
-    c.axes[axis(2)].stroke = protocol::units::Length(350_00);
-    c.pio_axis = Some(axis(1));
-    c.pio_pattern = Pattern::Solenoid3;
-    c.pio_start = StartMode::Edge;
-    c.pio_jog = JogSpeed::from_hundredths(25_00).unwrap();
-    c.pio_inch = InchStep::from_hundredths(5).unwrap();
-    c.axis_base = AxisBase::new(17).unwrap();
-    c.unit = UnitId::new(63).unwrap();
-    c.net.ip = protocol::net::Ipv4([10, 1, 2, 3]);
-    c.net.prefix = 16;
-    c.net.router = protocol::net::Ipv4([10, 1, 0, 1]);
-    c.net.policy.allow[2] = protocol::net::Ipv4([10, 1, 2, 9]);
-    c.net.policy.max_connections = 2;
-    c.net.policy.idle_s = 600;
+    c.settings.axes[axis(2)].scale.lead = Lead::from_hundredths(1200).unwrap();
+    c.settings.axes[axis(2)].stroke = protocol::units::Length(350_00);
+    c.settings.pio_axis = Some(axis(1));
+    c.settings.pio_pattern = Pattern::Solenoid3;
+    c.settings.pio_start = StartMode::Edge;
+    c.settings.pio_jog = JogSpeed::from_hundredths(25_00).unwrap();
+    c.settings.pio_inch = InchStep::from_hundredths(5).unwrap();
+    c.settings.axis_base = AxisBase::new(17).unwrap();
+    c.settings.unit = UnitId::new(63).unwrap();
+    c.settings.net.ip = protocol::net::Ipv4([10, 1, 2, 3]);
+    c.settings.net.prefix = 16;
+    c.settings.net.router = protocol::net::Ipv4([10, 1, 0, 1]);
+    c.settings.net.policy.allow[2] = protocol::net::Ipv4([10, 1, 2, 9]);
+    c.settings.net.policy.max_connections = 2;
+    c.settings.net.policy.idle_s = 600;
     c
 }
 
@@ -45,8 +45,8 @@ fn config() -> GatewayConfig {
 #[test]
 fn a_format_2_record_is_read() {
     let mut old = config();
-    old.axis_base = AxisBase::DEFAULT;
-    old.net = protocol::net::NetConfig::DEFAULT;
+    old.settings.axis_base = AxisBase::DEFAULT;
+    old.settings.net = protocol::net::NetConfig::DEFAULT;
     let record = Settings::of(&old).encode();
     let mut v2 = record[..RECORD_LEN_2].to_vec();
     v2[0] = FORMAT_2;
@@ -63,12 +63,12 @@ fn a_format_2_record_is_read() {
 #[test]
 fn a_format_1_record_is_read() {
     let mut old = config();
-    old.axis_base = AxisBase::DEFAULT;
-    old.net = protocol::net::NetConfig::DEFAULT;
-    old.pio_pattern = Pattern::Positioning;
-    old.pio_start = StartMode::Level;
-    old.pio_jog = JogSpeed::from_hundredths(protocol::plc::DEFAULT_PIO_JOG).unwrap();
-    old.pio_inch = InchStep::from_hundredths(protocol::plc::DEFAULT_PIO_INCH).unwrap();
+    old.settings.axis_base = AxisBase::DEFAULT;
+    old.settings.net = protocol::net::NetConfig::DEFAULT;
+    old.settings.pio_pattern = Pattern::Positioning;
+    old.settings.pio_start = StartMode::Level;
+    old.settings.pio_jog = JogSpeed::from_hundredths(protocol::plc::DEFAULT_PIO_JOG).unwrap();
+    old.settings.pio_inch = InchStep::from_hundredths(protocol::plc::DEFAULT_PIO_INCH).unwrap();
     let record = Settings::of(&old).encode();
     let mut v1 = record[..RECORD_LEN_1].to_vec();
     v1[0] = FORMAT_1;
@@ -90,7 +90,7 @@ fn a_format_1_record_is_read() {
 #[test]
 fn a_pattern_the_board_cannot_run_is_not_applied() {
     let mut seven = config();
-    seven.pio_pattern = Pattern::Solenoid7;
+    seven.settings.pio_pattern = Pattern::Solenoid7;
     let settings = Settings::of(&seven);
     let mut small = GatewayConfig::new(AxisSet::EMPTY);
     small.pio_ports = Ports {
@@ -98,11 +98,11 @@ fn a_pattern_the_board_cannot_run_is_not_applied() {
         outputs: Pattern::Positioning.outputs(),
     };
     settings.apply_to(&mut small);
-    assert_eq!(small.pio_pattern, Pattern::Positioning);
-    assert_eq!(small.pio_axis, Some(axis(1)));
+    assert_eq!(small.settings.pio_pattern, Pattern::Positioning);
+    assert_eq!(small.settings.pio_axis, Some(axis(1)));
     // Pattern 5 needs no port pattern 0 lacks.
     Settings::of(&config()).apply_to(&mut small);
-    assert_eq!(small.pio_pattern, Pattern::Solenoid3);
+    assert_eq!(small.settings.pio_pattern, Pattern::Solenoid3);
 }
 
 #[test]
@@ -115,7 +115,7 @@ fn a_record_round_trips() {
     settings.apply_to(&mut in_place);
     assert_eq!(in_place, applied);
     assert_eq!(Settings::of(&applied), settings);
-    assert_eq!(applied.axes[axis(2)].scale.lead.hundredths(), 1200);
+    assert_eq!(applied.settings.axes[axis(2)].scale.lead.hundredths(), 1200);
 }
 
 #[test]
@@ -198,14 +198,14 @@ fn settings() -> impl Strategy<Value = Settings> {
     )
         .prop_map(|(axes, retries, wd, rtim, plc_baud, per_axis)| {
             let mut c = GatewayConfig::new(AxisSet(axes & 0x7FFF));
-            c.unit = UnitId::new(63).unwrap();
+            c.settings.unit = UnitId::new(63).unwrap();
             c.bus.retries = retries;
-            c.watchdog = protocol::plc::WatchdogTime::from_millis(wd).unwrap();
+            c.settings.watchdog = protocol::plc::WatchdogTime::from_millis(wd).unwrap();
             c.bus.rtim = protocol::Rtim::new(rtim).unwrap();
-            c.plc.baud = PlcBaud::new(plc_baud).unwrap();
-            c.plc.parity = Parity::Even;
+            c.settings.plc.baud = PlcBaud::new(plc_baud).unwrap();
+            c.settings.plc.parity = Parity::Even;
             for (axis, (lead, ppr, home, twos, stroke)) in protocol::Axis::all().zip(per_axis) {
-                let a = &mut c.axes[axis];
+                let a = &mut c.settings.axes[axis];
                 a.scale.lead = Lead::from_hundredths(lead.max(1)).unwrap();
                 a.scale.pulses_per_rev = std::num::NonZeroU16::new(ppr.max(1)).unwrap();
                 a.scale.home = if home {
@@ -259,14 +259,14 @@ fn save_stores_the_settings_with_the_pending_ones() {
     let saved = Settings::decode(&record).unwrap();
     assert_eq!(
         (
-            saved.plc.baud.bits_per_second(),
-            saved.plc.parity,
-            saved.unit.get()
+            saved.gateway.plc.baud.bits_per_second(),
+            saved.gateway.plc.parity,
+            saved.gateway.unit.get()
         ),
         (19_200, Parity::Even, 100)
     );
     assert_eq!(
-        saved.watchdog,
+        saved.gateway.watchdog,
         protocol::plc::WatchdogTime::from_millis(500).unwrap()
     );
     assert_eq!(saved.retries, 0, "RETRIES, written at once, is saved");
@@ -309,7 +309,7 @@ fn a_saved_stroke_of_zero_loads() {
     };
     let saved = Settings::decode(&record).expect("the saved record loads");
     assert_eq!(
-        saved.axis_config[axis(1)].stroke,
+        saved.gateway.axes[axis(1)].stroke,
         protocol::units::Length(0)
     );
 }

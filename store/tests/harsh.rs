@@ -483,10 +483,10 @@ fn campaign<const PAGE: usize, const WRITE: usize, const UNIT: usize, const ECC:
             if loaded.settings != last && !took {
                 tally.violation(format!(
                     "cut {cycle}: loaded {:?} (source {:?}), wanted the last save {:?} or the one cut short {:?}",
-                    loaded.settings.map(|s| s.watchdog),
+                    loaded.settings.map(|s| s.gateway.watchdog),
                     loaded.boot.source,
-                    last.map(|s| s.watchdog),
-                    pending.map(|(s, _)| s.map(|s| s.watchdog)),
+                    last.map(|s| s.gateway.watchdog),
+                    pending.map(|(s, _)| s.map(|s| s.gateway.watchdog)),
                 ));
             }
             if took {

@@ -44,9 +44,9 @@ fn rig_with(change: impl FnOnce(&mut GatewayConfig)) -> Rig {
     bus.add_controller(axis0(), controller);
     let mut config = GatewayConfig::new(AxisSet::first(1));
     config.bus.establish = false;
-    config.watchdog = protocol::plc::WatchdogTime::OFF; // wired I/O: no Modbus watchdog
-    config.pio_axis = Some(axis0());
-    config.axes[axis0()] = AxisConfig {
+    config.settings.watchdog = protocol::plc::WatchdogTime::OFF; // wired I/O: no Modbus watchdog
+    config.settings.pio_axis = Some(axis0());
+    config.settings.axes[axis0()] = AxisConfig {
         scale,
         stroke: Length(100_00),
     };
@@ -124,7 +124,7 @@ fn son_home_strobe_a_position_and_read_pm() {
         "PEND drops while the move runs"
     );
     r.until(5_000, |o| o.pend() && o.pm() == 5);
-    let scale = r.h.node.gateway().config().axes[axis0()].scale;
+    let scale = r.h.node.gateway().config().settings.axes[axis0()].scale;
     let target = scale.position_to_wire(Length(30_00)).unwrap();
     let c = r.h.bus.controller(axis0()).unwrap();
     assert_eq!(c.position(), i64::from(target.0), "point 5 is 30 mm");
@@ -278,7 +278,7 @@ fn a_res_pulse_acknowledges_the_fail_safe_once_the_stop_input_is_closed() {
 /// holds, read from its memory), compared first: a PWRT at the same place writes nothing.
 #[test]
 fn teaching_jogs_and_pwrt_stores_the_position_into_the_selected_point() {
-    let mut r = rig_with(|c| c.pio_pattern = Pattern::Teaching);
+    let mut r = rig_with(|c| c.settings.pio_pattern = Pattern::Teaching);
     r.run(100);
     r.servo_on_and_home();
     r.set(PioInputs::ST6, true); // MODE
@@ -291,7 +291,7 @@ fn teaching_jogs_and_pwrt_stores_the_position_into_the_selected_point() {
     r.run(500);
     let c = r.h.bus.controller(axis0()).unwrap();
     assert!(!c.moving(), "stopped on release");
-    let scale = r.h.node.gateway().config().axes[axis0()].scale;
+    let scale = r.h.node.gateway().config().settings.axes[axis0()].scale;
     let at = scale.position_from_wire(protocol::Pulses(c.position() as i32));
     assert!(
         at.0 > 10_00 && at.0 < 50_00,

@@ -61,21 +61,21 @@ fuzz_target!(|data: &[u8]| {
     };
     let mut config = GatewayConfig::new(AxisSet(u16::from(setup & 0x0F) | 1));
     config.bus.establish = setup & 0x10 != 0;
-    config.pio_axis = if setup & 0x20 != 0 {
+    config.settings.pio_axis = if setup & 0x20 != 0 {
         Axis::new(0)
     } else {
         None
     };
-    config.pio_pattern = [
+    config.settings.pio_pattern = [
         Pattern::Positioning,
         Pattern::Teaching,
         Pattern::Solenoid7,
         Pattern::Solenoid3,
     ][usize::from(setup >> 6)];
     if setup & 0x40 != 0 {
-        config.net.policy.allow[0] = Ipv4([10, 0, 0, 1]);
-        config.net.policy.max_connections = 2;
-        config.net.policy.idle_s = 1;
+        config.settings.net.policy.allow[0] = Ipv4([10, 0, 0, 1]);
+        config.settings.net.policy.max_connections = 2;
+        config.settings.net.policy.idle_s = 1;
     }
     let mut node = Node::new(
         config,
@@ -116,7 +116,7 @@ fuzz_target!(|data: &[u8]| {
                 let bits = u16::from(b.first().copied().unwrap_or(0))
                     | u16::from(b.get(1).copied().unwrap_or(0)) << 8;
                 // The PIO's inputs stop its axis too (*STP, a jog released).
-                talked |= node.gateway().config().pio_axis.is_some();
+                talked |= node.gateway().config().settings.pio_axis.is_some();
                 node.sample_inputs(Instant(now), PioInputs::from_bits(bits));
             }
             3 => {

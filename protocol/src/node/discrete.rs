@@ -6,12 +6,12 @@ use super::*;
 impl Node {
     /// The PIO input pins at `now` (bit n = PCON pattern 0 port INn; *STP high = may run).
     pub fn sample_inputs(&mut self, now: Instant, inputs: PioInputs) {
-        let Some(axis) = self.gateway.config().pio_axis else {
+        let Some(axis) = self.gateway.config().settings.pio_axis else {
             self.outputs = PioOutputs::SAFE;
             return;
         };
         let config = self.gateway.config();
-        let (pattern, start) = (config.pio_pattern, config.pio_start);
+        let (pattern, start) = (config.settings.pio_pattern, config.settings.pio_start);
         if (pattern, start) != (self.pio.config().pattern, self.pio.config().start) {
             // Another pattern: the inputs mean other things, so they start over (each must be
             // seen OFF and ON again before its edge counts, *STP ON before anything moves). A
@@ -41,7 +41,7 @@ impl Node {
         }
         let state = *self.gateway.engine().axis(axis);
         let link_ok = !self.gateway.engine().establishing();
-        let home = self.gateway.config().axes[axis].scale.home;
+        let home = self.gateway.config().settings.axes[axis].scale.home;
         let (outputs, job) = self.pio.sample(now, inputs, &state, link_ok, home);
         self.outputs = outputs;
         if let Some(inputs) = self.pio.take_refused() {
@@ -89,17 +89,17 @@ impl Node {
     /// PIOJOG and [`PIO_ACCEL`]; `None` if the axis' scale cannot express them.
     fn jog(&self, axis: Axis) -> Option<Jog> {
         let config = self.gateway.config();
-        let axis = &config.axes[axis];
+        let axis = &config.settings.axes[axis];
         let scale = &axis.scale;
         let wire = |at: i32| scale.position_to_wire(Length(at)).ok();
         let step = |distance: i32| scale.distance_to_wire(Length(distance)).ok();
-        let inch = config.pio_inch.length().0;
+        let inch = config.settings.pio_inch.length().0;
         Some(Jog {
             plus_end: wire(axis.stroke.0)?,
             minus_end: wire(0)?,
             plus_step: step(inch)?,
             minus_step: step(-inch)?,
-            velocity: scale.velocity(config.pio_jog.speed()).ok()?,
+            velocity: scale.velocity(config.settings.pio_jog.speed()).ok()?,
             acceleration: scale.acceleration(Accel(u32::from(PIO_ACCEL))).ok()?,
         })
     }

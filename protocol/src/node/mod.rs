@@ -237,7 +237,7 @@ const fn plc_frame_end(baud: u32, gap: Option<Duration>) -> Duration {
 impl Node {
     /// A node for `config`, the gateway being `identity` (FC2B/0E, FC11, VERSION) and started
     /// as `boot` says (CFGSOURCE, CFGERRORS, RESETCAUSE, SAVECOUNT): the firmware's facts, which
-    /// are no settings. The Modbus receiver's t3.5 follows `config.plc.baud`; its t1.5 gap
+    /// are no settings. The Modbus receiver's t3.5 follows `config.settings.plc.baud`; its t1.5 gap
     /// check is off, since byte stamps taken when a task reads the UART are not accurate to the
     /// 750 µs it needs (the CRC still rejects a garbled frame).
     ///
@@ -252,7 +252,10 @@ impl Node {
             gateway: Gateway::new(config, identity, boot),
             receiver: Receiver::with_timing(
                 None,
-                plc_frame_end(config.plc.baud.bits_per_second(), config.plc_frame_gap),
+                plc_frame_end(
+                    config.settings.plc.baud.bits_per_second(),
+                    config.plc_frame_gap,
+                ),
             ),
             slave: Slave::new(),
             reply: ReplyBuffer::new(),
@@ -333,7 +336,7 @@ impl Node {
                 let reply = self.reply.as_bytes();
                 let on_wire = chars_time(
                     reply.len(),
-                    self.gateway.config().plc.baud.bits_per_second(),
+                    self.gateway.config().settings.plc.baud.bits_per_second(),
                 );
                 self.gateway.plc_activity(now, now + on_wire);
                 return Some(Action::Reply(reply));
@@ -457,7 +460,9 @@ impl Node {
         #[cfg(feature = "tcp")]
         let at = earliest(
             at,
-            self.tcp.server.poll_at(&self.gateway.config().net.policy),
+            self.tcp
+                .server
+                .poll_at(&self.gateway.config().settings.net.policy),
         );
         at
     }
@@ -485,7 +490,7 @@ impl Node {
     /// with FAILSAFE on PM1-PM8 while the fail-safe is latched
     /// ([`PioOutputs::with_failsafe`]).
     pub fn outputs(&self) -> PioOutputs {
-        if self.gateway.config().pio_axis.is_none() {
+        if self.gateway.config().settings.pio_axis.is_none() {
             return PioOutputs::SAFE;
         }
         self.outputs
@@ -501,7 +506,7 @@ impl Node {
     /// The PLC line's settings: the UART starts at them (the node asks for every change after
     /// that with [`Action::PlcLine`]).
     pub fn plc_line(&self) -> PlcLine {
-        self.gateway.config().plc
+        self.gateway.config().settings.plc
     }
 
     /// How often the inputs must be sampled ([`sample_inputs`](Node::sample_inputs)): every
@@ -509,7 +514,11 @@ impl Node {
     /// times count in its samples); `None` when only a change matters (the stop input: the
     /// PIO inputs then mean nothing).
     pub fn sample_period(&self) -> Option<Duration> {
-        self.gateway.config().pio_axis.map(|_| pio::SAMPLE_PERIOD)
+        self.gateway
+            .config()
+            .settings
+            .pio_axis
+            .map(|_| pio::SAMPLE_PERIOD)
     }
 
     /// The indicator LEDs.

@@ -48,7 +48,7 @@ impl Node {
         socket: SocketHandle,
         peer: crate::net::Ipv4,
     ) -> bool {
-        let policy = self.gateway.config().net.policy;
+        let policy = self.gateway.config().settings.net.policy;
         self.dirty = true;
         self.tcp.server.open(now, socket, peer, &policy)
     }
@@ -130,7 +130,7 @@ impl Node {
 
     /// A socket to close, or the next request answered (taking turns between connections).
     pub(super) fn poll_tcp(&mut self, now: Instant) -> Option<TcpAction> {
-        let policy = self.gateway.config().net.policy;
+        let policy = self.gateway.config().settings.net.policy;
         if let Some(socket) = self.tcp.server.take_close(now, &policy) {
             return Some(TcpAction::Close(socket));
         }
@@ -139,7 +139,7 @@ impl Node {
             counters: self.tcp.server.counters(),
             connections: self.tcp.server.connections(),
         };
-        let direct_unit = self.gateway.config().unit.get();
+        let direct_unit = self.gateway.config().settings.unit.get();
         loop {
             let (socket, adu) = self.tcp.server.next_frame()?;
             let mut model = self.gateway.registers(now, link).with_tcp(view);

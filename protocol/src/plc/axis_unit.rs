@@ -33,7 +33,7 @@ impl Gateway {
     /// first, so the table is not looked at again here.
     pub(super) fn axis_read(&mut self, axis: Axis, address: u16) -> Result<u16, Refused> {
         let plc = self.axes[axis];
-        let config = self.config.axes[axis];
+        let config = self.config.settings.axes[axis];
         let state = self.engine.axis(axis);
         match address {
             PNOW..=DSSE => {
@@ -162,13 +162,13 @@ impl Gateway {
     }
 
     pub(super) fn home_direction(&self, axis: Axis) -> HomeDirection {
-        self.config.axes[axis].scale.home
+        self.config.settings.axes[axis].scale.home
     }
 
     /// A direct move (0x9900) on this axis: within its travel (from where it rests, for an
     /// incremental one), in its units.
     fn direct_move(&self, axis: Axis, m: &DirectMove) -> Result<JobKind, Refused> {
-        let config = self.config.axes[axis];
+        let config = self.config.settings.axes[axis];
         let scale = config.scale;
         let target = if m.relative() {
             // The end of a relative move must be inside the travel too, from where it is now:
@@ -257,7 +257,7 @@ impl Gateway {
         point: PositionNo,
         values: &[u16],
     ) -> Result<(), Refused> {
-        let config = self.config.axes[axis];
+        let config = self.config.settings.axes[axis];
         let data = table::point(values, &config)?;
         // Unchanged, as the PLC sees it (the cached row in the PLC's units): nothing to do and
         // no bus time spent. Otherwise the store job compares with the controller itself.

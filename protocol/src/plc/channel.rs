@@ -144,7 +144,7 @@ impl Channel {
         let field = field(offset).ok_or(Refused::OutOfRange)?;
         let value = match code {
             READ_FIELD | READ_RAW => 0,
-            WRITE_FIELD => table::field_from_plc(field, join(hi, lo), &config.axes[axis])?,
+            WRITE_FIELD => table::field_from_plc(field, join(hi, lo), &config.settings.axes[axis])?,
             _ => return Err(Refused::OutOfRange),
         };
         Ok(Some((axis, point, value)))

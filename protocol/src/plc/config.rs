@@ -395,16 +395,13 @@ impl InchStep {
     }
 }
 
-/// Everything the gateway is set up with: what the PLC can set (and SAVE) and what the board
-/// decides. Not what the firmware learns at a start, which [`Node::new`](crate::node::Node::new)
-/// takes apart: who the gateway is ([`Identity`]) and how it started ([`Boot`](super::Boot)).
-///
-/// Start from [`GatewayConfig::new`] (or [`GatewayConfig::DEFAULT`]) and set fields: more may
-/// come.
+/// What the PLC sets and SAVE stores, but for the bus' part (its rate, RTIM, resends and axes
+/// are the engine's, in [`GatewayConfig::bus`]): [`GatewayConfig::settings`]. Kept together so
+/// that the stored record ([`Settings`](super::settings::Settings): these and the bus' part) is
+/// taken from a configuration and put back in one copy, not field by field.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-#[non_exhaustive]
-pub struct GatewayConfig {
+pub struct GatewaySettings {
     /// The gateway's own Modbus unit id.
     pub unit: UnitId,
     /// The unit id of axis 0: axis n is unit `axis_base + n` (several gateways on one PLC
@@ -412,13 +409,6 @@ pub struct GatewayConfig {
     pub axis_base: AxisBase,
     /// The PLC line.
     pub plc: PlcLine,
-    /// The silence that ends a Modbus frame on the PLC line when it must be longer than t3.5 of
-    /// `plc.baud` (Modbus over Serial Line §2.5.1.1); `None` on a wire. Only where bytes do not
-    /// arrive at the wire's pace: the emulator's PLC line is a socket, whose bytes the task can
-    /// read in bursts further apart than t3.5, which would split a request in two.
-    pub plc_frame_gap: Option<Duration>,
-    /// The bus master's configuration; its `axes` are the axes the PLC can address.
-    pub bus: Config,
     /// Per-axis units and travel.
     pub axes: AxisMap<AxisConfig>,
     /// PLC silence that trips the fail-safe ([`WatchdogTime::OFF`]: none).
@@ -431,8 +421,6 @@ pub struct GatewayConfig {
     pub pio_pattern: Pattern,
     /// How the solenoid patterns' ST inputs start a move (PCON parameter No. 27).
     pub pio_start: StartMode,
-    /// The PIO ports the board has: a pattern needing others is refused.
-    pub pio_ports: Ports,
     /// Pattern 1's jog speed (PIOJOG).
     pub pio_jog: JogSpeed,
     /// Pattern 1's inching step (PIOINCH).
@@ -442,40 +430,84 @@ pub struct GatewayConfig {
     pub net: NetConfig,
 }
 
-impl GatewayConfig {
-    /// The defaults, with no axis on the bus: unit 63, axis 0 at unit 1, the PLC line at
-    /// 115.2 kbit/s without parity, the bus as [`Config::DEFAULT`], the watchdog at 1 s
-    /// stopping every axis, no PIO axis (pattern 0, level start, every port), the jog's
-    /// factory values, the network's defaults.
-    pub const DEFAULT: GatewayConfig = GatewayConfig::new(AxisSet::EMPTY);
+impl GatewaySettings {
+    /// [`GatewaySettings::new`].
+    pub const DEFAULT: GatewaySettings = GatewaySettings::new();
 
-    /// A gateway for `axes` with defaults everywhere else.
-    pub const fn new(axes: AxisSet) -> GatewayConfig {
-        GatewayConfig {
+    /// The defaults: unit 63, axis 0 at unit 1, the PLC line at 115.2 kbit/s without parity,
+    /// every axis as [`AxisConfig::DEFAULT`], the watchdog at 1 s stopping every axis, no PIO
+    /// axis (pattern 0, level start), the jog's factory values, the network's defaults.
+    // A function, not only the constant: where it runs (the firmware's start), it writes the
+    // fields in place, where the constant would be a 240-byte copy of itself in flash.
+    pub const fn new() -> GatewaySettings {
+        GatewaySettings {
             unit: UnitId::DEFAULT,
             axis_base: AxisBase::DEFAULT,
             plc: PlcLine::DEFAULT,
-            plc_frame_gap: None,
-            bus: Config {
-                axes,
-                ..Config::DEFAULT
-            },
             axes: AxisMap::new(AxisConfig::DEFAULT),
             watchdog: WatchdogTime::DEFAULT,
             watchdog_action: WatchdogAction::StopAll,
             pio_axis: None,
             pio_pattern: Pattern::Positioning,
             pio_start: StartMode::Level,
-            pio_ports: Ports::ALL,
             pio_jog: JogSpeed::DEFAULT,
             pio_inch: InchStep::DEFAULT,
             net: NetConfig::DEFAULT,
         }
     }
+}
+
+impl Default for GatewaySettings {
+    fn default() -> GatewaySettings {
+        GatewaySettings::DEFAULT
+    }
+}
+
+/// Everything the gateway is set up with: what the PLC can set (and SAVE) and what the board
+/// decides. Not what the firmware learns at a start, which [`Node::new`](crate::node::Node::new)
+/// takes apart: who the gateway is ([`Identity`]) and how it started ([`Boot`](super::Boot)).
+///
+/// Start from [`GatewayConfig::new`] (or [`GatewayConfig::DEFAULT`]) and set fields: more may
+/// come.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub struct GatewayConfig {
+    /// What the PLC sets and SAVE stores, but for the bus' part (in `bus`).
+    pub settings: GatewaySettings,
+    /// The silence that ends a Modbus frame on the PLC line when it must be longer than t3.5 of
+    /// `settings.plc.baud` (Modbus over Serial Line §2.5.1.1); `None` on a wire. Only where
+    /// bytes do not arrive at the wire's pace: the emulator's PLC line is a socket, whose bytes
+    /// the task can read in bursts further apart than t3.5, which would split a request in two.
+    pub plc_frame_gap: Option<Duration>,
+    /// The bus master's configuration; its `axes` are the axes the PLC can address. Its rate,
+    /// RTIM, resends and axes are stored settings too.
+    pub bus: Config,
+    /// The PIO ports the board has: a pattern needing others is refused.
+    pub pio_ports: Ports,
+}
+
+impl GatewayConfig {
+    /// The defaults, with no axis on the bus: [`GatewaySettings::new`]'s, the bus as
+    /// [`Config::DEFAULT`], every PIO port.
+    pub const DEFAULT: GatewayConfig = GatewayConfig::new(AxisSet::EMPTY);
+
+    /// A gateway for `axes` with defaults everywhere else.
+    pub const fn new(axes: AxisSet) -> GatewayConfig {
+        GatewayConfig {
+            settings: GatewaySettings::new(),
+            plc_frame_gap: None,
+            bus: Config {
+                axes,
+                ..Config::DEFAULT
+            },
+            pio_ports: Ports::ALL,
+        }
+    }
 
     /// The axis addressed by a Modbus unit id, if the PLC may address it.
     pub fn axis_of_unit(&self, unit: u8) -> Option<Axis> {
-        self.axis_base.axis_of(unit, self.bus.axes)
+        self.settings.axis_base.axis_of(unit, self.bus.axes)
     }
 }
 

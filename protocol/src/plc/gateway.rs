@@ -144,8 +144,8 @@ impl Gateway {
         self.now = now;
         let trip = self.failsafe.check(
             now,
-            self.config.watchdog.duration(),
-            self.config.watchdog_action,
+            self.config.settings.watchdog.duration(),
+            self.config.settings.watchdog_action,
         );
         if trip == Some(Trip::StopAll) {
             self.stop_all();
@@ -225,12 +225,13 @@ impl Gateway {
     /// The PLC line, if APPLY changed it since the last call: the firmware switches its UART
     /// (after the reply to the APPLY has gone out at the old settings).
     pub fn take_plc_line(&mut self) -> Option<super::PlcLine> {
-        core::mem::take(&mut self.plc_line_changed).then_some(self.config.plc)
+        core::mem::take(&mut self.plc_line_changed).then_some(self.config.settings.plc)
     }
 
     /// When the PLC watchdog trips if the PLC stays silent.
     pub fn watchdog_deadline(&self) -> Option<Instant> {
-        self.failsafe.deadline(self.config.watchdog.duration())
+        self.failsafe
+            .deadline(self.config.settings.watchdog.duration())
     }
 
     /// Whether every configured axis answers.
@@ -329,7 +330,8 @@ impl Gateway {
     /// The fail-safe holds every axis: the stop input is active, or a latched cause that holds
     /// motion is not acknowledged yet ([`failsafe`](super::failsafe)).
     fn failsafe_holds(&self) -> bool {
-        self.failsafe.holds_motion(self.config.watchdog_action)
+        self.failsafe
+            .holds_motion(self.config.settings.watchdog_action)
     }
 
     /// A RES pulse on the discrete inputs (PIOAXIS set, its axis online and showing no alarm):
@@ -493,9 +495,9 @@ impl Gateway {
     }
 
     fn job_done(&mut self, id: JobId, axis: Axis, result: Result<JobOutput, JobError>) {
-        let jog_speed = self.config.pio_jog.hundredths();
+        let jog_speed = self.config.settings.pio_jog.hundredths();
         let teach = if TEACHING {
-            let config = &self.config.axes[axis];
+            let config = &self.config.settings.axes[axis];
             self.teach
                 .job_done(id, &result, config, jog_speed, &mut self.engine)
         } else {
@@ -547,7 +549,7 @@ impl Gateway {
         self.points.job_done(id, axis, &result);
         if let Some((axis, point)) =
             self.channel
-                .job_done(id, &result, &self.config.axes, &mut self.engine)
+                .job_done(id, &result, &self.config.settings.axes, &mut self.engine)
         {
             self.points.forget(axis, point);
         }

@@ -48,7 +48,7 @@ impl Gateway {
             }
             G_FAILSAFE => self.failsafe.latched(),
             G_FAILSAFE_COUNT => self.failsafe.count(),
-            G_WATCHDOG => self.config.watchdog.millis(),
+            G_WATCHDOG => self.config.settings.watchdog.millis(),
             G_BUS_BAUD => u16::try_from(self.persist.baud.bits_per_second() / 100).unwrap_or(0),
             G_BUS_RTIM => u16::from(self.persist.rtim.get()),
             G_PLC_BAUD => self.persist.plc.baud.register(),
@@ -65,12 +65,16 @@ impl Gateway {
             G_RESET_CAUSE => self.persist.boot.reset as u16,
             G_RETRIES => u16::from(self.engine.config().retries),
             G_APPLY | G_SYNC_START => 0,
-            G_WD_ACTION => self.config.watchdog_action as u16,
-            G_PIO_AXIS => self.config.pio_axis.map_or(0xFFFF, |a| u16::from(a.get())),
-            G_PIO_PATTERN => self.config.pio_pattern.code(),
-            G_PIO_START => self.config.pio_start as u16,
-            G_PIO_JOG => self.config.pio_jog.hundredths(),
-            G_PIO_INCH => self.config.pio_inch.hundredths(),
+            G_WD_ACTION => self.config.settings.watchdog_action as u16,
+            G_PIO_AXIS => self
+                .config
+                .settings
+                .pio_axis
+                .map_or(0xFFFF, |a| u16::from(a.get())),
+            G_PIO_PATTERN => self.config.settings.pio_pattern.code(),
+            G_PIO_START => self.config.settings.pio_start as u16,
+            G_PIO_JOG => self.config.settings.pio_jog.hundredths(),
+            G_PIO_INCH => self.config.settings.pio_inch.hundredths(),
             G_SYNC_MASK => self.sync.mask().0,
             G_SYNC_STATUS => self.sync.status() as u16,
             a => {
@@ -149,7 +153,7 @@ impl Gateway {
     }
 
     fn axis_config_read(&self, axis: Axis, field: u16) -> u16 {
-        let c = self.config.axes[axis];
+        let c = self.config.settings.axes[axis];
         let stroke = split(u32::try_from(c.stroke.0).unwrap_or(0));
         match field {
             axis_cfg::ENABLED => u16::from(self.persist.axes.contains(axis)),
@@ -257,8 +261,8 @@ impl Gateway {
         match write {
             GatewayWrite::Nothing | GatewayWrite::ChannelRequest(..) | GatewayWrite::SyncStart => {}
             GatewayWrite::AckFailsafe => self.failsafe.acknowledge(true),
-            GatewayWrite::Watchdog(time) => self.config.watchdog = time,
-            GatewayWrite::WatchdogAction(action) => self.config.watchdog_action = action,
+            GatewayWrite::Watchdog(time) => self.config.settings.watchdog = time,
+            GatewayWrite::WatchdogAction(action) => self.config.settings.watchdog_action = action,
             GatewayWrite::BusBaud(baud) => self.persist.baud = baud,
             GatewayWrite::BusRtim(rtim) => self.persist.rtim = rtim,
             GatewayWrite::Retries(retries) => {
@@ -271,29 +275,24 @@ impl Gateway {
             GatewayWrite::UnitId(unit) => self.persist.unit = unit,
             GatewayWrite::AxisBase(base) => self.persist.axis_base = base,
             #[cfg(feature = "tcp")]
-            GatewayWrite::Net(setting) => self.config.net.set(setting),
+            GatewayWrite::Net(setting) => self.config.settings.net.set(setting),
             GatewayWrite::Apply => {
-                let pending = self.persist.pending(&self.config);
-                self.plc_line_changed |= pending.plc != self.config.plc;
-                self.config.plc = pending.plc;
-                self.config.unit = pending.unit;
-                self.config.axis_base = pending.axis_base;
-                self.config.bus.axes = pending.bus.axes;
-                self.config.bus.baud = pending.bus.baud;
-                self.config.bus.rtim = pending.bus.rtim;
-                self.engine
-                    .reconfigure(pending.bus.axes, pending.bus.baud, pending.bus.rtim);
+                let plc = self.config.settings.plc;
+                self.persist.apply_to(&mut self.config);
+                self.plc_line_changed |= self.config.settings.plc != plc;
+                let bus = &self.config.bus;
+                self.engine.reconfigure(bus.axes, bus.baud, bus.rtim);
             }
             GatewayWrite::Save => self.persist.save(),
             GatewayWrite::Restart => self.persist.request = Some(SettingsRequest::Restart),
             GatewayWrite::FactoryReset => {
                 self.persist.request = Some(SettingsRequest::FactoryReset)
             }
-            GatewayWrite::PioAxis(axis) => self.config.pio_axis = axis,
-            GatewayWrite::PioPattern(pattern) => self.config.pio_pattern = pattern,
-            GatewayWrite::PioStart(start) => self.config.pio_start = start,
-            GatewayWrite::PioJog(speed) => self.config.pio_jog = speed,
-            GatewayWrite::PioInch(inch) => self.config.pio_inch = inch,
+            GatewayWrite::PioAxis(axis) => self.config.settings.pio_axis = axis,
+            GatewayWrite::PioPattern(pattern) => self.config.settings.pio_pattern = pattern,
+            GatewayWrite::PioStart(start) => self.config.settings.pio_start = start,
+            GatewayWrite::PioJog(speed) => self.config.settings.pio_jog = speed,
+            GatewayWrite::PioInch(inch) => self.config.settings.pio_inch = inch,
             GatewayWrite::SyncMask(mask) => self.sync.set_mask(mask),
             GatewayWrite::Axis(axis, setting) => self.apply_axis_setting(axis, setting),
         }
@@ -301,7 +300,7 @@ impl Gateway {
 
     /// An AXISCFG field of `axis`, stored.
     fn apply_axis_setting(&mut self, axis: Axis, setting: AxisSetting) {
-        let c = &mut self.config.axes[axis];
+        let c = &mut self.config.settings.axes[axis];
         // The stroke's other word stays as it is.
         let [hi, lo] = split(u32::try_from(c.stroke.0).unwrap_or(0));
         match setting {

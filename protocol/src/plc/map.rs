@@ -7,7 +7,7 @@
 //!
 //! Each axis is its own Modbus unit, id = axis + 1 (as IAI's SIO-through mode does), laid out
 //! like IAI's PCON Modbus registers where the RC protocol can supply them. The gateway itself
-//! is one more unit ([`GatewayConfig::unit`](super::GatewayConfig::unit), 63 by default, like
+//! is one more unit ([`GatewaySettings::unit`](super::GatewaySettings::unit), 63 by default, like
 //! IAI's RGW-SIO) for its configuration, diagnostics, synchronized start and command channel.
 
 /// Which unit an entry belongs to.

@@ -52,10 +52,10 @@ pub mod write;
 pub use boot::{Boot, ConfigSource, ResetCause};
 pub use command::{CommandState, Reason};
 pub use config::{
-    AxisBase, AxisConfig, GatewayConfig, InchStep, JogSpeed, Parity, PlcBaud, PlcLine, UnitId,
-    WatchdogAction, WatchdogTime, DEFAULT_AXIS_BASE, DEFAULT_GATEWAY_UNIT, DEFAULT_PIO_INCH,
-    DEFAULT_PIO_JOG, DEFAULT_WATCHDOG_MS, IDENTITY, MAX_AXIS_BASE, MAX_PIO_INCH, PIO_ACCEL,
-    PLC_BAUDS,
+    AxisBase, AxisConfig, GatewayConfig, GatewaySettings, InchStep, JogSpeed, Parity, PlcBaud,
+    PlcLine, UnitId, WatchdogAction, WatchdogTime, DEFAULT_AXIS_BASE, DEFAULT_GATEWAY_UNIT,
+    DEFAULT_PIO_INCH, DEFAULT_PIO_JOG, DEFAULT_WATCHDOG_MS, IDENTITY, MAX_AXIS_BASE, MAX_PIO_INCH,
+    PIO_ACCEL, PLC_BAUDS,
 };
 pub use failsafe::{CAUSE_STOP_INPUT, CAUSE_WATCHDOG};
 pub use gateway::Gateway;

@@ -66,7 +66,7 @@ impl Registers<'_> {
         if let Some(offset) = address.checked_sub(G_NET).filter(|&o| o < G_NET_LEN) {
             return match offset {
                 crate::net::registers::CONNECTIONS => Some(u16::from(self.tcp.connections)),
-                _ => self.gateway.config.net.register(offset),
+                _ => self.gateway.config.settings.net.register(offset),
             };
         }
         let offset = address.checked_sub(G_TCP).filter(|&o| o < G_TCP_LEN)?;
@@ -177,7 +177,7 @@ impl DataModel for Registers<'_> {
 
     fn serves(&self, unit: u8) -> bool {
         let config = &self.gateway.config;
-        unit == config.unit.get() || config.axis_of_unit(unit).is_some()
+        unit == config.settings.unit.get() || config.axis_of_unit(unit).is_some()
     }
 
     fn read_bits(

@@ -69,9 +69,9 @@ impl Persist {
         Persist {
             baud: config.bus.baud,
             rtim: config.bus.rtim,
-            plc: config.plc,
-            unit: config.unit,
-            axis_base: config.axis_base,
+            plc: config.settings.plc,
+            unit: config.settings.unit,
+            axis_base: config.settings.axis_base,
             axes: config.bus.axes,
             status: SaveStatus::Idle,
             boot,
@@ -79,16 +79,15 @@ impl Persist {
         }
     }
 
-    /// `config` with the pending settings in force: what SAVE stores and APPLY applies.
-    pub(super) fn pending(&self, config: &GatewayConfig) -> GatewayConfig {
-        let mut config = *config;
+    /// The pending settings into `config`: what APPLY does, and what SAVE stores with the rest
+    /// of `config`.
+    pub(super) fn apply_to(&self, config: &mut GatewayConfig) {
         config.bus.baud = self.baud;
         config.bus.rtim = self.rtim;
-        config.plc = self.plc;
-        config.unit = self.unit;
-        config.axis_base = self.axis_base;
+        config.settings.plc = self.plc;
+        config.settings.unit = self.unit;
+        config.settings.axis_base = self.axis_base;
         config.bus.axes = self.axes;
-        config
     }
 
     /// SAVE: ask the firmware to store the settings (with the pending ones: [`record`]).
@@ -101,7 +100,9 @@ impl Persist {
 
     /// The settings record of `config` with the pending settings in force: what SAVE stores.
     pub(super) fn record(&self, config: &GatewayConfig) -> [u8; RECORD_LEN] {
-        Settings::of(&self.pending(config)).encode()
+        let mut config = *config;
+        self.apply_to(&mut config);
+        Settings::of(&config).encode()
     }
 
     /// The firmware's answer to a save: the new save count, or a failure.

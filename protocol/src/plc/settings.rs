@@ -44,7 +44,8 @@
 
 use super::config::{
     complement_code, complement_of, home_of, stroke_of, AxisBase, AxisConfig, GatewayConfig,
-    InchStep, JogSpeed, Parity, PlcBaud, PlcLine, UnitId, WatchdogAction, WatchdogTime,
+    GatewaySettings, InchStep, JogSpeed, Parity, PlcBaud, PlcLine, UnitId, WatchdogAction,
+    WatchdogTime,
 };
 use crate::axes::AxisSet;
 use crate::engine::MAX_RETRIES;
@@ -92,64 +93,32 @@ pub enum SettingsError {
     Field(u8),
 }
 
-/// The stored settings: the part of a [`GatewayConfig`] that survives a power cycle.
+/// The stored settings: the part of a [`GatewayConfig`] that survives a power cycle, its
+/// [`settings`](GatewayConfig::settings) and its bus' rate, RTIM, resends and axes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Settings {
-    /// Gateway unit id.
-    pub unit: UnitId,
-    /// PLC line.
-    pub plc: PlcLine,
-    /// PLC watchdog.
-    pub watchdog: WatchdogTime,
-    /// What the watchdog does.
-    pub watchdog_action: WatchdogAction,
+    /// Everything but the bus' part.
+    pub gateway: GatewaySettings,
     /// Bus rate.
     pub baud: Baud,
     /// RTIM.
     pub rtim: Rtim,
     /// Resends.
     pub retries: u8,
-    /// PIO axis.
-    pub pio_axis: Option<Axis>,
-    /// PIO pattern.
-    pub pio_pattern: Pattern,
-    /// PIO start mode (patterns 4 and 5).
-    pub pio_start: StartMode,
-    /// Pattern 1's jog speed.
-    pub pio_jog: JogSpeed,
-    /// Pattern 1's inching step.
-    pub pio_inch: InchStep,
     /// Axes on the bus.
     pub axes: AxisSet,
-    /// The unit id of axis 0.
-    pub axis_base: AxisBase,
-    /// The Ethernet board's address and the Modbus TCP server's policy.
-    pub net: NetConfig,
-    /// Every axis' configuration.
-    pub axis_config: crate::AxisMap<AxisConfig>,
 }
 
 impl Settings {
     /// The settings of `config`.
     pub fn of(config: &GatewayConfig) -> Settings {
         Settings {
-            unit: config.unit,
-            plc: config.plc,
-            watchdog: config.watchdog,
-            watchdog_action: config.watchdog_action,
+            gateway: config.settings,
             baud: config.bus.baud,
             rtim: config.bus.rtim,
             retries: config.bus.retries,
-            pio_axis: config.pio_axis,
-            pio_pattern: config.pio_pattern,
-            pio_start: config.pio_start,
-            pio_jog: config.pio_jog,
-            pio_inch: config.pio_inch,
             axes: config.bus.axes,
-            axis_base: config.axis_base,
-            net: config.net,
-            axis_config: config.axes,
         }
     }
 
@@ -162,44 +131,37 @@ impl Settings {
 
     /// [`Settings::apply`] in place (the firmware's start-up keeps one configuration, no copies).
     pub fn apply_to(&self, config: &mut GatewayConfig) {
-        config.unit = self.unit;
-        config.plc = self.plc;
-        config.watchdog = self.watchdog;
-        config.watchdog_action = self.watchdog_action;
+        let pattern = config.settings.pio_pattern;
+        config.settings = self.gateway;
+        // A pattern the board cannot run (settings from another board) stays as it was (the
+        // default, at a start).
+        if !config.pio_ports.run(self.gateway.pio_pattern) {
+            config.settings.pio_pattern = pattern;
+        }
         config.bus.baud = self.baud;
         config.bus.rtim = self.rtim;
         config.bus.retries = self.retries;
-        config.pio_axis = self.pio_axis;
-        // A pattern the board cannot run (settings from another board) stays at the default.
-        if config.pio_ports.run(self.pio_pattern) {
-            config.pio_pattern = self.pio_pattern;
-        }
-        config.pio_start = self.pio_start;
-        config.pio_jog = self.pio_jog;
-        config.pio_inch = self.pio_inch;
         config.bus.axes = self.axes;
-        config.axis_base = self.axis_base;
-        config.net = self.net;
-        config.axes = self.axis_config;
     }
 
     /// The record, as stored.
     pub fn encode(&self) -> [u8; RECORD_LEN] {
         let mut out = [0u8; RECORD_LEN];
+        let g = &self.gateway;
         let mut w = Fields(&mut out, 0);
         w.u8(FORMAT);
-        w.u8(self.unit.get());
-        w.bytes(&self.plc.baud.bits_per_second().to_le_bytes());
-        w.u8(self.plc.parity as u8);
-        w.bytes(&self.watchdog.millis().to_le_bytes());
-        w.u8(self.watchdog_action as u8);
+        w.u8(g.unit.get());
+        w.bytes(&g.plc.baud.bits_per_second().to_le_bytes());
+        w.u8(g.plc.parity as u8);
+        w.bytes(&g.watchdog.millis().to_le_bytes());
+        w.u8(g.watchdog_action as u8);
         w.u8(self.baud.brsl());
         w.u8(self.rtim.get());
         // As the engine uses it (it clamps a larger one): a record holding more is refused.
         w.u8(self.retries.min(MAX_RETRIES));
-        w.u8(self.pio_axis.map_or(0xFF, Axis::get));
+        w.u8(g.pio_axis.map_or(0xFF, Axis::get));
         w.bytes(&self.axes.0.to_le_bytes());
-        for (_, c) in self.axis_config.iter() {
+        for (_, c) in g.axes.iter() {
             w.bytes(&c.scale.lead.hundredths().to_le_bytes());
             w.bytes(&c.scale.pulses_per_rev.get().to_le_bytes());
             w.u8(c.scale.home.code());
@@ -207,17 +169,17 @@ impl Settings {
             w.bytes(&c.stroke.0.to_le_bytes());
         }
         // Both codes are below 256.
-        w.u8(self.pio_pattern.code() as u8);
-        w.u8(self.pio_start as u8);
-        w.bytes(&self.pio_jog.hundredths().to_le_bytes());
-        w.bytes(&self.pio_inch.hundredths().to_le_bytes());
-        w.u8(self.axis_base.get());
-        w.bytes(&self.net.ip.0);
-        w.u8(self.net.prefix);
-        w.bytes(&self.net.router.0);
-        w.u8(self.net.policy.max_connections);
-        w.bytes(&self.net.policy.idle_s.to_le_bytes());
-        for address in &self.net.policy.allow {
+        w.u8(g.pio_pattern.code() as u8);
+        w.u8(g.pio_start as u8);
+        w.bytes(&g.pio_jog.hundredths().to_le_bytes());
+        w.bytes(&g.pio_inch.hundredths().to_le_bytes());
+        w.u8(g.axis_base.get());
+        w.bytes(&g.net.ip.0);
+        w.u8(g.net.prefix);
+        w.bytes(&g.net.router.0);
+        w.u8(g.net.policy.max_connections);
+        w.bytes(&g.net.policy.idle_s.to_le_bytes());
+        for address in &g.net.policy.allow {
             w.bytes(&address.0);
         }
         let sum = crc::checksum(out.get(..RECORD_LEN - 2).unwrap_or(&[]));
@@ -314,22 +276,24 @@ impl Settings {
             (AxisBase::DEFAULT, NetConfig::DEFAULT)
         };
         let settings = Settings {
-            unit,
-            plc: PlcLine { baud, parity },
-            watchdog,
-            watchdog_action,
+            gateway: GatewaySettings {
+                unit,
+                axis_base,
+                plc: PlcLine { baud, parity },
+                axes: axis_config,
+                watchdog,
+                watchdog_action,
+                pio_axis,
+                pio_pattern,
+                pio_start,
+                pio_jog,
+                pio_inch,
+                net,
+            },
             baud: bus_baud,
             rtim,
             retries,
-            pio_axis,
-            pio_pattern,
-            pio_start,
-            pio_jog,
-            pio_inch,
             axes,
-            axis_base,
-            net,
-            axis_config,
         };
         // The gateway unit must not be one of the axes' units.
         if axis_base.axis_of(unit.get(), axes).is_some() {

@@ -461,7 +461,7 @@ impl Rig {
     ) -> Rig {
         let mut c = GatewayConfig::new(AxisSet::first(n));
         c.bus.establish = false;
-        c.axes = protocol::AxisMap::new(protocol::plc::AxisConfig {
+        c.settings.axes = protocol::AxisMap::new(protocol::plc::AxisConfig {
             scale: protocol::units::Scale {
                 lead: protocol::units::Lead::from_hundredths(800).unwrap(),
                 ..protocol::plc::AxisConfig::DEFAULT.scale

@@ -13,7 +13,7 @@ use protocol::AxisSet;
 /// Settings with `watchdog_ms` (0 or 50-60 000) and the first `axes` axes (1-16).
 pub fn settings(watchdog_ms: u16, axes: u8) -> Settings {
     let mut c = GatewayConfig::new(AxisSet::first(axes));
-    c.watchdog = WatchdogTime::from_millis(watchdog_ms).expect("0 or 50-60 000 ms");
+    c.settings.watchdog = WatchdogTime::from_millis(watchdog_ms).expect("0 or 50-60 000 ms");
     Settings::of(&c)
 }
 

@@ -85,7 +85,7 @@ fn main() {
         bus.add_controller(a, c);
     }
     let mut config = GatewayConfig::new(AxisSet::first(AXES));
-    config.axes = AxisMap::new(AxisConfig {
+    config.settings.axes = AxisMap::new(AxisConfig {
         scale,
         stroke: Length(100_00),
     });

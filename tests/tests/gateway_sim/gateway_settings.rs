@@ -64,7 +64,7 @@ fn bus_settings_watchdog_action_and_link_counters() {
         Err(Exception::IllegalDataValue)
     );
     write(&mut h, 63, G_PIO_AXIS, &[0]).unwrap();
-    assert_eq!(h.node.gateway().config().pio_axis, Some(axis(0)));
+    assert_eq!(h.node.gateway().config().settings.pio_axis, Some(axis(0)));
     // PLC-link counters are the node's own slave's: a frame with a bad CRC is counted, and the
     // frames counted so far include this very read's predecessors.
     h.node.plc_received(

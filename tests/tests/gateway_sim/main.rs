@@ -44,7 +44,7 @@ fn gateway_with(n: u8, stroke: i32, row3: Option<[u32; 10]>, silent: &[u8]) -> N
     let mut bus = bus_at_line(BusConfig::default(), &axes, Baud::B115200, Rtim::MIN);
     let mut config = GatewayConfig::new(AxisSet::first(n));
     config.bus.establish = false;
-    config.axes = AxisMap::new(AxisConfig {
+    config.settings.axes = AxisMap::new(AxisConfig {
         scale: scale(),
         stroke: Length(stroke),
     });

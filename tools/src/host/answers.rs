@@ -78,7 +78,7 @@ impl Host {
                     "cmer": reason,
                     "link": link,
                 });
-                let scale = Some(config.axes[axis].scale);
+                let scale = Some(config.settings.axes[axis].scale);
                 if let (Some(c), Some(scale), Value::Object(map)) = (
                     self.sim().and_then(|bus| bus.controller(axis)),
                     scale,

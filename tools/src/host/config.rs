@@ -41,19 +41,19 @@ pub fn gateway_config(options: &Options) -> io::Result<GatewayConfig> {
             options.plc_baud
         ))
     })?;
-    config.plc = protocol::plc::PlcLine {
+    config.settings.plc = protocol::plc::PlcLine {
         baud,
         parity: options.plc_parity,
     };
     if let Some(tcp) = &options.tcp {
-        if tcp.allow.len() > config.net.policy.allow.len() {
+        if tcp.allow.len() > config.settings.net.policy.allow.len() {
             return Err(invalid(format!(
                 "{} clients to allow: at most {}",
                 tcp.allow.len(),
-                config.net.policy.allow.len()
+                config.settings.net.policy.allow.len()
             )));
         }
-        for (slot, &ip) in config.net.policy.allow.iter_mut().zip(&tcp.allow) {
+        for (slot, &ip) in config.settings.net.policy.allow.iter_mut().zip(&tcp.allow) {
             *slot = ip;
         }
     }
@@ -64,7 +64,7 @@ pub fn gateway_config(options: &Options) -> io::Result<GatewayConfig> {
     // Bytes are stamped when read: a pseudo-terminal or a USB adapter has no wire time.
     config.bus.wire_timing = false;
     let unit = UnitId::new(options.unit).filter(|_| config.axis_of_unit(options.unit).is_none());
-    config.unit = unit.ok_or_else(|| {
+    config.settings.unit = unit.ok_or_else(|| {
         invalid(format!(
             "unit {}: 1-247 and not an axis unit (axis n is unit n + 1)",
             options.unit
@@ -76,12 +76,12 @@ pub fn gateway_config(options: &Options) -> io::Result<GatewayConfig> {
             options.watchdog_ms
         ))
     })?;
-    config.watchdog = watchdog;
+    config.settings.watchdog = watchdog;
     if options.stroke.0 <= 0 {
         return Err(invalid("the stroke must be positive".into()));
     }
     let scale = gateway_scale(options.lead, options.home);
-    config.axes = protocol::AxisMap::new(AxisConfig {
+    config.settings.axes = protocol::AxisMap::new(AxisConfig {
         scale,
         stroke: options.stroke,
     });

@@ -266,7 +266,7 @@ impl Host {
         self.seen_receiver = protocol::modbus::ReceiverCounters::default();
         self.burst.clear();
         let config = self.node.gateway().config();
-        let (plc_bps, bus_baud) = (config.plc.baud.bits_per_second(), config.bus.baud);
+        let (plc_bps, bus_baud) = (config.settings.plc.baud.bits_per_second(), config.bus.baud);
         if let Some(plc) = &mut self.plc {
             plc.set_rate(plc_bps)?;
         }

@@ -111,10 +111,10 @@ fn gateway() -> Result<NodeHarness, String> {
     }
     let mut config = GatewayConfig::new(AxisSet::first(AXES));
     config.bus.establish = false;
-    config.axes = AxisMap::new(axis_config());
-    config.watchdog = protocol::plc::WatchdogTime::OFF;
-    config.plc = PlcLine::DEFAULT;
-    config.pio_axis = Some(axis(MOVERS[0])?);
+    config.settings.axes = AxisMap::new(axis_config());
+    config.settings.watchdog = protocol::plc::WatchdogTime::OFF;
+    config.settings.plc = PlcLine::DEFAULT;
+    config.settings.pio_axis = Some(axis(MOVERS[0])?);
     let mut h = NodeHarness::new(config, bus);
     h.inputs = Some(PioInputs::from_bits(
         PioInputs::STP_N.bits() | PioInputs::SON.bits(),

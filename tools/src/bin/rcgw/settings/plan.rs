@@ -215,8 +215,8 @@ mod tests {
     /// A gateway started with these settings running: `unit`, `base`, `axes` on the bus.
     fn gateway(unit: u8, base: u8, axes: AxisSet) -> Gateway {
         let mut config = GatewayConfig::new(axes);
-        config.unit = UnitId::new(unit).unwrap();
-        config.axis_base = AxisBase::new(base).unwrap();
+        config.settings.unit = UnitId::new(unit).unwrap();
+        config.settings.axis_base = AxisBase::new(base).unwrap();
         Gateway::new(
             config,
             &protocol::plc::IDENTITY,
