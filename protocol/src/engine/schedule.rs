@@ -61,6 +61,11 @@
 //! one (the speed of an axis still accelerating), 7 T early, with no read after it to correct it;
 //! an estimate right from one read in the cruise needs the acceleration time, which a direct
 //! move's `v` command gives (docs/performance.md, "Which part of the prototype does what").
+//! A prototype with it (and with the arrived target as the next move's start, the estimate read
+//! asked for once the acceleration is over, no status poll of a mover before its arrival when
+//! that is within the idle bound) met the mover target in every `rt-bench` run and left the idle
+//! axes at 2.1-2.5 cycles, short of bus at RTIM 7; it is 740 B over the F103's flash, so it did not
+//! land (docs/performance.md, "The acceleration time, and where the time came from").
 //!
 //! [`Config::position_reads_per_cycle`]: super::Config::position_reads_per_cycle
 //! [`Config::probe_interval`]: super::Config::probe_interval
