@@ -491,6 +491,9 @@ impl<F: NorFlash> Store<F> {
         };
         let (saves, mut load_errors) = self.counts();
         let mut source = ConfigSource::Damaged;
+        // The settings of the item the start uses, decoded once (the fallback that finds them
+        // copies the same bytes to the newest record).
+        let mut settings = None;
         // The item appended to count this start: its length (the counts only: the defaults).
         let mut counted = Some(COUNTS_LEN);
         if scan.ours_last() {
@@ -507,7 +510,8 @@ impl<F: NorFlash> Store<F> {
                     break;
                 }
                 match Settings::decode(record) {
-                    Ok(_) => {
+                    Ok(decoded) => {
+                        settings = Some(decoded);
                         source = ConfigSource::Flash;
                         counted = (fallback > 0).then_some(len);
                         break;
@@ -535,10 +539,6 @@ impl<F: NorFlash> Store<F> {
             // Best effort: a flash that will not take the write is counted next start again.
             let _ = self.append(&scan, len);
         }
-        let settings = match source {
-            ConfigSource::Flash => Settings::decode(self.record(len)).ok(),
-            _ => None,
-        };
         Loaded {
             settings,
             boot: Boot {
