@@ -5,44 +5,45 @@
 //! §4-3-1), so the sooner one follows the completion, the sooner the PLC sees it. Polling every
 //! mover all the time cannot do it with several movers (four movers polled in turn: each every
 //! four transactions at best, and idle axes starved); polling a mover when it is about to arrive
-//! can. The estimate comes from what the engine sees anyway: the target of the move command it
-//! sent (`a` absolute, `m` relative, complete edition §4-4-8/§4-4-11), where the axis rested
-//! at the command, and position reads (R4 PNOW) during the move, modelled as the controller
-//! moves: an even acceleration from a standstill, a cruise, and a braking as long as the
-//! acceleration (complete edition §7-2-1, MXAC 0):
+//! can. The estimate comes from what the engine sees anyway, modelled as the controller moves:
+//! an even acceleration from a standstill, a cruise, and a braking as long as the acceleration
+//! (complete edition §7-2-1, MXAC 0):
 //!
-//! - **Accelerating** (a read's distance from the start over the square of its time does not
-//!   fall, or the read before came in the first quarter of the time): twice the mean speed
-//!   since the command is the speed it has. Provisional: it speeds up further, so the estimate
-//!   errs early, and the next read is asked for.
-//! - **Cruising**: the speed between the last two reads, extrapolated to the target, plus half
-//!   the time the acceleration lost against that speed (`lost`): a constant-speed
-//!   extrapolation alone is early by half the braking time (eight transactions early for
-//!   `rt-bench`'s 40 mm moves), and the axis was polled as arriving all that while. The half
-//!   left out keeps the estimate early by about a quarter of the braking time, which covers
-//!   the position band (PFIN comes when the axis enters it, before the target, complete
-//!   edition §4-3-1).
-//! - **Braking** (less left than the acceleration covered): the estimate from the cruise
-//!   stands; the speed between reads now overstates how long the rest takes.
+//! - the target of the move command it sent (`a` absolute, `m` relative, complete edition
+//!   §4-4-8/§4-4-11; a point's position from the gateway's cached row);
+//! - where the axis started: where it rested at the command, or the target of the move before
+//!   if that one was seen complete and its axis not read at rest yet;
+//! - how long it accelerates: `2 × velocity / acceleration` ms, from the last `v` (0.2 rpm and
+//!   0.1 rpm/ms, §4-4-20, whatever the lead and the encoder) or the cached row's VCMD and ACMD
+//!   (§7-2-2) of the point it moves to;
+//! - one position read (R4 PNOW) once the acceleration is over. With the acceleration time
+//!   known, the distance covered gives the speed, and the speed the end: the whole distance at
+//!   that speed plus one acceleration time ([`trapezoid_end`]). A read is timed by its answer, as
+//!   the command is: each is a transaction after its controller took it, so the time between
+//!   them is right (timing the command by its request made every estimate a transaction late).
 //!
-//! The reads an estimate needs are few (`ESTIMATE_READS` per move), so the schedule sends them
-//! first and outside the per-cycle share of position reads, each when the mover's position is
-//! due (right after the command, then a share period later). Before this model the second read,
-//! still in the acceleration, set a speed far below the one the axis reached, and the estimate
-//! was late by tens of milliseconds (`rt-bench`: movers seen complete up to 9 transactions
-//! after they entered their band). A mover whose command was accepted counts as moving until
-//! a status says otherwise (`unseen`): its last status, from before the command, says it
-//! stands.
+//! The estimate aims a quarter of the acceleration time before the end: PFIN comes when the
+//! axis enters its position band, before the target (§4-3-1), and the schedule polls it from
+//! then on. A move the gateway cannot model (a home, a point whose row it does not hold or whose
+//! motion comes from the common parameters, a move before any `v`, one too short to reach its
+//! speed) has no estimate, and the schedule polls its axis as often as the bus allows. (An
+//! earlier model took the speed between reads without the acceleration time: a read in the
+//! acceleration made it up to 7 transactions early or late, docs/performance.md.) A mover whose
+//! command was accepted counts as moving until a status says otherwise (`unseen`): its last
+//! status, from before the command, says it stands.
 //!
 //! A move ends in its position band, not at rest, so the estimate's last duty is the stop: the
-//! stopped axis is read again until two reads agree ([`SETTLE_READS`]), so that the position the
-//! PLC sees is where the axis came to rest.
+//! stopped axis is read again until two reads agree ([`SETTLE_READS`]), or one finds it at the
+//! move's target (a trapezoid ends at rest there), so that the position the PLC sees is where
+//! the axis came to rest.
 
 use core::num::NonZeroU32;
 
-use crate::div::div;
+use crate::div::{div, divisor};
 use crate::time::{Duration, Instant};
-use crate::{Command, Pulses};
+use crate::{Acceleration, Command, Pulses, Velocity};
+
+use super::job::PointAim;
 
 /// What the engine expects of one axis' move.
 #[derive(Clone, Copy, Debug)]
@@ -51,16 +52,14 @@ pub(super) struct Approach {
     target: Option<Pulses>,
     /// When its command was answered: position reads before it belong to an earlier move.
     since: Instant,
-    /// Where it was then (the last position read), if it rested there: the first point of its
-    /// speed.
+    /// Where the move started, if known (the module's doc). Once it stopped at its target,
+    /// that target: a read there finds it at rest, and the next move starts there.
     start: Option<Pulses>,
     /// When it is expected at its target, if `eta_known`.
     // Not an `Option<Instant>`: 8 bytes more per axis, in a node the F103 budget holds to the
     // byte.
     eta: Instant,
     eta_known: bool,
-    /// Whether `eta` comes from two reads during the move (at its speed), not from its start.
-    measured: bool,
     /// Position reads since the command: bounds the reads an estimate may ask for.
     reads: u8,
     /// A move command was accepted and no status seen since: the axis moves although its last
@@ -68,11 +67,15 @@ pub(super) struct Approach {
     unseen: bool,
     /// Position reads left to find where a stopped axis came to rest ([`SETTLE_READS`]).
     settle_reads: u8,
+    /// How long the axis accelerates to its speed, µs (0: not known): what the velocity and
+    /// acceleration of its execution area make of it ([`ramp_time`]), from the last `v` or
+    /// the cached row of the point it moved to. Kept from move to move.
+    ramp: u32,
 }
 
-/// The position reads a move's estimate may ask for beyond the per-cycle share (one from its
-/// start, one at its speed, one spare for a read that came before the axis started).
-const ESTIMATE_READS: u8 = 3;
+/// The position reads a move's estimate may ask for beyond the per-cycle share: one, and one
+/// spare for a read that came too early (the axis started late) or from a move too short.
+const ESTIMATE_READS: u8 = 2;
 
 /// The position reads that may follow a stop until two in a row agree, each at least
 /// [`SETTLE_GAP`] after the one before. A controller reports positioning complete (PFIN) when the
@@ -94,51 +97,74 @@ impl Approach {
         start: None,
         eta: Instant::ZERO,
         eta_known: false,
-        measured: false,
         reads: 0,
         unseen: false,
         settle_reads: 0,
+        ramp: 0,
     };
 
-    /// A move command was accepted at `now`, with the position last read (for a relative
-    /// move) and, for a move to a point, the point's position if its job knows it. Other
-    /// commands leave the estimate alone.
+    /// A command answered at `now` was accepted, with the position last read (for a relative
+    /// move) and, for a move to a point, what its job knows of the point. A move starts an
+    /// estimate; a `v` sets the acceleration time of the moves after it; other commands leave
+    /// the estimate alone.
+    #[inline(never)]
     pub(super) fn command_accepted(
         &mut self,
         now: Instant,
         command: &Command,
         at: Option<Pulses>,
-        point_at: Option<Pulses>,
+        point: Option<PointAim>,
     ) {
         let target = match *command {
             Command::MoveAbsolute(to) => Some(to),
             Command::MoveRelative(by) => at.map(|from| Pulses(from.0.saturating_add(by.0))),
-            // A point's position is not in the command: only if its job knows it.
-            Command::MoveToPoint(_) => point_at,
+            // A point's position is not in the command: only if its job knows it. Its row's
+            // velocity and acceleration are now the execution area's (complete edition §7-3-2),
+            // or the common defaults when its flags say so, which the gateway does not know.
+            Command::MoveToPoint(_) => {
+                self.ramp = point
+                    .and_then(|p| p.motion)
+                    .map_or(0, |(v, a)| ramp_time(v, a));
+                point.map(|p| p.position)
+            }
             // A home's is not known: no estimate.
             Command::Home(_) => None,
+            Command::SetVelocityAcceleration {
+                velocity,
+                acceleration,
+            } => {
+                self.ramp = ramp_time(velocity, acceleration);
+                return;
+            }
             _ => return,
         };
         // Where the axis rests, if it does: a position read while the last move was still
-        // ending (or settling in its band) is not where this one starts, and would make its
-        // acceleration look longer than it was (`lost`), the estimate late (`scripts/bench.sh`,
-        // scenario 6, moves given as soon as the last one is seen complete).
+        // ending is not where this one starts. Seen complete and not read at rest yet, it is in
+        // the band of the target it went to, a band's width from where it rests: its start as
+        // near as the gateway knows it (the PLC gives the next move as soon as it sees PEND,
+        // before the read at rest: `rt-bench`).
         let rested = self.target.is_none() && !self.unseen && self.settle_reads == 0;
+        let start = if rested {
+            at
+        } else {
+            self.start.filter(|_| self.settling())
+        };
         *self = Approach {
             target,
             since: now,
-            start: at.filter(|_| rested),
+            start,
             eta: Instant::ZERO,
             eta_known: false,
-            measured: false,
             reads: 0,
             unseen: true,
             settle_reads: 0,
+            ramp: self.ramp,
         };
     }
 
     /// A position read answered at `now` (`position`), after the one before (`previous`): the
-    /// estimate of the phase the move is in (the module's doc).
+    /// estimate, or a step of the settling after a stop.
+    #[inline(never)]
     pub(super) fn position_read(
         &mut self,
         now: Instant,
@@ -147,61 +173,29 @@ impl Approach {
     ) {
         let Some(target) = self.target else {
             // Stopped (or a move without a target, where nothing settles): at rest once a read
-            // agrees with the one before.
+            // agrees with the one before, or finds it at its target (a trapezoid's speed is nil
+            // there: one read less after most moves).
             if let Some(left) = self.settle_reads.checked_sub(1) {
-                let agrees = previous.is_some_and(|(before, _)| before == position);
+                let agrees = previous.is_some_and(|(before, _)| before == position)
+                    || self.start == Some(position);
                 self.settle_reads = if agrees { 0 } else { left };
             }
             return;
         };
         self.reads = self.reads.saturating_add(1);
-        let previous = previous.filter(|&(_, at)| at >= self.since);
-        let (t, before) = (
-            self.elapsed(now),
-            previous.map(|(p, at)| (p, self.elapsed(at))),
-        );
-        let (from, elapsed, lost, measured) = match (before, self.start) {
-            // Cruising: at its speed between the two reads, plus half the time its
-            // acceleration lost (its braking loses as much: see `lost`).
-            (Some((before, early)), Some(start))
-                if !accelerating(start, before, early, position, t) =>
-            {
-                let elapsed = t.saturating_sub(early);
-                (
-                    before,
-                    elapsed,
-                    lost(start, t, before, position, elapsed),
-                    true,
-                )
-            }
-            // Without the position at the command: at the speed between the reads.
-            (Some((before, early)), None) => (before, t.saturating_sub(early), 0, true),
-            // Still accelerating (or the first read of the move): twice the mean speed since
-            // the command, the speed it has now if it accelerates evenly from a standstill.
-            (_, Some(start)) => (start, t / 2, 0, false),
-            (None, None) => return,
+        let Some(start) = self.start else {
+            return;
         };
-        let left = time_left(position, target, from, elapsed);
-        // Less left than its acceleration covered: it brakes, slower than between the reads.
-        // The estimate from its cruise stands.
-        if self.measured && left.is_some_and(|left| left < u64::from(lost)) {
+        // Once it brakes (by the estimate: three quarters of a ramp before the aim) a read
+        // would give a speed too low: the estimate stands.
+        if self.eta_known && now + Duration(u64::from(self.ramp / 4 * 3)) > self.eta {
             return;
         }
-        self.eta = now + Duration(left.unwrap_or(0).saturating_add(u64::from(lost / 2)));
-        self.eta_known = left.is_some();
-        self.measured = measured && self.eta_known;
-    }
-
-    /// µs from the command to `at`, in 32 bits (71 minutes, saturating: no move's estimate
-    /// needs more).
-    // 32-bit products spare the F103 64-bit multiplications.
-    fn elapsed(&self, at: Instant) -> u32 {
-        u32::try_from(at.0.saturating_sub(self.since.0)).unwrap_or(u32::MAX)
-    }
-
-    /// Whether the axis' move has a target, so that position reads can estimate its arrival.
-    pub(super) fn has_target(&self) -> bool {
-        self.target.is_some()
+        let t = u32::try_from(now.0.saturating_sub(self.since.0)).unwrap_or(u32::MAX);
+        if let Some(end) = trapezoid_end(start, position, target, self.ramp, t) {
+            self.eta = self.since + Duration(end - u64::from(self.ramp / 4));
+            self.eta_known = true;
+        }
     }
 
     /// A `t` started the move this axis had buffered, at `now`: it moves, although its last
@@ -230,30 +224,47 @@ impl Approach {
         self.unseen
     }
 
-    /// Whether a position read would give (or correct) the estimate: the move has a target, its
-    /// speed is not measured yet, and it has not had its share of reads.
+    /// Whether its arrival can be estimated (the module's doc), and is not yet: a read
+    /// would give it.
     pub(super) fn needs_read(&self) -> bool {
-        self.target.is_some() && !self.measured && self.reads < ESTIMATE_READS
+        self.timed() && !self.eta_known && self.reads < ESTIMATE_READS
     }
 
-    /// Whether the axis' arrival is estimated from its speed (its position need not be read as
-    /// often any more).
-    pub(super) fn estimated(&self) -> bool {
-        self.measured
+    /// Whether its position is to be read at `now` for the estimate: it needs one, and the
+    /// acceleration is over (a read before it tells the speed least well).
+    pub(super) fn read_due(&self, now: Instant) -> bool {
+        self.needs_read() && now >= self.since + Duration(u64::from(self.ramp))
+    }
+
+    /// Whether its arrival can be estimated: its start, target and acceleration time are known.
+    pub(super) fn timed(&self) -> bool {
+        self.target.is_some() && self.start.is_some() && self.ramp > 0
     }
 
     /// The axis is not moving any more (or never started): nothing to expect.
     pub(super) fn clear(&mut self) {
-        *self = Approach::NONE;
-    }
-
-    /// The axis stopped: nothing to expect of its move, but its position is read until it
-    /// rests ([`SETTLE_READS`]).
-    pub(super) fn stopped(&mut self) {
         *self = Approach {
-            settle_reads: SETTLE_READS,
+            ramp: self.ramp,
             ..Approach::NONE
         };
+    }
+
+    /// The axis stopped (`arrived`: positioning complete, in its target's band): nothing to
+    /// expect of its move, but its position is read until it rests ([`SETTLE_READS`]).
+    #[inline(never)]
+    pub(super) fn stopped(&mut self, arrived: bool) {
+        *self = Approach {
+            settle_reads: SETTLE_READS,
+            start: self.target.filter(|_| arrived),
+            ramp: self.ramp,
+            ..Approach::NONE
+        };
+    }
+
+    /// A stop (`d`) was accepted: the move ends short of its target, and is not expected there.
+    pub(super) fn cancelled(&mut self) {
+        self.target = None;
+        self.eta_known = false;
     }
 
     /// Whether the axis stopped and its position has not been seen to rest yet.
@@ -267,53 +278,41 @@ impl Approach {
     }
 }
 
-/// The µs an axis at `position` takes to reach `target`, having come from `before` in
-/// `elapsed_us` µs at the same speed; `None` if it does not move toward the target.
-fn time_left(position: Pulses, target: Pulses, before: Pulses, elapsed_us: u32) -> Option<u64> {
-    let remaining = target.0.abs_diff(position.0);
-    if remaining == 0 {
-        return Some(0);
-    }
-    let moved = NonZeroU32::new(position.0.abs_diff(before.0))?;
-    if (position.0 > before.0) != (target.0 > position.0) {
+/// The acceleration time (µs) of a move at `velocity` (0.2 rpm) reached at `acceleration`
+/// (0.1 rpm/ms): 2 × velocity / acceleration ms, whatever the lead and the encoder (complete
+/// edition §4-4-20, `v`; the same units as a point's VCMD and ACMD, §7-2-2).
+fn ramp_time(velocity: Velocity, acceleration: Acceleration) -> u32 {
+    2_000 * u32::from(velocity.get()) / u32::from(acceleration.get()).max(1)
+}
+
+/// When (µs after its start) a move from `start` to `target` ends, from a read at `position`
+/// `t` µs after its start, if it accelerates evenly for `ramp` µs to its speed, cruises, and
+/// brakes as long (MXAC 0, complete edition §7-2-1); `None` if the read tells nothing: before
+/// half its acceleration (where the transaction's part of `t` weighs most), away from the
+/// target, or a move too short to reach its speed.
+fn trapezoid_end(
+    start: Pulses,
+    position: Pulses,
+    target: Pulses,
+    ramp: u32,
+    t: u32,
+) -> Option<u64> {
+    let covered = NonZeroU32::new(position.0.abs_diff(start.0))?;
+    if ramp == 0 || t < ramp / 2 || (position.0 > start.0) != (target.0 > start.0) {
         return None;
     }
-    // 32 x 32 bits: no overflow, and no 64-bit division routine (crate::div).
-    Some(div(u64::from(remaining) * u64::from(elapsed_us), moved))
-}
-
-/// Whether an axis that left `start` at the command still accelerated between a read `before`,
-/// `early` µs after the command, and one at `position`, `late` µs after it: an even
-/// acceleration from a standstill covers a distance in proportion to the square of its time,
-/// so the distance over the square of the time stays the same while it accelerates and falls
-/// once it cruises.
-///
-/// A read in the first quarter of the time tells nothing: the axis starts when its controller
-/// takes the command, up to a transaction before the engine's `since` (its answer), so a read
-/// 4 ms after the answer may find it 7 ms under way. Counted as accelerating, the safe side (the
-/// speed from the start errs early).
-fn accelerating(start: Pulses, before: Pulses, early: u32, position: Pulses, late: u32) -> bool {
-    // In ms, up to 65 s: each product fits its type.
-    let (early, late) = ((early >> 10).min(0xFFFF), (late >> 10).min(0xFFFF));
-    early * 4 < late
-        || u64::from(position.0.abs_diff(start.0)) * u64::from(early * early)
-            >= u64::from(before.0.abs_diff(start.0)) * u64::from(late * late)
-}
-
-/// The time (µs) an axis that left `start` at the command, `elapsed` µs ago, lost to its
-/// acceleration against its speed now (from `before` to `position` in `step_us` µs, its last
-/// two reads): the time it has been under way less the time its distance takes at that speed.
-/// It brakes as long as it accelerated (the deceleration follows the acceleration value unless
-/// MXAC says otherwise, complete edition §7-2-1; with MXAC the acceleration is the harder, and
-/// the estimate earlier), so a constant-speed extrapolation is early by half the braking time,
-/// which is this.
-fn lost(start: Pulses, elapsed: u32, before: Pulses, position: Pulses, step_us: u32) -> u32 {
-    let Some(step) = NonZeroU32::new(position.0.abs_diff(before.0)) else {
-        return 0;
+    let distance = u64::from(target.0.abs_diff(start.0));
+    // The time the whole distance takes at its speed (its cruise plus one ramp).
+    let at_speed = if t >= ramp {
+        // Cruising: covered = speed × (t − ramp / 2).
+        div(distance * u64::from(t - ramp / 2), covered)
+    } else {
+        // Accelerating: covered = speed × t² / (2 ramp).
+        let half = div(distance * u64::from(t / 2), covered);
+        div(half.saturating_mul(u64::from(t)), divisor(ramp))
     };
-    let distance = u64::from(position.0.abs_diff(start.0));
-    let at_speed = div(distance * u64::from(step_us), step);
-    elapsed.saturating_sub(u32::try_from(at_speed).unwrap_or(u32::MAX))
+    // Reaching its speed and braking from it take a ramp's distance.
+    (at_speed >= u64::from(ramp)).then(|| at_speed + u64::from(ramp))
 }
 
 #[cfg(test)]
@@ -321,37 +320,6 @@ mod tests {
     use super::*;
 
     const MS: u64 = 1_000;
-
-    #[test]
-    fn extrapolates_the_speed_between_two_reads_to_the_target() {
-        let mut a = Approach::NONE;
-        a.command_accepted(
-            Instant(0),
-            &Command::MoveAbsolute(Pulses(10_000)),
-            None,
-            None,
-        );
-        // 1000 pulses in 100 ms, 6000 to go: 600 ms.
-        a.position_read(
-            Instant(200 * MS),
-            Pulses(4_000),
-            Some((Pulses(3_000), Instant(100 * MS))),
-        );
-        assert_eq!(a.eta(), Some(Instant(800 * MS)));
-        // Backwards, relative.
-        a.command_accepted(
-            Instant(0),
-            &Command::MoveRelative(Pulses(-5_000)),
-            Some(Pulses(10_000)),
-            None,
-        );
-        a.position_read(
-            Instant(50 * MS),
-            Pulses(9_000),
-            Some((Pulses(9_500), Instant(25 * MS))),
-        );
-        assert_eq!(a.eta(), Some(Instant(50 * MS + 200 * MS)));
-    }
 
     /// Where a trapezoidal move from 0 to `distance` is at `t` ms: accelerating evenly for
     /// `ramp` ms to `speed` pulses/ms, cruising, braking as long as it accelerated.
@@ -370,96 +338,109 @@ mod tests {
         p.round() as i32
     }
 
+    /// rt-bench's `v`: 20 pulses/ms (7500 × 0.2 rpm at 800 pulses a turn) reached in 68.18 ms
+    /// (ACMD 220: 2 × 7500 / 220 ms).
+    fn bench_v() -> Command {
+        match (Velocity::new(7_500), Acceleration::new(220)) {
+            (Some(velocity), Some(acceleration)) => Command::SetVelocityAcceleration {
+                velocity,
+                acceleration,
+            },
+            _ => Command::Status,
+        }
+    }
+
     #[test]
-    fn a_move_is_expected_early_but_near_its_end_after_its_acceleration() {
-        // rt-bench's moves: 40 mm at 200 mm/s, 68 ms of acceleration (0.3 G); 268 ms in all.
-        let (distance, speed, ramp) = (4_000.0, 20.0, 68.0);
-        let end = distance / speed + ramp;
+    fn no_estimate_without_a_target_a_start_an_acceleration_time_or_progress() {
         let mut a = Approach::NONE;
+        let point = Command::MoveToPoint(crate::PositionNo::MIN);
+        a.command_accepted(Instant(0), &point, Some(Pulses(0)), None);
+        a.position_read(Instant(80 * MS), Pulses(1_000), None);
+        assert_eq!(a.eta(), None, "a point's position is unknown here");
+        // Known to its job (the gateway's cached row), but its motion from the common
+        // parameters: no acceleration time.
+        let row = |motion| {
+            Some(PointAim {
+                position: Pulses(4_000),
+                motion,
+            })
+        };
+        a.command_accepted(Instant(0), &point, Some(Pulses(0)), row(None));
+        a.position_read(Instant(80 * MS), Pulses(1_000), None);
+        assert!(a.eta().is_none() && !a.timed());
+        // With its own: estimated as an `a` after a `v` is.
+        let motion = match bench_v() {
+            Command::SetVelocityAcceleration {
+                velocity,
+                acceleration,
+            } => Some((velocity, acceleration)),
+            _ => None,
+        };
+        a.clear();
+        a.command_accepted(Instant(0), &point, Some(Pulses(0)), row(motion));
+        let at = |t| Pulses(trapezoid(4_000.0, 20.0, 68.18, t));
+        a.position_read(Instant(80 * MS), at(80.0), None);
+        assert!(a.eta().is_some());
+        // The same `a` without a start (the axis was not seen at rest): none.
+        a.command_accepted(
+            Instant(0),
+            &Command::MoveAbsolute(Pulses(4_000)),
+            None,
+            None,
+        );
+        a.position_read(Instant(80 * MS), at(80.0), None);
+        assert_eq!(a.eta(), None, "no start");
+        // From a known start: not while it stands, nor while it moves away.
+        a.clear();
         a.command_accepted(
             Instant(0),
             &Command::MoveAbsolute(Pulses(4_000)),
             Some(Pulses(0)),
             None,
         );
-        let mut previous = None;
-        let mut etas = [0.0; 5];
-        for (i, t) in [4.0, 65.0, 135.0, 205.0, 250.0].into_iter().enumerate() {
-            let now = Instant((t * 1_000.0) as u64);
-            let at = Pulses(trapezoid(distance, speed, ramp, t));
-            a.position_read(now, at, previous);
-            previous = Some((at, now));
-            etas[i] = a.eta().map_or(f64::NAN, |eta| eta.0 as f64 / 1_000.0);
-        }
-        // Never late (a late estimate leaves the axis unpolled past its end) once it has moved
-        // more than a pulse or two (4 ms after the command: provisional, not `estimated`).
-        for (i, eta) in etas.iter().enumerate().skip(1) {
-            assert!(*eta <= end, "read {i}: {eta} ms, the move ends at {end} ms");
-        }
-        // Accelerating (65 ms): at the speed it has, within its braking time.
-        assert!(etas[1] >= end - ramp, "{etas:?}");
-        // Cruising: within a quarter of the ramp (half the braking time, which the position band
-        // partly covers), not half the braking time early as a constant speed would be.
-        for eta in &etas[2..] {
-            assert!(*eta >= end - ramp / 4.0 - 1.0, "{etas:?}");
-        }
-        assert!(a.estimated());
-    }
-
-    #[test]
-    fn no_estimate_without_a_target_a_sample_of_this_move_or_progress() {
-        let mut a = Approach::NONE;
-        a.command_accepted(
-            Instant(0),
-            &Command::MoveToPoint(crate::PositionNo::MIN),
-            None,
-            None,
-        );
-        a.position_read(Instant(20), Pulses(5), Some((Pulses(0), Instant(10))));
-        assert_eq!(a.eta(), None, "a point's position is unknown here");
-        // Known to its job (the gateway's cached row): estimated as an `a` is.
-        a.command_accepted(
-            Instant(0),
-            &Command::MoveToPoint(crate::PositionNo::MIN),
-            None,
-            Some(Pulses(105)),
-        );
-        a.position_read(Instant(20), Pulses(5), Some((Pulses(0), Instant(10))));
-        assert_eq!(
-            a.eta(),
-            Some(Instant(20 + 200)),
-            "100 pulses left at 0.5 pulse/µs"
-        );
-        a.command_accepted(
-            Instant(100),
-            &Command::MoveAbsolute(Pulses(1_000)),
-            None,
-            None,
-        );
-        a.position_read(Instant(120), Pulses(5), Some((Pulses(0), Instant(90))));
-        assert_eq!(a.eta(), None, "the earlier read is from before the move");
-        a.position_read(Instant(140), Pulses(5), Some((Pulses(5), Instant(120))));
+        a.position_read(Instant(80 * MS), Pulses(0), None);
         assert_eq!(a.eta(), None, "standing still");
-        a.position_read(Instant(160), Pulses(0), Some((Pulses(5), Instant(140))));
+        a.position_read(Instant(90 * MS), Pulses(-5), None);
         assert_eq!(a.eta(), None, "moving away");
-        a.position_read(Instant(180), Pulses(1_000), Some((Pulses(0), Instant(160))));
-        assert_eq!(a.eta(), Some(Instant(180)), "there");
+        assert!(!a.needs_read(), "two reads spent");
         a.clear();
         assert_eq!(a.eta(), None);
     }
 
+    /// A position read of a stopped axis at `position`, `before` the read before.
+    fn read(a: &mut Approach, position: i32, before: i32) {
+        a.position_read(
+            Instant(0),
+            Pulses(position),
+            Some((Pulses(before), Instant(0))),
+        )
+    }
+
+    #[test]
+    fn a_stopped_axis_read_at_its_target_rests_there() {
+        let mut a = Approach::NONE;
+        a.command_accepted(
+            Instant(0),
+            &Command::MoveAbsolute(Pulses(5_000)),
+            Some(Pulses(0)),
+            None,
+        );
+        a.stopped(true);
+        read(&mut a, 4_994, 3_000);
+        assert!(a.settling(), "short of its target, in its band");
+        read(&mut a, 5_000, 4_994);
+        assert!(!a.settling(), "at its target: one read, not two that agree");
+        // A stop without a target (a home's, a point's the job does not know) needs two.
+        a.stopped(true);
+        read(&mut a, 5_000, 4_994);
+        assert!(a.settling());
+    }
+
     #[test]
     fn a_stopped_axis_settles_when_two_reads_agree_or_after_its_reads() {
-        let read = |a: &mut Approach, position: i32, before: i32| {
-            a.position_read(
-                Instant(0),
-                Pulses(position),
-                Some((Pulses(before), Instant(0))),
-            )
-        };
         let mut a = Approach::NONE;
         assert!(!a.settling(), "not stopped");
-        a.stopped();
+        a.stopped(true);
         assert!(a.settling());
         read(&mut a, 4_994, 3_000);
         read(&mut a, 5_000, 4_994);
@@ -467,7 +448,7 @@ mod tests {
         read(&mut a, 5_000, 5_000);
         assert!(!a.settling(), "two reads agree");
         // A servo hunting a pulse either side: read no more than SETTLE_READS times.
-        a.stopped();
+        a.stopped(true);
         for i in 0..SETTLE_READS {
             assert!(a.settling(), "read {i}");
             read(
@@ -478,27 +459,147 @@ mod tests {
         }
         assert!(!a.settling());
         // A new move ends it.
-        a.stopped();
+        a.stopped(true);
         a.command_accepted(Instant(0), &Command::MoveAbsolute(Pulses(0)), None, None);
         assert!(!a.settling());
     }
 
     #[test]
-    fn other_commands_keep_the_estimate_and_extremes_do_not_overflow() {
+    fn one_read_and_the_acceleration_time_give_the_end_of_the_move() {
+        // rt-bench's moves: 4000 pulses, 268.18 ms in all.
+        let (distance, speed, ramp) = (4_000.0, 20.0, 68.18);
+        let end = distance / speed + ramp;
+        let moving = |to: i32, at: Option<i32>| {
+            let mut a = Approach::NONE;
+            a.command_accepted(Instant(0), &bench_v(), None, None);
+            a.command_accepted(
+                Instant(0),
+                &Command::MoveAbsolute(Pulses(to)),
+                at.map(Pulses),
+                None,
+            );
+            a
+        };
+        for t in [40.0, 70.0, 120.0, 180.0] {
+            let mut a = moving(4_000, Some(0));
+            assert!(!a.read_due(Instant(60 * MS)), "in its acceleration");
+            assert!(a.read_due(Instant(70 * MS)));
+            let now = Instant((t * 1_000.0) as u64);
+            a.position_read(now, Pulses(trapezoid(distance, speed, ramp, t)), None);
+            // Aimed a quarter of the ramp before the end, within a millisecond (a pulse read
+            // early in the acceleration weighs most; a transaction takes 4 ms or more).
+            let eta = a.eta().map(|eta| eta.0 as f64 / 1_000.0);
+            let aim = end - ramp / 4.0;
+            assert!(
+                eta.is_some_and(|eta| (eta - aim).abs() < 1.0),
+                "read at {t} ms: {eta:?}, not {aim}"
+            );
+            assert!(!a.needs_read());
+            // A read once it brakes (its speed lower) leaves the estimate as it is.
+            let late = Instant(250 * MS);
+            a.position_read(late, Pulses(trapezoid(distance, speed, ramp, 250.0)), None);
+            assert_eq!(a.eta().map(|eta| eta.0 as f64 / 1_000.0), eta);
+        }
+        // Backwards, from a relative move.
         let mut a = Approach::NONE;
+        a.command_accepted(Instant(0), &bench_v(), None, None);
         a.command_accepted(
             Instant(0),
-            &Command::MoveAbsolute(Pulses(i32::MAX)),
-            None,
+            &Command::MoveRelative(Pulses(-4_000)),
+            Some(Pulses(4_000)),
             None,
         );
         a.position_read(
-            Instant(u64::MAX / 2),
-            Pulses(i32::MIN + 1),
-            Some((Pulses(i32::MIN), Instant(0))),
+            Instant(100 * MS),
+            Pulses(4_000 - trapezoid(distance, speed, ramp, 100.0)),
+            None,
         );
-        assert_eq!(a.eta(), Some(Instant(u64::MAX)), "saturates");
+        assert!(a
+            .eta()
+            .is_some_and(|eta| (eta.0 as f64 / 1_000.0 - (end - ramp / 4.0)).abs() < 1.0));
+        // Before half its ramp a read tells too little: no estimate, and another read is due.
+        let mut a = moving(4_000, Some(0));
+        a.position_read(
+            Instant(20 * MS),
+            Pulses(trapezoid(distance, speed, ramp, 20.0)),
+            None,
+        );
+        assert!(a.eta().is_none() && a.needs_read());
+        // A move too short to reach its speed (a triangle: under 1364 pulses) is not a
+        // trapezoid: no estimate.
+        let mut a = moving(600, Some(0));
+        a.position_read(
+            Instant(60 * MS),
+            Pulses(trapezoid(distance, speed, ramp, 60.0)),
+            None,
+        );
+        assert!(a.eta().is_none());
+    }
+
+    #[test]
+    fn the_next_move_starts_where_the_last_arrived_unless_a_stop_ended_it() {
+        let mut a = Approach::NONE;
+        let v = Command::SetVelocityAcceleration {
+            velocity: Velocity::MAX,
+            acceleration: Acceleration::MIN,
+        };
+        a.command_accepted(Instant(0), &v, None, None);
+        a.command_accepted(
+            Instant(0),
+            &Command::MoveAbsolute(Pulses(4_000)),
+            Some(Pulses(0)),
+            None,
+        );
+        assert!(a.timed());
+        // Seen complete, not read at rest yet (in its band): it starts at the last target.
+        a.stopped(true);
+        a.command_accepted(
+            Instant(1),
+            &Command::MoveAbsolute(Pulses(0)),
+            Some(Pulses(3_990)),
+            None,
+        );
+        assert!(a.timed(), "the arrived target is the start");
+        // Stopped short (a `d`, an alarm): where it is is not known until it rests.
+        a.cancelled();
+        a.stopped(true);
+        a.command_accepted(
+            Instant(2),
+            &Command::MoveAbsolute(Pulses(4_000)),
+            Some(Pulses(2_000)),
+            None,
+        );
+        assert!(!a.timed());
+        a.stopped(false);
+        a.command_accepted(
+            Instant(3),
+            &Command::MoveAbsolute(Pulses(0)),
+            Some(Pulses(2_000)),
+            None,
+        );
+        assert!(!a.timed());
+    }
+
+    #[test]
+    fn other_commands_keep_the_estimate_and_extremes_do_not_overflow() {
+        let mut a = Approach::NONE;
+        let slowest = Command::SetVelocityAcceleration {
+            velocity: Velocity::MAX,
+            acceleration: Acceleration::MIN,
+        };
+        a.command_accepted(Instant(u64::MAX - 1), &slowest, None, None);
+        let far = Command::MoveAbsolute(Pulses(i32::MAX));
+        a.command_accepted(Instant(u64::MAX - 1), &far, Some(Pulses(i32::MIN)), None);
+        a.position_read(Instant(u64::MAX), Pulses(i32::MIN + 1), None);
+        assert_eq!(a.eta(), None, "a microsecond in: not half its ramp");
+        // (At rest again: the start is where it was read.)
+        a.clear();
+        a.command_accepted(Instant(0), &far, Some(Pulses(i32::MIN)), None);
+        a.position_read(Instant(u64::MAX), Pulses(i32::MIN + 1), None);
+        // 2^32 pulses at one every 71 minutes: far ahead, and no overflow on the way.
+        let eta = a.eta();
+        assert!(eta.is_some_and(|eta| eta.0 > u64::MAX / 2), "{eta:?}");
         a.command_accepted(Instant(1), &Command::Status, None, None);
-        assert_eq!(a.eta(), Some(Instant(u64::MAX)));
+        assert_eq!(a.eta(), eta);
     }
 }

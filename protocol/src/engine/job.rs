@@ -18,6 +18,18 @@ use crate::{
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct JobId(pub u32);
 
+/// What a move to a point goes by, from the point's row: where it ends, and how fast it gets
+/// there.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PointAim {
+    /// The point's position.
+    pub position: Pulses,
+    /// Its velocity and acceleration, if the row's own count (its flags), not the common
+    /// defaults.
+    pub motion: Option<(Velocity, Acceleration)>,
+}
+
 /// What to do with one axis.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -29,10 +41,10 @@ pub enum JobKind {
     /// The homing procedure (complete edition §6-2): wait ready (PFIN), `o`, wait for ZFIN,
     /// then read the position (0), so that it is known when the job is done.
     Home(HomeDirection),
-    /// Q3, then wait for positioning complete. With the point's position, if the submitter
-    /// knows it (the gateway's cached row): the Q3 does not say where the axis goes, and only
-    /// a known target lets the schedule estimate the arrival.
-    MoveToPoint(PositionNo, Option<Pulses>),
+    /// Q3, then wait for positioning complete. With what the submitter knows of the point (the
+    /// gateway's cached row): the Q3 does not say where the axis goes, and only a known target
+    /// lets the schedule estimate the arrival.
+    MoveToPoint(PositionNo, Option<PointAim>),
     /// `a`, then wait for positioning complete.
     MoveAbsolute(Pulses),
     /// `m`, then wait. Never resent on time-out: the outcome is then unknown (§5 (2)).

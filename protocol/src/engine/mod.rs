@@ -68,7 +68,7 @@ mod transaction;
 
 pub use axis::{AxisState, Counters, Link, LinkError};
 pub use config::{Config, MAX_RETRIES};
-pub use job::{Job, JobError, JobId, JobKind, JobOutput};
+pub use job::{Job, JobError, JobId, JobKind, JobOutput, PointAim};
 pub use output::{BusCounters, Event, Output, SubmitError};
 
 use establish::Phase;

@@ -55,6 +55,11 @@ impl Engine {
         }
         if let Some(report) = reply.report() {
             self.update_report(now, axis, *report);
+            if flight.origin == Origin::Job {
+                // A job's direct command answered with the axis' status, as a poll would have
+                // (complete edition §3-1-2): the next poll counts from it.
+                self.schedule.reported(now, axis);
+            }
         }
         let reads_pnow =
             matches!(flight.request.command, Command::ReadMemory { address } if address == PNOW);
@@ -84,7 +89,7 @@ impl Engine {
             let at = self.axes[axis].position;
             // A point's position is not in its Q3: the job may know it. A `t` starts the moves
             // its axes buffered.
-            let (point_at, started) = match self.active[axis].as_ref().map(|a| a.job.kind) {
+            let (point, started) = match self.active[axis].as_ref().map(|a| a.job.kind) {
                 Some(JobKind::MoveToPoint(_, target)) => (target, AxisSet::EMPTY),
                 Some(JobKind::StartBuffered(axes))
                     if matches!(flight.request.command, Command::ExecuteBuffered) =>
@@ -93,12 +98,9 @@ impl Engine {
                 }
                 _ => (None, AxisSet::EMPTY),
             };
-            self.schedule.approach(axis).command_accepted(
-                now,
-                &flight.request.command,
-                at,
-                point_at,
-            );
+            self.schedule
+                .approach(axis)
+                .command_accepted(now, &flight.request.command, at, point);
             for a in started.iter() {
                 self.schedule.approach(a).started(now);
             }
@@ -111,6 +113,9 @@ impl Engine {
                     (None, Some(report)) => Ok(JobOutput::Status(*report)),
                     (None, None) => Ok(JobOutput::Done),
                 };
+                if result.is_ok() {
+                    self.schedule.approach(axis).cancelled();
+                }
                 self.emit(Event::JobDone { id, axis, result });
             }
             Origin::Job => self.job_reply(now, axis, &reply),
@@ -180,16 +185,15 @@ impl Engine {
         state.report_at = Some(now);
         let moving = state.moving();
         self.schedule.approach(axis).status_seen();
-        // Just stopped: its position is worth reading. Moving: until its arrival is estimated,
-        // then now and then (the estimate needs no more, and the bus is better spent on the
-        // status polls that see it arrive).
+        // Just stopped: its position is worth reading. (A mover's are read for its estimate
+        // when its acceleration is over, and now and then: the schedule.)
         let stopped = was_moving && !moving;
-        let read_anyway = stopped && !self.job_reads_position(axis);
-        if read_anyway || (moving && self.schedule.approach(axis).needs_read()) {
+        if stopped && !self.job_reads_position(axis) {
             self.schedule.position_due(axis);
         }
         if stopped {
-            self.schedule.approach(axis).stopped();
+            let arrived = report.outputs.pfin();
+            self.schedule.approach(axis).stopped(arrived);
         }
         if changed {
             self.emit(Event::Status { axis, report });

@@ -5,15 +5,15 @@
 //! resends, `Engine::next_transaction`):
 //!
 //! 1. **Arriving movers**, even before job frames. A mover whose arrival is estimated
-//!    ([`approach`](super::approach): its target, and its speed between two position reads) is
-//!    polled from that moment on, for up to a cycle, the one polled longest ago first; at most
-//!    [`ARRIVAL_RUN`] polls in a row before one other frame.
+//!    ([`approach`](super::approach): its start, target and acceleration time, and one position
+//!    read) is polled from that moment on, for up to a cycle, the one polled longest ago first;
+//!    at most [`ARRIVAL_RUN`] polls in a row before one other frame.
 //! 2. Job frames, at most [`JOB_RUN`] in a row before one frame of the rules below (when
 //!    they have one; never between the attempts of a frame being resent); a rejoining axis'
 //!    next step (the engine), then the polls below.
 //! 3. **Urgent position reads (R4 PNOW)**, not counted in the share below: a mover's estimate
-//!    (a move's first reads), and an axis whose position was never read (every position register
-//!    of the axis waits for it).
+//!    (once its acceleration is over: a read before it tells its speed least well), and an axis
+//!    whose position was never read (every position register of the axis waits for it).
 //! 4. **Idle axes that are due**: [`IDLE_PERIOD_CYCLES`] cycles after their last poll (a cycle
 //!    is one transaction per axis that answers, at the transaction time measured on this bus:
 //!    a pseudo-terminal answers faster than the wire, a slow converter slower), the longest
@@ -21,51 +21,46 @@
 //! 5. **Offline axes** are probed when their probe is due, with a doubling back-off from
 //!    [`FIRST_PROBE`] up to [`Config::probe_interval`], so that an axis lost to a burst of noise
 //!    is back quickly and a dead one costs little; the probe of an axis owed a stop is that
-//!    stop. Before the movers: with one axis online its cycle is one transaction, it is always
-//!    at its limit (rule 7), and the others were never probed while it moved. Now and then a
+//!    stop. Before the movers: with one axis online its cycle is one transaction, a mover
+//!    without an estimate is always due (rule 7), and the others were never probed while it
+//!    moved. Now and then a
 //!    probe is a rejoin try at the power-up settings instead ([`rejoin`](super::rejoin)): one
 //!    such try costs up to 300 ms of bus time (9.6 kbit/s, RTIM 255 ms), so it is started only
 //!    while no axis moves or runs a job (unless [`Config::rejoin_while_moving`]).
 //! 6. **Other position reads**: movers (each as often as its part of the share allows, once a
-//!    cycle at least), axes that just stopped (unless their move job reads it), and axes that
+//!    cycle at least; one whose arrival is or will be estimated every two cycles, the bound of
+//!    an idle axis' status, as its estimate needs no more), axes that just stopped (unless their move job reads it), and axes that
 //!    stopped until two reads agree (they stop in their position band, short of where they
 //!    rest: [`approach`](super::approach)); at most [`Config::position_reads_per_cycle`] per
 //!    cycle.
-//! 7. **Movers a cycle after their last poll** (and axes with a job), the longest waiting
-//!    first: never less than a round robin would give them.
-//! 8. **Status (`n`), earliest deadline first**, among the others: an idle axis, and a mover
+//! 7. **Status (`n`), earliest deadline first**, among the others: an idle axis, and a mover
 //!    whose arrival is estimated but not near, is due [`IDLE_PERIOD_CYCLES`] cycles after its
-//!    last poll; a mover whose estimate is a read away twice a cycle; one whose arrival cannot
-//!    be estimated (a home, a point whose position its job does not carry, a job without a
-//!    move) or is overdue as soon as it has been polled. Ties go to the one polled longest
+//!    last poll; a mover expected within two cycles of its last poll not before its arrival (a
+//!    poll before it would only see it moving, and its status age stays within an idle axis'
+//!    bound; rule 4 passes it over too); a mover whose estimate is a read away twice a cycle;
+//!    one whose arrival cannot be estimated (a home, a point the gateway holds no row of, a
+//!    move before any `v`, one too short to reach its speed, a job without a move) or is
+//!    overdue as soon as it has been polled. Ties go to the one polled longest
 //!    ago, then in axis order from a rotating cursor. Work-conserving: when all are idle nobody waits for a deadline, so the
-//!    axes are polled round robin at the wire limit.
+//!    axes are polled round robin at the wire limit. A job frame's answer carries the axis'
+//!    status as a poll's does (complete edition §3-1-2), so it counts as one: a mover whose job
+//!    sends frames is polled that much less. (A rule that polled every mover and axis with a
+//!    job once a cycle, before the idle axes' deadlines, was dropped: it gave four movers four
+//!    polls a cycle more than their deadlines need, which the idle axes' bound paid for.)
 //!
 //! Measured by `scripts/bench.sh` (scenario 5: four of 16 axes moving at 115.2 kbit/s).
 //!
-//! **The trade-off left** (issue 34, `rt-bench` in docs/performance.md): two movers that arrive
-//! together are polled in turn, and after [`ARRIVAL_RUN`] arrival polls one other frame goes, so
-//! one of them waits 8/3 transactions between polls and is seen up to 1 + 8/3 T after it enters
-//! its band (the 3.6-3.7 T p99 of the real-time runs, against a target of 3). Two movers each
-//! polled every other transaction would take the whole bus while their windows overlap, holding
-//! job frames and idle axes off; estimates within a transaction would keep the windows apart.
-//! And four movers cost some 12 transactions a move (two commands, four position reads, six
-//! status polls: `rt-bench`'s `bus per move`), more than a round leaves the twelve idle axes for a
-//! status age under two cycles in real time (2.4-2.9 there; 1.9 in virtual time, where moves rest
-//! between runs). Why the windows overlap: the estimates are early by 4-5 T on a full bus, where a
-//! move's start point is dropped because the last move's settle reads have not agreed yet; kept,
-//! the estimate aims a quarter of the braking before the stop, which is early or late depending on
-//! the position band and the deceleration, which the gateway does not know (docs/performance.md,
-//! "Where the bus goes"). Kept at RTIM 7, it is worse: a mover's position is read once a cycle,
-//! once in a 290 ms move, and from one read with its start point the estimate is the provisional
-//! one (the speed of an axis still accelerating), 7 T early, with no read after it to correct it;
-//! an estimate right from one read in the cruise needs the acceleration time, which a direct
-//! move's `v` command gives (docs/performance.md, "Which part of the prototype does what").
-//! A prototype with it (and with the arrived target as the next move's start, the estimate read
-//! asked for once the acceleration is over, no status poll of a mover before its arrival when
-//! that is within the idle bound) met the mover target in every `rt-bench` run and left the idle
-//! axes at 2.1-2.5 cycles, short of bus at RTIM 7; it is 740 B over the F103's flash, so it did not
-//! land (docs/performance.md, "The acceleration time, and where the time came from").
+//! **The trade-off left** (issue 34, `rt-bench` in docs/performance.md, "The acceleration time,
+//! and where the time came from"): with the estimate within a transaction or two, movers are
+//! seen 2-3 T after they enter their band (p99; a target of 3), but the idle axes are short of
+//! bus, not of order: at RTIM 7 a direct move costs 6.4 T (`v`, `a`, the estimate's read, one
+//! or two status polls, the read at rest), four movers take 59 % of the bus, and twelve idle
+//! axes polled with the rest wait 1.8 cycles on average, 2.4-2.5 at p99 when the movers' ends
+//! come together (points, one command less: 2.1-2.2; RTIM 3: 2.2). Two cycles at p99 needs
+//! about one frame less per move, which only the `v` (when the axis' execution area holds its
+//! velocity already: the gateway does not track it) or the read at rest (the position the PLC
+//! sees when the move is done) could give. Two movers that arrive together are still polled in
+//! turn, [`ARRIVAL_RUN`] at most before one other frame.
 //!
 //! [`Config::position_reads_per_cycle`]: super::Config::position_reads_per_cycle
 //! [`Config::probe_interval`]: super::Config::probe_interval
@@ -89,7 +84,7 @@ use crate::{Axis, Command, Request, Rtim};
 pub const IDLE_PERIOD_CYCLES: (u64, u64) = (5, 4);
 
 /// Idle axes that are due are polled at most this many times in a row before one frame of the
-/// rules after them (position reads, movers at their limit, probes, the rest): 12, every idle
+/// rules after them (position reads, probes, the rest): 12, every idle
 /// axis of the benchmark's four movers among 16 (scenario 6: 8 left the last ones over their
 /// bound).
 pub const IDLE_RUN: u8 = 12;
@@ -202,6 +197,12 @@ impl Schedule {
         } else {
             timing::transaction_time(on.0, on.1)
         }
+    }
+
+    /// The axis' status came in at `now` in the answer to something other than a poll: its
+    /// status age counts from then.
+    pub(super) fn reported(&mut self, now: Instant, axis: Axis) {
+        self.last_poll[axis] = now;
     }
 
     /// Count every axis' status age from `now` (the bus was busy with something else before).
@@ -342,7 +343,7 @@ impl Engine {
         // always due, and nothing below would ever go.
         self.schedule.idle_run = 0;
         // Before the movers: with few axes online the cycle is a transaction or two, a mover is
-        // always at its limit, and an offline axis (one owed a stop among them) was never
+        // always due, and an offline axis (one owed a stop among them) was never
         // probed while another moved.
         if let Some(probe) = self.next_probe(&pass) {
             return Some(probe);
@@ -353,9 +354,6 @@ impl Engine {
                 return Some(self.position_read(axis));
             }
         }
-        if let Some(axis) = self.mover_at_limit(&pass) {
-            return Some(self.status_poll(now, axis));
-        }
         let cursor = self.schedule.cursor;
         // Arriving axes had their turn above; this is the other one.
         let others = AxisSet(pass.polled.0 & !pass.arriving.0).iter();
@@ -365,16 +363,18 @@ impl Engine {
                 last + idle_period
             } else {
                 let approach = &self.schedule.approach[a];
-                let ahead = approach.eta().is_none_or(|eta| now < eta);
                 match approach.eta() {
+                    // Arriving within the idle bound: its arrival's poll is its next.
+                    Some(eta) if self.awaited(a, cycle) => eta,
                     // Arriving later: supervised as an idle axis until it is about to (then it
                     // is polled above, as arriving).
-                    Some(eta) if now < eta && approach.estimated() => last + idle_period,
-                    // Its estimate (or a measured one) is a position read away (those go
-                    // first): meanwhile twice a cycle.
-                    _ if ahead && approach.has_target() => last + Duration(cycle.0 / 2),
-                    // No estimate possible (a point's or a home's move, a job without a
-                    // move), or past its estimate: as often as the bus allows.
+                    Some(eta) if now < eta => last + idle_period,
+                    // Its estimate is a position read away (that goes first): meanwhile twice a
+                    // cycle.
+                    None if approach.needs_read() => last + Duration(cycle.0 / 2),
+                    // No estimate possible (a home, a point the gateway holds no row of, a move
+                    // too short to reach its speed, a job without a move: `approach`), or past
+                    // its estimate: as often as the bus allows.
                     _ => last,
                 }
             };
@@ -430,13 +430,6 @@ impl Engine {
         (Request::new(axis, Command::Status), Origin::Poll, 0)
     }
 
-    /// The mover (or axis with a job) polled longest ago, if that is a `cycle` ago or more:
-    /// never supervised less often than by a round robin, whatever else is due.
-    fn mover_at_limit(&self, pass: &Pass) -> Option<Axis> {
-        let movers = AxisSet(pass.hot.0 & pass.polled.0);
-        self.polled_longest_ago(movers, pass.now, pass.cycle)
-    }
-
     /// The key that puts the axis polled longest ago first, ties in turn from the cursor.
     fn waiting_longest(&self, axis: Axis) -> (Instant, u8) {
         let cursor = self.schedule.cursor;
@@ -446,18 +439,24 @@ impl Engine {
         )
     }
 
-    /// The idle axis polled longest ago, if that is `limit` ago or more.
+    /// The axis polled longest ago, if that is `limit` ago or more.
     fn idle_due(&self, pass: &Pass, limit: Duration) -> Option<Axis> {
-        self.polled_longest_ago(pass.polled, pass.now, limit)
+        // One subtraction, not an addition per axis (twice a transaction, every axis).
+        let since = Instant(pass.now.0.checked_sub(limit.0)?);
+        let due = pass
+            .polled
+            .iter()
+            .filter(|&a| self.schedule.last_poll[a] <= since && !self.awaited(a, pass.cycle));
+        least(due, |a| self.waiting_longest(a))
     }
 
-    /// The axis of `axes` polled longest ago, if that is `limit` before `now` or more (one
-    /// search for [`idle_due`](Self::idle_due) and [`mover_at_limit`](Self::mover_at_limit)).
-    fn polled_longest_ago(&self, axes: AxisSet, now: Instant, limit: Duration) -> Option<Axis> {
-        // One subtraction, not an addition per axis (twice a transaction, every axis).
-        let since = Instant(now.0.checked_sub(limit.0)?);
-        let due = axes.iter().filter(|&a| self.schedule.last_poll[a] <= since);
-        least(due, |a| self.waiting_longest(a))
+    /// Whether the axis' next status poll is the one at its estimated arrival: that is within
+    /// two cycles of its last poll (the bound of an idle axis' status age), and a poll before
+    /// it would only see it moving.
+    fn awaited(&self, axis: Axis, cycle: Duration) -> bool {
+        let approach = &self.schedule.approach[axis];
+        let bound = self.schedule.last_poll[axis] + Duration(cycle.0.saturating_mul(2));
+        approach.eta().is_some_and(|eta| eta <= bound)
     }
 
     /// A mover expected at its target since (for up to a `cycle`), the one polled longest ago:
@@ -505,10 +504,17 @@ impl Engine {
         let share = divisor(u32::from(self.config.position_reads_per_cycle));
         let movers = pass.moving.len() as u64;
         let period = Duration(div(pass.cycle.0.saturating_mul(movers), share)).min(pass.cycle);
+        // One whose arrival is estimated needs no reads for it: every two cycles, the bound of
+        // an idle axis' status.
+        let twice = Duration(pass.cycle.0.saturating_mul(2));
         let stale = pass.moving.iter().filter(|&a| {
-            self.axes[a]
-                .position_at
-                .is_none_or(|at| at + period <= pass.now)
+            let approach = &self.schedule.approach[a];
+            let period = if approach.timed() { twice } else { period };
+            // (Not before its estimate's read, which comes once its acceleration is over.)
+            !approach.needs_read()
+                && self.axes[a]
+                    .position_at
+                    .is_none_or(|at| at + period <= pass.now)
         });
         // A stopped axis is read again until two reads agree (it may have stopped short, in
         // its position band), each read a gap after the last.
@@ -518,8 +524,14 @@ impl Engine {
                     .position_at
                     .is_some_and(|at| at + SETTLE_GAP <= pass.now)
         });
+        // A mover's estimate, once its acceleration is over.
+        let estimate = pass
+            .hot
+            .iter()
+            .filter(|&a| self.schedule.approach[a].read_due(pass.now));
         let due = stale
             .chain(settling)
+            .chain(estimate)
             .fold(self.schedule.position_due, AxisSet::with);
         // Urgent: a mover's estimate, and a position never read (every position register of
         // the axis waits for it).

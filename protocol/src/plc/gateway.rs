@@ -402,7 +402,7 @@ impl Gateway {
         // then estimates the arrival as it does for a direct move.
         let kind = match kind {
             JobKind::MoveToPoint(point, None) => {
-                JobKind::MoveToPoint(point, self.points.position(axis, point))
+                JobKind::MoveToPoint(point, self.points.aim(axis, point))
             }
             other => other,
         };

@@ -18,9 +18,9 @@
 use super::refused::Refused;
 use crate::axes::AxisMap;
 use crate::engine::point_jobs::{PointData, PointReadback};
-use crate::engine::{Engine, Job, JobError, JobId, JobKind, JobOutput};
-use crate::memory::PointField;
-use crate::{Axis, PositionNo, Pulses};
+use crate::engine::{Engine, Job, JobError, JobId, JobKind, JobOutput, PointAim};
+use crate::memory::{flgp, PointField};
+use crate::{Acceleration, Axis, PositionNo, Pulses, Velocity};
 
 /// Rows kept, for all axes together.
 pub const CACHED_ROWS: usize = 18;
@@ -82,11 +82,27 @@ impl PointCache {
         Some(row.data)
     }
 
-    /// The point's position, if its row is cached (as the controller holds it, in pulses; not
-    /// marked as used: a move is not a use of the table).
-    pub(super) fn position(&self, axis: Axis, point: PositionNo) -> Option<Pulses> {
+    /// What a move to the point goes by, if its row is cached (as the controller holds it; not
+    /// marked as used: a move is not a use of the table): its position, and its velocity and
+    /// acceleration if its flags make them count (else the common defaults do, complete
+    /// edition §7-2-2, which the gateway does not know).
+    pub(super) fn aim(&self, axis: Axis, point: PositionNo) -> Option<PointAim> {
         let row = self.rows.get(self.slot(axis, point)?)?.as_ref()?;
-        Some(Pulses::from_wire(row.data.get(PointField::Position)))
+        let field = |f| row.data.get(f);
+        let units = |f| u16::try_from(field(f)).ok();
+        let motion = (field(PointField::Flags) & flgp::MOTION != 0)
+            .then(|| {
+                let velocity = Velocity::new(units(PointField::Velocity)?)?;
+                Some((
+                    velocity,
+                    Acceleration::new(units(PointField::Acceleration)?)?,
+                ))
+            })
+            .flatten();
+        Some(PointAim {
+            position: Pulses::from_wire(field(PointField::Position)),
+            motion,
+        })
     }
 
     fn put(&mut self, axis: Axis, point: PositionNo, data: PointReadback) {

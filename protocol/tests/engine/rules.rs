@@ -476,7 +476,9 @@ fn a_move_seen_only_in_position_is_read_again_until_it_rests() {
             engine
                 .submit(Job {
                     axis: axis(0),
-                    kind: JobKind::MoveAbsolute(Pulses(-4)),
+                    // It rests a pulse short of its target, in its band: a read at the
+                    // target would end the reads at once (it rests there).
+                    kind: JobKind::MoveAbsolute(Pulses(-5)),
                 })
                 .unwrap();
             submitted = true;
@@ -607,5 +609,45 @@ fn a_lost_job_frame_s_attempts_have_nothing_else_to_its_axis_between_them() {
     assert!(
         jobs >= 10 && lost >= 20,
         "only {jobs} jobs, {lost} lost answers"
+    );
+}
+
+/// A job frame's answer carries the axis' status as a poll's does (complete edition §3-1-2): the
+/// axis is not polled again for it, its turn goes to the axes polled longer ago.
+#[test]
+fn a_job_frame_s_answer_counts_as_its_axis_status_poll() {
+    let mut engine = Engine::new(config(3));
+    let mut now = Instant(0);
+    let mut address = 0;
+    let mut exchange = |engine: &mut Engine, now: &mut Instant| {
+        let request = next_frame(engine, now);
+        reply(engine, now, answer(&request, &mut address));
+        (request.axis.get(), request.command)
+    };
+    // Every axis online, its position read: round robin from here.
+    while engine.axis(axis(2)).position.is_none() {
+        exchange(&mut engine, &mut now);
+    }
+    while exchange(&mut engine, &mut now) != (2, Command::Status) {}
+    // Axis 0 was polled longest ago; a job of its own answers for it.
+    engine
+        .submit(Job {
+            axis: axis(0),
+            kind: JobKind::Command(Command::Servo(true)),
+        })
+        .unwrap();
+    assert_eq!(
+        exchange(&mut engine, &mut now),
+        (0, Command::Servo(true)),
+        "the job frame"
+    );
+    let polls: Vec<_> = (0..3).map(|_| exchange(&mut engine, &mut now)).collect();
+    assert_eq!(
+        polls,
+        [
+            (1, Command::Status),
+            (2, Command::Status),
+            (0, Command::Status)
+        ]
     );
 }

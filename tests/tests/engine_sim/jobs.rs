@@ -410,8 +410,9 @@ fn single_field_write_and_read_back() {
 /// in position within a few transactions of the moment they are (instead of up to a whole cycle
 /// later: polled in turn, four movers are each seen every four transactions at best, behind
 /// their own position reads and the others' commands), their arrivals are estimated from their
-/// targets and position reads before they get there, and the idle axes' status age stays
-/// within two cycles meanwhile.
+/// targets, acceleration times and a position read before they get there, and the idle axes'
+/// status age stays within two cycles meanwhile. Moves as the PLC gives them: `v` then `a`, at
+/// the velocity and acceleration the controllers start with.
 #[test]
 fn moves_are_seen_complete_soon_after_they_are_in_band_and_idle_axes_keep_their_bound() {
     let mut h = established(16);
@@ -427,6 +428,10 @@ fn moves_are_seen_complete_soon_after_they_are_in_band_and_idle_axes_keep_their_
         );
         assert!(r.is_ok(), "{r:?}");
     }
+    let exec = h.bus.controller(movers[0]).unwrap().memory().exec.point;
+    let units = |f| u16::try_from(exec[rc_tools::sim::memory::pi(f)]).unwrap();
+    let velocity = Velocity::new(units(memory::PointField::Velocity)).unwrap();
+    let acceleration = Acceleration::new(units(memory::PointField::Acceleration)).unwrap();
     let transaction = timing::transaction_time(Baud::B115200, Rtim::MIN).as_micros();
     let cycle = 16 * transaction;
     let from = h.now;
@@ -454,7 +459,12 @@ fn moves_are_seen_complete_soon_after_they_are_in_band_and_idle_axes_keep_their_
             h.engine
                 .submit(Job {
                     axis: mover,
-                    kind: JobKind::MoveAbsolute(Pulses(to)),
+                    kind: JobKind::DirectMove {
+                        target: Pulses(to),
+                        relative: false,
+                        velocity,
+                        acceleration,
+                    },
                 })
                 .unwrap();
             // (estimated, in band at, seen at)

@@ -6,11 +6,11 @@
 //! USB adapter has no wire time, a slow converter adds some, and the figures are then taken
 //! against the transaction time measured in the run.
 
-use protocol::engine::{Event, Job, JobId, JobKind, Link};
+use protocol::engine::{Event, Job, JobId, JobKind, Link, PointAim};
 use protocol::line::Baud;
-use protocol::memory::PointField;
+use protocol::memory::{flgp, PointField};
 use protocol::status::Outputs;
-use protocol::{Axis, PositionNo, Pulses, Rtim};
+use protocol::{Acceleration, Axis, PositionNo, Pulses, Rtim, Velocity};
 
 use crate::measure::{all_axes, axis, config, cycles, established, Stats};
 use crate::scenarios::{homed, start_homing};
@@ -136,8 +136,26 @@ pub(crate) fn movers(dead: bool, ends: Ends, moves: Moves) -> Result<MoversResul
         };
         near - stroke / 100 * percent
     };
-    // Scenario 6: the same two positions as points 1 and 2 of each mover (with the speed and
-    // acceleration its `a` moves run at).
+    // Every move at the velocity and acceleration the controllers start with, given as the PLC
+    // gives it: a direct move is `v` then `a` (the PLC's direct-move registers), and a point's
+    // row carries its own motion (what the PLC's point writes store: FLGP's motion bit), which
+    // the gateway's cache knows. With either the gateway knows the acceleration time, which
+    // its arrival estimate needs (engine::approach).
+    let exec = h
+        .bus
+        .controller(movers[0].axis)
+        .ok_or("no moving controller")?
+        .memory()
+        .exec
+        .point;
+    let units = |f| {
+        let value = exec.get(rc_tools::sim::memory::pi(f)).copied().unwrap_or(0);
+        u16::try_from(value).unwrap_or(u16::MAX)
+    };
+    let velocity = Velocity::new(units(PointField::Velocity)).ok_or("velocity out of range")?;
+    let acceleration =
+        Acceleration::new(units(PointField::Acceleration)).ok_or("acceleration out of range")?;
+    // Scenario 6: the same two positions as points 1 and 2 of each mover.
     let (near_point, far_point) = (PositionNo::new(1), PositionNo::new(2));
     if let Moves::Points { .. } = moves {
         for (i, m) in movers.iter().enumerate() {
@@ -148,8 +166,11 @@ pub(crate) fn movers(dead: bool, ends: Ends, moves: Moves) -> Result<MoversResul
                 .memory_mut();
             for (index, at) in [(1usize, near), (2, far(i))] {
                 let mut row = memory.exec.point;
-                let position = rc_tools::sim::memory::pi(PointField::Position);
-                *row.get_mut(position).ok_or("no position field")? = Pulses(at).to_wire();
+                let field = |f| rc_tools::sim::memory::pi(f);
+                *row.get_mut(field(PointField::Position))
+                    .ok_or("no position field")? = Pulses(at).to_wire();
+                *row.get_mut(field(PointField::Flags))
+                    .ok_or("no flags field")? |= flgp::MOTION;
                 *memory.nv.points.get_mut(index).ok_or("no point")? = row;
                 *memory.nv.written.get_mut(index).ok_or("no point")? = true;
             }
@@ -197,9 +218,18 @@ pub(crate) fn movers(dead: bool, ends: Ends, moves: Moves) -> Result<MoversResul
                 m.toward_far = !m.toward_far;
                 let kind = match (moves, point) {
                     (Moves::Points { .. }, Some(point)) => {
-                        JobKind::MoveToPoint(point, Some(Pulses(to)))
+                        let aim = PointAim {
+                            position: Pulses(to),
+                            motion: Some((velocity, acceleration)),
+                        };
+                        JobKind::MoveToPoint(point, Some(aim))
                     }
-                    _ => JobKind::MoveAbsolute(Pulses(to)),
+                    _ => JobKind::DirectMove {
+                        target: Pulses(to),
+                        relative: false,
+                        velocity,
+                        acceleration,
+                    },
                 };
                 let id = h
                     .engine
