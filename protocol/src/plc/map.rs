@@ -383,7 +383,7 @@ pub fn gateway_writable(address: u16) -> Option<bool> {
 /// Every address the gateway answers. Anything else is exception 02.
 pub const MAP: &[Entry] = &[
     e(Unit::Axis, Status, PNOW, 2, "PNOW", "0.01 mm", "int32", false,
-      "Present position from home (R4 PNOW: read when the axis comes online, once per status cycle while it moves, at the end of every move and of homing (before the command's status says done), then again until two reads agree: PFIN comes when the axis enters its position band, before it rests)", Partial("not continuous: exception 04 until the axis has answered")),
+      "Present position from home (R4 PNOW: read when the axis comes online, every cycle or two while it moves, at the end of every move and of homing (before the command's status says done), then again until two reads agree: PFIN comes when the axis enters its position band, before it rests)", Partial("not continuous: exception 04 until the axis has answered")),
     e(Unit::Axis, Status, ALMC, 1, "ALMC", "code", "0x00-0xFF", false,
       "Alarm code (RC error 0x80-0xFF) while *ALM is off, else 0", Partial("RC codes, not PCON codes")),
     e(Unit::Axis, Status, DIPM, 1, "DIPM", "bits", "", false,
