@@ -171,15 +171,14 @@ impl Approach {
         &mut self,
         now: Instant,
         position: Pulses,
-        previous: Option<(Pulses, Instant)>,
+        previous: Option<Pulses>,
     ) {
         let Some(target) = self.target else {
             // Stopped (or a move without a target, where nothing settles): at rest once a read
             // agrees with the one before, or finds it at its target (a trapezoid's speed is nil
             // there: one read less after most moves).
             if let Some(left) = self.settle_reads.checked_sub(1) {
-                let agrees = previous.is_some_and(|(before, _)| before == position)
-                    || self.start == Some(position);
+                let agrees = previous == Some(position) || self.start == Some(position);
                 self.settle_reads = if agrees { 0 } else { left };
             }
             return;
@@ -343,14 +342,18 @@ mod tests {
 
     /// rt-bench's `v`: 20 pulses/ms (7500 × 0.2 rpm at 800 pulses a turn) reached in 68.18 ms
     /// (ACMD 220: 2 × 7500 / 220 ms).
+    fn bench_motion() -> Option<(Velocity, Acceleration)> {
+        Some((Velocity::new(7_500)?, Acceleration::new(220)?))
+    }
+
+    /// The `v` of [`bench_motion`].
     fn bench_v() -> Command {
-        match (Velocity::new(7_500), Acceleration::new(220)) {
-            (Some(velocity), Some(acceleration)) => Command::SetVelocityAcceleration {
+        bench_motion().map_or(Command::Status, |(velocity, acceleration)| {
+            Command::SetVelocityAcceleration {
                 velocity,
                 acceleration,
-            },
-            _ => Command::Status,
-        }
+            }
+        })
     }
 
     #[test]
@@ -372,13 +375,7 @@ mod tests {
         a.position_read(Instant(80 * MS), Pulses(1_000), None);
         assert!(a.eta().is_none() && !a.timed());
         // With its own: estimated as an `a` after a `v` is.
-        let motion = match bench_v() {
-            Command::SetVelocityAcceleration {
-                velocity,
-                acceleration,
-            } => Some((velocity, acceleration)),
-            _ => None,
-        };
+        let motion = bench_motion();
         a.clear();
         a.command_accepted(Instant(0), &point, Some(Pulses(0)), row(motion));
         let at = |t| Pulses(trapezoid(4_000.0, 20.0, 68.18, t));
@@ -412,11 +409,7 @@ mod tests {
 
     /// A position read of a stopped axis at `position`, `before` the read before.
     fn read(a: &mut Approach, position: i32, before: i32) {
-        a.position_read(
-            Instant(0),
-            Pulses(position),
-            Some((Pulses(before), Instant(0))),
-        )
+        a.position_read(Instant(0), Pulses(position), Some(Pulses(before)))
     }
 
     #[test]

@@ -66,7 +66,7 @@ impl Engine {
         if let (true, Some(position)) = (reads_pnow, reply.position()) {
             // Whoever asked (polling, a job), PNOW is PNOW.
             let state = &mut self.axes[axis];
-            let previous = state.position.zip(state.position_at);
+            let previous = state.position;
             state.position = Some(position);
             state.position_at = Some(now);
             self.schedule
