@@ -428,10 +428,8 @@ fn moves_are_seen_complete_soon_after_they_are_in_band_and_idle_axes_keep_their_
         );
         assert!(r.is_ok(), "{r:?}");
     }
-    let exec = h.bus.controller(movers[0]).unwrap().memory().exec.point;
-    let units = |f| u16::try_from(exec[rc_tools::sim::memory::pi(f)]).unwrap();
-    let velocity = Velocity::new(units(memory::PointField::Velocity)).unwrap();
-    let acceleration = Acceleration::new(units(memory::PointField::Acceleration)).unwrap();
+    let controller = h.bus.controller(movers[0]).unwrap();
+    let (velocity, acceleration) = controller.memory().exec_motion().unwrap();
     let transaction = timing::transaction_time(Baud::B115200, Rtim::MIN).as_micros();
     let cycle = 16 * transaction;
     let from = h.now;

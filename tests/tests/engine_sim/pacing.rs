@@ -59,18 +59,8 @@ fn fast_bus() -> (Harness, [[i32; 2]; 4]) {
 
 /// The velocity and acceleration the controllers start with (their execution area).
 fn motion(h: &Harness) -> (Velocity, Acceleration) {
-    let exec = h
-        .bus
-        .controller(axis(MOVERS[0]))
-        .unwrap()
-        .memory()
-        .exec
-        .point;
-    let units = |f| u16::try_from(exec[pi(f)]).unwrap();
-    (
-        Velocity::new(units(PointField::Velocity)).unwrap(),
-        Acceleration::new(units(PointField::Acceleration)).unwrap(),
-    )
+    let controller = h.bus.controller(axis(MOVERS[0])).unwrap();
+    controller.memory().exec_motion().unwrap()
 }
 
 /// The movers go back and forth between points 1 and 2 for `seconds`; the job carries the

@@ -16,7 +16,7 @@
 //! Anything else is an illegal memory address: warning 0x61 (§8-1-5).
 
 use protocol::memory::{common, flgp, PointField, EXECUTION_OFFSET, PNOW, ROM_VERSION, VNOW};
-use protocol::Address;
+use protocol::{Acceleration, Address, Velocity};
 
 /// Words of common parameters (0x000-0x01F).
 pub const COMMON_LEN: usize = 0x20;
@@ -307,6 +307,16 @@ impl Memory {
     /// Set the execution row word of `field`.
     pub fn set_exec_field(&mut self, field: PointField, value: u32) {
         self.exec.point[pi(field)] = value;
+    }
+
+    /// The execution row's velocity and acceleration (VCMD, ACMD) as a `v` would give them, if
+    /// they are in the command's range: the motion the axis moves at now.
+    pub fn exec_motion(&self) -> Option<(Velocity, Acceleration)> {
+        let units = |field| u16::try_from(self.exec_field(field)).ok();
+        Some((
+            Velocity::new(units(PointField::Velocity)?)?,
+            Acceleration::new(units(PointField::Acceleration)?)?,
+        ))
     }
 }
 

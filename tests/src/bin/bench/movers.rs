@@ -10,7 +10,7 @@ use protocol::engine::{Event, Job, JobId, JobKind, Link, PointAim};
 use protocol::line::Baud;
 use protocol::memory::{flgp, PointField};
 use protocol::status::Outputs;
-use protocol::{Acceleration, Axis, PositionNo, Pulses, Rtim, Velocity};
+use protocol::{Axis, PositionNo, Pulses, Rtim};
 
 use crate::measure::{all_axes, axis, config, cycles, established, Stats};
 use crate::scenarios::{homed, start_homing};
@@ -141,20 +141,13 @@ pub(crate) fn movers(dead: bool, ends: Ends, moves: Moves) -> Result<MoversResul
     // row carries its own motion (what the PLC's point writes store: FLGP's motion bit), which
     // the gateway's cache knows. With either the gateway knows the acceleration time, which
     // its arrival estimate needs (engine::approach).
-    let exec = h
+    let (velocity, acceleration) = h
         .bus
         .controller(movers[0].axis)
         .ok_or("no moving controller")?
         .memory()
-        .exec
-        .point;
-    let units = |f| {
-        let value = exec.get(rc_tools::sim::memory::pi(f)).copied().unwrap_or(0);
-        u16::try_from(value).unwrap_or(u16::MAX)
-    };
-    let velocity = Velocity::new(units(PointField::Velocity)).ok_or("velocity out of range")?;
-    let acceleration =
-        Acceleration::new(units(PointField::Acceleration)).ok_or("acceleration out of range")?;
+        .exec_motion()
+        .ok_or("velocity or acceleration out of range")?;
     // Scenario 6: the same two positions as points 1 and 2 of each mover.
     let (near_point, far_point) = (PositionNo::new(1), PositionNo::new(2));
     if let Moves::Points { .. } = moves {
