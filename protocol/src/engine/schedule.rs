@@ -37,7 +37,10 @@
 //!    whose arrival is estimated but not near, is due [`IDLE_PERIOD_CYCLES`] cycles after its
 //!    last poll; a mover expected within two cycles of its last poll not before its arrival (a
 //!    poll before it would only see it moving, and its status age stays within an idle axis'
-//!    bound; rule 4 passes it over too); a mover whose estimate is a read away twice a cycle;
+//!    bound; rule 4 passes it over too), and until then every other axis goes before it, due
+//!    or not: the bus free now goes to idle axes, which then have a poll behind them when the
+//!    movers arrive together and take the bus (it went to the mover whose arrival was nearest,
+//!    five polls in a row before each arrival: `rt-bench`, 2.5 status polls a move, now 1.3); a mover whose estimate is a read away twice a cycle;
 //!    one whose arrival cannot be estimated (a home, a point the gateway holds no row of, a
 //!    move before any `v`, one too short to reach its speed, a job without a move) or is
 //!    overdue as soon as it has been polled. Ties go to the one polled longest
@@ -364,10 +367,12 @@ impl Engine {
             } else {
                 let approach = &self.schedule.approach[a];
                 match approach.eta() {
-                    // Arriving within the idle bound: its arrival's poll is its next.
-                    Some(eta) if self.awaited(a, cycle) => eta,
-                    // Arriving later: supervised as an idle axis until it is about to (then it
-                    // is polled above, as arriving).
+                    // Arriving within the idle bound: its arrival's poll is its next (above, as
+                    // arriving), and one before it would only see it moving: any other axis
+                    // first, even one not due (the bus is free now, and will be short when the
+                    // movers arrive together).
+                    Some(eta) if now < eta && self.awaited(a, cycle) => Instant(u64::MAX),
+                    // Arriving later: supervised as an idle axis until then.
                     Some(eta) if now < eta => last + idle_period,
                     // Its estimate is a position read away (that goes first): meanwhile twice a
                     // cycle.

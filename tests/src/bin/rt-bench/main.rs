@@ -21,7 +21,8 @@
 //! rt-bench [--seconds 20] [--only direct_rtim3] [--json]
 //! ```
 //! Exit status 0 when every run was measured (whether the targets are met is in the output:
-//! `BENCH_RT {...}`), 1 when a run could not be made.
+//! `BENCH_RT {...}`), 1 when a run could not be made, 2 on a wrong argument (an `--only` that
+//! names no run measures nothing, so it is refused rather than reported as met).
 
 mod analyse;
 #[allow(dead_code)]
@@ -430,6 +431,14 @@ fn main() -> ExitCode {
     if let Err(e) = std::fs::create_dir_all(&dir) {
         eprintln!("rt-bench: {}: {e}", dir.display());
         return ExitCode::FAILURE;
+    }
+    if let Some(o) = only
+        .as_ref()
+        .filter(|o| !CASES.iter().any(|c| c.name() == **o))
+    {
+        let names: Vec<String> = CASES.iter().map(Case::name).collect();
+        eprintln!("rt-bench: no run {o} (runs: {})", names.join(", "));
+        return ExitCode::from(2);
     }
     let mut runs = Vec::new();
     let (mut worst_complete, mut worst_idle): (f64, f64) = (0.0, 0.0);
