@@ -189,6 +189,12 @@ impl Channel {
         config: &AxisMap<AxisConfig>,
         engine: &mut Engine,
     ) -> Option<(Axis, PositionNo)> {
+        if !CHANNEL {
+            // A build without the channel never starts a job (`Channel::store` is not called
+            // there): said here too, so that such a build has none of this code (520 B of the
+            // F103's flash).
+            return None;
+        }
         let (request, wanted) = match self.state {
             State::Reading(r, request, wanted) | State::Writing(r, request, wanted) if r == id => {
                 (request, wanted)
