@@ -22,9 +22,14 @@
 //!   the command is: each is a transaction after its controller took it, so the time between
 //!   them is right (timing the command by its request made every estimate a transaction late).
 //!
-//! The estimate aims a quarter of the acceleration time before the end: PFIN comes when the
-//! axis enters its position band, before the target (§4-3-1), and the schedule polls it from
-//! then on. A move the gateway cannot model (a home, a point whose row it does not hold or whose
+//! The estimate aims a quarter of the acceleration time before the end, or three transactions
+//! (as measured on the bus) if that is less: PFIN comes when the axis enters its position band,
+//! before the target (§4-3-1), and the schedule polls it from then on. On a fast bus a quarter
+//! of the acceleration is many transactions (17 ms is four at RTIM 3 without wire time), each
+//! poll in them sees the axis still moving, and the idle axes pay for them (`rt-bench`, direct
+//! moves at RTIM 3: 4.2 status polls a move and idle axes at 2.06-2.07 cycles; 3.3-3.4 and
+//! 1.73-1.83 with the three); three are the margin the estimate's errors of a few milliseconds
+//! (the host's timing) need. A move the gateway cannot model (a home, a point whose row it does not hold or whose
 //! motion comes from the common parameters, a move before any `v`, one too short to reach its
 //! speed) has no estimate, and the schedule polls its axis as often as the bus allows. (An
 //! earlier model took the speed between reads without the acceleration time: a read in the
@@ -163,8 +168,9 @@ impl Approach {
         };
     }
 
-    /// A position read answered at `now` (`position`), after the one before (`previous`): the
-    /// estimate, or a step of the settling after a stop.
+    /// A position read answered at `now` (`position`), after the one before (`previous`), on a
+    /// bus whose transactions take `transaction`: the estimate, or a step of the settling after
+    /// a stop.
     // Not inlined into the reply handler: some 200 B of the F103's flash for the three.
     #[inline(never)]
     pub(super) fn position_read(
@@ -172,6 +178,7 @@ impl Approach {
         now: Instant,
         position: Pulses,
         previous: Option<Pulses>,
+        transaction: Duration,
     ) {
         let Some(target) = self.target else {
             // Stopped (or a move without a target, where nothing settles): at rest once a read
@@ -194,7 +201,9 @@ impl Approach {
         }
         let t = u32::try_from(now.0.saturating_sub(self.since.0)).unwrap_or(u32::MAX);
         if let Some(end) = trapezoid_end(start, position, target, self.ramp, t) {
-            self.eta = self.since + Duration(end - u64::from(self.ramp / 4));
+            let transaction = u32::try_from(transaction.0).unwrap_or(u32::MAX);
+            let early = (self.ramp / 4).min(transaction.saturating_mul(3));
+            self.eta = self.since + Duration(end - u64::from(early));
             self.eta_known = true;
         }
     }
@@ -323,6 +332,9 @@ mod tests {
 
     const MS: u64 = 1_000;
 
+    /// A transaction long enough that the arrival's margin is the quarter acceleration.
+    const SLOW: Duration = Duration(1_000 * MS);
+
     /// Where a trapezoidal move from 0 to `distance` is at `t` ms: accelerating evenly for
     /// `ramp` ms to `speed` pulses/ms, cruising, braking as long as it accelerated.
     fn trapezoid(distance: f64, speed: f64, ramp: f64, t: f64) -> i32 {
@@ -361,7 +373,7 @@ mod tests {
         let mut a = Approach::NONE;
         let point = Command::MoveToPoint(crate::PositionNo::MIN);
         a.command_accepted(Instant(0), &point, Some(Pulses(0)), None);
-        a.position_read(Instant(80 * MS), Pulses(1_000), None);
+        a.position_read(Instant(80 * MS), Pulses(1_000), None, SLOW);
         assert_eq!(a.eta(), None, "a point's position is unknown here");
         // Known to its job (the gateway's cached row), but its motion from the common
         // parameters: no acceleration time.
@@ -372,14 +384,14 @@ mod tests {
             })
         };
         a.command_accepted(Instant(0), &point, Some(Pulses(0)), row(None));
-        a.position_read(Instant(80 * MS), Pulses(1_000), None);
+        a.position_read(Instant(80 * MS), Pulses(1_000), None, SLOW);
         assert!(a.eta().is_none() && !a.timed());
         // With its own: estimated as an `a` after a `v` is.
         let motion = bench_motion();
         a.clear();
         a.command_accepted(Instant(0), &point, Some(Pulses(0)), row(motion));
         let at = |t| Pulses(trapezoid(4_000.0, 20.0, 68.18, t));
-        a.position_read(Instant(80 * MS), at(80.0), None);
+        a.position_read(Instant(80 * MS), at(80.0), None, SLOW);
         assert!(a.eta().is_some());
         // The same `a` without a start (the axis was not seen at rest): none.
         a.command_accepted(
@@ -388,7 +400,7 @@ mod tests {
             None,
             None,
         );
-        a.position_read(Instant(80 * MS), at(80.0), None);
+        a.position_read(Instant(80 * MS), at(80.0), None, SLOW);
         assert_eq!(a.eta(), None, "no start");
         // From a known start: not while it stands, nor while it moves away.
         a.clear();
@@ -398,9 +410,9 @@ mod tests {
             Some(Pulses(0)),
             None,
         );
-        a.position_read(Instant(80 * MS), Pulses(0), None);
+        a.position_read(Instant(80 * MS), Pulses(0), None, SLOW);
         assert_eq!(a.eta(), None, "standing still");
-        a.position_read(Instant(90 * MS), Pulses(-5), None);
+        a.position_read(Instant(90 * MS), Pulses(-5), None, SLOW);
         assert_eq!(a.eta(), None, "moving away");
         assert!(!a.needs_read(), "two reads spent");
         a.clear();
@@ -409,7 +421,7 @@ mod tests {
 
     /// A position read of a stopped axis at `position`, `before` the read before.
     fn read(a: &mut Approach, position: i32, before: i32) {
-        a.position_read(Instant(0), Pulses(position), Some(Pulses(before)))
+        a.position_read(Instant(0), Pulses(position), Some(Pulses(before)), SLOW)
     }
 
     #[test]
@@ -481,7 +493,7 @@ mod tests {
             assert!(!a.read_due(Instant(60 * MS)), "in its acceleration");
             assert!(a.read_due(Instant(70 * MS)));
             let now = Instant((t * 1_000.0) as u64);
-            a.position_read(now, Pulses(trapezoid(distance, speed, ramp, t)), None);
+            a.position_read(now, Pulses(trapezoid(distance, speed, ramp, t)), None, SLOW);
             // Aimed a quarter of the ramp before the end, within a millisecond (a pulse read
             // early in the acceleration weighs most; a transaction takes 4 ms or more).
             let eta = a.eta().map(|eta| eta.0 as f64 / 1_000.0);
@@ -493,7 +505,12 @@ mod tests {
             assert!(!a.needs_read());
             // A read once it brakes (its speed lower) leaves the estimate as it is.
             let late = Instant(250 * MS);
-            a.position_read(late, Pulses(trapezoid(distance, speed, ramp, 250.0)), None);
+            a.position_read(
+                late,
+                Pulses(trapezoid(distance, speed, ramp, 250.0)),
+                None,
+                SLOW,
+            );
             assert_eq!(a.eta().map(|eta| eta.0 as f64 / 1_000.0), eta);
         }
         // Backwards, from a relative move.
@@ -509,6 +526,7 @@ mod tests {
             Instant(100 * MS),
             Pulses(4_000 - trapezoid(distance, speed, ramp, 100.0)),
             None,
+            SLOW,
         );
         assert!(a
             .eta()
@@ -519,6 +537,7 @@ mod tests {
             Instant(20 * MS),
             Pulses(trapezoid(distance, speed, ramp, 20.0)),
             None,
+            SLOW,
         );
         assert!(a.eta().is_none() && a.needs_read());
         // A move too short to reach its speed (a triangle: under 1364 pulses) is not a
@@ -528,8 +547,38 @@ mod tests {
             Instant(60 * MS),
             Pulses(trapezoid(distance, speed, ramp, 60.0)),
             None,
+            SLOW,
         );
         assert!(a.eta().is_none());
+    }
+
+    /// On a fast bus the estimate aims three transactions before the end, not a quarter of
+    /// the acceleration time: the polls in between would only see the axis moving.
+    #[test]
+    fn on_a_fast_bus_the_estimate_aims_three_transactions_before_the_end() {
+        let (distance, speed, ramp) = (4_000.0, 20.0, 68.18);
+        let end = distance / speed + ramp;
+        let aim = |transaction: Duration| {
+            let mut a = Approach::NONE;
+            a.command_accepted(Instant(0), &bench_v(), None, None);
+            a.command_accepted(
+                Instant(0),
+                &Command::MoveAbsolute(Pulses(4_000)),
+                Some(Pulses(0)),
+                None,
+            );
+            let read = Pulses(trapezoid(distance, speed, ramp, 100.0));
+            a.position_read(Instant(100 * MS), read, None, transaction);
+            a.eta().map_or(f64::NAN, |eta| end - eta.0 as f64 / 1_000.0)
+        };
+        // 4.4 ms (RTIM 3 over a pseudo-terminal): 13.2 ms early, not 17.
+        assert!(
+            (aim(Duration(4_400)) - 13.2).abs() < 1.0,
+            "{}",
+            aim(Duration(4_400))
+        );
+        // 8.4 ms (RTIM 7): the quarter acceleration, 17 ms, is less.
+        assert!((aim(Duration(8_400)) - ramp / 4.0).abs() < 1.0);
     }
 
     #[test]
@@ -586,12 +635,12 @@ mod tests {
         a.command_accepted(Instant(u64::MAX - 1), &slowest, None, None);
         let far = Command::MoveAbsolute(Pulses(i32::MAX));
         a.command_accepted(Instant(u64::MAX - 1), &far, Some(Pulses(i32::MIN)), None);
-        a.position_read(Instant(u64::MAX), Pulses(i32::MIN + 1), None);
+        a.position_read(Instant(u64::MAX), Pulses(i32::MIN + 1), None, SLOW);
         assert_eq!(a.eta(), None, "a microsecond in: not half its ramp");
         // (At rest again: the start is where it was read.)
         a.clear();
         a.command_accepted(Instant(0), &far, Some(Pulses(i32::MIN)), None);
-        a.position_read(Instant(u64::MAX), Pulses(i32::MIN + 1), None);
+        a.position_read(Instant(u64::MAX), Pulses(i32::MIN + 1), None, SLOW);
         // 2^32 pulses at one every 71 minutes: far ahead, and no overflow on the way.
         let eta = a.eta();
         assert!(eta.is_some_and(|eta| eta.0 > u64::MAX / 2), "{eta:?}");

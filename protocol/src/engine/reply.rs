@@ -69,9 +69,12 @@ impl Engine {
             let previous = state.position;
             state.position = Some(position);
             state.position_at = Some(now);
+            let transaction = self
+                .schedule
+                .transaction((self.config.baud, self.config.rtim));
             self.schedule
                 .approach(axis)
-                .position_read(now, position, previous);
+                .position_read(now, position, previous, transaction);
         }
         if flight.stands_in {
             // Its origin's frame did not go: the job, establishment step or rejoin step sends

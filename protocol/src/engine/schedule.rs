@@ -196,7 +196,9 @@ impl Schedule {
 
     /// One transaction on the line `on`: as measured, or its nominal time until one is (or
     /// after the line changed).
-    fn transaction(&self, on: (Baud, Rtim)) -> Duration {
+    // Not inlined: the reply handler calls it too (150 B of the F103's flash).
+    #[inline(never)]
+    pub(super) fn transaction(&self, on: (Baud, Rtim)) -> Duration {
         if self.measured_on == Some(on) {
             self.transaction
         } else {
@@ -606,7 +608,12 @@ mod tests {
             Some(Pulses(0)),
             None,
         );
-        approach.position_read(at + Duration(120 * MS), Pulses(1_718), None);
+        approach.position_read(
+            at + Duration(120 * MS),
+            Pulses(1_718),
+            None,
+            Duration(5 * MS),
+        );
         approach.eta().unwrap_or(Instant(u64::MAX))
     }
 
