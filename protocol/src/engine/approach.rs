@@ -16,9 +16,13 @@
 //! - how long it accelerates: `2 × velocity / acceleration` ms, from the last `v` (0.2 rpm and
 //!   0.1 rpm/ms, §4-4-20, whatever the lead and the encoder) or the cached row's VCMD and ACMD
 //!   (§7-2-2) of the point it moves to;
-//! - one position read (R4 PNOW) once the acceleration is over. With the acceleration time
-//!   known, the distance covered gives the speed, and the speed the end: the whole distance at
-//!   that speed plus one acceleration time ([`trapezoid_end`]). A read is timed by its answer, as
+//! - one position read (R4 PNOW) half an acceleration time into the cruise (a read right at
+//!   the end of the acceleration divides the distance by half an acceleration time, so that a
+//!   start a few milliseconds late in the host's timing put the arrival 4 transactions late:
+//!   `rt-bench`, point moves at RTIM 7; half an acceleration later the error is halved, and a
+//!   read that lands in the braking is known by the end it gives, and gives none). With the
+//!   acceleration time known, the distance covered gives the speed, and the speed the end: the
+//!   whole distance at that speed plus one acceleration time ([`trapezoid_end`]). A read is timed by its answer, as
 //!   the command is: each is a transaction after its controller took it, so the time between
 //!   them is right (timing the command by its request made every estimate a transaction late).
 //!
@@ -240,10 +244,11 @@ impl Approach {
         self.timed() && !self.eta_known && self.reads < ESTIMATE_READS
     }
 
-    /// Whether its position is to be read at `now` for the estimate: it needs one, and the
-    /// acceleration is over (a read before it tells the speed least well).
+    /// Whether its position is to be read at `now` for the estimate: it needs one, and it is
+    /// half an acceleration into its cruise (a read nearer the start tells the speed least
+    /// well: the module's doc).
     pub(super) fn read_due(&self, now: Instant) -> bool {
-        self.needs_read() && now >= self.since + Duration(u64::from(self.ramp))
+        self.needs_read() && now >= self.since + Duration(u64::from(self.ramp / 2 * 3))
     }
 
     /// Whether its arrival can be estimated: its start, target and acceleration time are known.
@@ -300,7 +305,7 @@ fn ramp_time(velocity: Velocity, acceleration: Acceleration) -> u32 {
 /// `t` µs after its start, if it accelerates evenly for `ramp` µs to its speed, cruises, and
 /// brakes as long (MXAC 0, complete edition §7-2-1); `None` if the read tells nothing: before
 /// half its acceleration (where the transaction's part of `t` weighs most), away from the
-/// target, or a move too short to reach its speed.
+/// target, in the braking (by the end it would give), or a move too short to reach its speed.
 fn trapezoid_end(
     start: Pulses,
     position: Pulses,
@@ -322,8 +327,9 @@ fn trapezoid_end(
         let half = div(distance * u64::from(t / 2), covered);
         div(half.saturating_mul(u64::from(t)), divisor(ramp))
     };
-    // Reaching its speed and braking from it take a ramp's distance.
-    (at_speed >= u64::from(ramp)).then(|| at_speed + u64::from(ramp))
+    // Reaching its speed and braking from it take a ramp's distance. A read the estimate puts
+    // after the braking's start (`at_speed` after the start) was in it: a speed too low.
+    (at_speed >= u64::from(ramp) && u64::from(t) <= at_speed).then(|| at_speed + u64::from(ramp))
 }
 
 #[cfg(test)]
@@ -490,8 +496,9 @@ mod tests {
         };
         for t in [40.0, 70.0, 120.0, 180.0] {
             let mut a = moving(4_000, Some(0));
-            assert!(!a.read_due(Instant(60 * MS)), "in its acceleration");
-            assert!(a.read_due(Instant(70 * MS)));
+            // Half an acceleration into the cruise (102 ms), not at its start.
+            assert!(!a.read_due(Instant(100 * MS)), "too near its acceleration");
+            assert!(a.read_due(Instant(103 * MS)));
             let now = Instant((t * 1_000.0) as u64);
             a.position_read(now, Pulses(trapezoid(distance, speed, ramp, t)), None, SLOW);
             // Aimed a quarter of the ramp before the end, within a millisecond (a pulse read
@@ -550,6 +557,32 @@ mod tests {
             SLOW,
         );
         assert!(a.eta().is_none());
+    }
+
+    /// A read in the braking tells nothing (taken as a cruise, it gives a speed too low and an
+    /// arrival too late): a read that the estimate it would give puts after the braking's start
+    /// is not one. A read late in the cruise still gives the end.
+    #[test]
+    fn a_read_in_the_braking_gives_no_estimate() {
+        let (distance, speed, ramp) = (4_000.0, 20.0, 68.18);
+        let read = |t: f64| {
+            let mut a = Approach::NONE;
+            a.command_accepted(Instant(0), &bench_v(), None, None);
+            a.command_accepted(
+                Instant(0),
+                &Command::MoveAbsolute(Pulses(4_000)),
+                Some(Pulses(0)),
+                None,
+            );
+            let at = Pulses(trapezoid(distance, speed, ramp, t));
+            a.position_read(Instant((t * 1_000.0) as u64), at, None, SLOW);
+            a.eta()
+        };
+        // The braking starts at 200 ms.
+        assert!(read(195.0).is_some());
+        for t in [205.0, 230.0, 260.0] {
+            assert_eq!(read(t), None, "read at {t} ms");
+        }
     }
 
     /// On a fast bus the estimate aims three transactions before the end, not a quarter of

@@ -14,7 +14,8 @@
 //!    they have one; never between the attempts of a frame being resent); a rejoining axis'
 //!    next step (the engine), then the polls below.
 //! 3. **Urgent position reads (R4 PNOW)**, not counted in the share below: a mover's estimate
-//!    (once its acceleration is over: a read before it tells its speed least well), and an axis
+//!    (half an acceleration into its cruise: a read nearer its start tells the speed least
+//!    well, [`approach`](super::approach)), and an axis
 //!    whose position was never read (every position register of the axis waits for it).
 //! 4. **Idle axes that are due**: [`IDLE_PERIOD_CYCLES`] cycles after their last poll (a cycle
 //!    is one transaction per axis that answers, at the transaction time measured on this bus:
@@ -35,18 +36,19 @@
 //!    stopped until two reads agree (they stop in their position band, short of where they
 //!    rest: [`approach`](super::approach)); at most [`Config::position_reads_per_cycle`] per
 //!    cycle.
-//! 7. **Status (`n`), earliest deadline first**, among the others: an idle axis, and a mover
-//!    whose arrival is estimated but not near, is due [`IDLE_PERIOD_CYCLES`] cycles after its
-//!    last poll; a mover expected within two cycles of its last poll not before its arrival (a
-//!    poll before it would only see it moving, and its status age stays within an idle axis'
-//!    bound; rule 4 passes it over too), and until then every other axis goes before it, due
-//!    or not: the bus free now goes to idle axes, which then have a poll behind them when the
-//!    movers arrive together and take the bus (it went to the mover whose arrival was nearest,
-//!    five polls in a row before each arrival: `rt-bench`, 2.5 status polls a move, now 1.3); a mover whose estimate is a read away twice a cycle;
-//!    one whose arrival cannot be estimated (a home, a point the gateway holds no row of, a
-//!    move before any `v`, one too short to reach its speed, a job without a move) or is
-//!    overdue as soon as it has been polled. Ties go to the one polled longest
-//!    ago, then in axis order from a rotating cursor. Work-conserving: when all are idle nobody waits for a deadline, so the
+//! 7. **Status (`n`), earliest deadline first**, among the others: an idle axis, a mover
+//!    whose arrival is estimated but not near, and one whose estimate is a read away (the read
+//!    goes first, rule 3), are due [`IDLE_PERIOD_CYCLES`] cycles after their last poll; a mover
+//!    expected within two cycles of its last poll not before its arrival (a poll before it
+//!    would only see it moving, and its status age stays within an idle axis' bound; rule 4
+//!    passes it over too), and until then every other axis goes before it, due or not: the bus
+//!    free now goes to idle axes, which then have a poll behind them when the movers arrive
+//!    together and take the bus (it went to the mover whose arrival was nearest, five polls in
+//!    a row before each arrival: `rt-bench`, 2.5 status polls a move, now 1.3); a mover whose
+//!    arrival cannot be estimated (a home, a point the gateway holds no row of, a move before
+//!    any `v`, one too short to reach its speed, a job without a move) or is overdue as soon
+//!    as it has been polled. Ties go to the one polled longest ago, then in axis order from a
+//!    rotating cursor. Work-conserving: when all are idle nobody waits for a deadline, so the
 //!    axes are polled round robin at the wire limit. A job frame's answer carries the axis'
 //!    status as a poll's does (complete edition §3-1-2), so it counts as one: a mover whose job
 //!    sends frames is polled that much less. (A rule that polled every mover and axis with a
@@ -55,17 +57,20 @@
 //!
 //! Measured by `scripts/bench.sh` (scenario 5: four of 16 axes moving at 115.2 kbit/s).
 //!
-//! **The trade-off left** (issue 34, `rt-bench` in docs/performance.md, "The acceleration time,
-//! and where the time came from"): with the estimate within a transaction or two, movers are
-//! seen 2-3 T after they enter their band (p99; a target of 3), but the idle axes are short of
-//! bus, not of order: at RTIM 7 a direct move costs 6.4 T (`v`, `a`, the estimate's read, one
-//! or two status polls, the read at rest), four movers take 59 % of the bus, and twelve idle
-//! axes polled with the rest wait 1.8 cycles on average, 2.4-2.5 at p99 when the movers' ends
-//! come together (points, one command less: 2.1-2.2; RTIM 3: 2.2). Two cycles at p99 needs
-//! about one frame less per move, which only the `v` (when the axis' execution area holds its
-//! velocity already: the gateway does not track it) or the read at rest (the position the PLC
-//! sees when the move is done) could give. Two movers that arrive together are still polled in
-//! turn, [`ARRIVAL_RUN`] at most before one other frame.
+//! **The trade-off left** (issue 34, `rt-bench` in docs/performance.md, "Polls that only saw a
+//! mover moving"): movers are seen 2-3 T after they enter their band (p99; a target of 3), and
+//! the idle axes within two cycles in three of `rt-bench`'s four runs. Direct moves at RTIM 7
+//! are the one short of bus: a move there costs 5.2 T (`v`, `a`, the estimate's read, one
+//! status poll or two, the read at rest), a round of four movers and the PLC's reaction about
+//! 37 T, and twelve idle axes within two cycles need 12 of every 32 T: the movers' ends and
+//! starts come together, and the idle axes wait 2.2 cycles at p99. Two ways were measured and
+//! not taken:
+//! - idle axes 7/4 cycles old before job frames: every idle p99 under 1.9, but movers at RTIM 3
+//!   at 3.6-3.8 T (a move's start waits, and arrivals meet);
+//! - no `v` when the axis' execution area holds that velocity already (an experiment): idle 1.9
+//!   at RTIM 7. The gateway would have to know the area for certain: a point move, a servo-on
+//!   after a reset, a power cycle between two polls, a teaching pendant all change it, and a
+//!   wrong guess moves the axis at a speed the PLC did not ask for.
 //!
 //! [`Config::position_reads_per_cycle`]: super::Config::position_reads_per_cycle
 //! [`Config::probe_interval`]: super::Config::probe_interval
@@ -378,9 +383,9 @@ impl Engine {
                     Some(eta) if now < eta && self.awaited(a, cycle) => Instant(u64::MAX),
                     // Arriving later: supervised as an idle axis until then.
                     Some(eta) if now < eta => last + idle_period,
-                    // Its estimate is a position read away (that goes first): meanwhile twice a
-                    // cycle.
-                    None if approach.needs_read() => last + Duration(cycle.0 / 2),
+                    // Its estimate is a position read away (that goes first, half an
+                    // acceleration into the cruise): meanwhile as an idle axis.
+                    None if approach.needs_read() => last + idle_period,
                     // No estimate possible (a home, a point the gateway holds no row of, a move
                     // too short to reach its speed, a job without a move: `approach`), or past
                     // its estimate: as often as the bus allows.
@@ -526,7 +531,7 @@ impl Engine {
         let stale = pass.moving.iter().filter(|&a| {
             let approach = &self.schedule.approach[a];
             let period = if approach.timed() { twice } else { period };
-            // (Not before its estimate's read, which comes once its acceleration is over.)
+            // (Not before its estimate's read, half an acceleration into its cruise.)
             !approach.needs_read()
                 && self.axes[a]
                     .position_at
@@ -540,7 +545,7 @@ impl Engine {
                     .position_at
                     .is_some_and(|at| at + SETTLE_GAP <= pass.now)
         });
-        // A mover's estimate, once its acceleration is over.
+        // A mover's estimate, half an acceleration into its cruise.
         let estimate = pass
             .hot
             .iter()
