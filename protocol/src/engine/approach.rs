@@ -374,6 +374,19 @@ mod tests {
         })
     }
 
+    /// An axis moving to `to` from `at` after [`bench_v`], both answered at 0.
+    fn moving(to: i32, at: Option<i32>) -> Approach {
+        let mut a = Approach::NONE;
+        a.command_accepted(Instant(0), &bench_v(), None, None);
+        a.command_accepted(
+            Instant(0),
+            &Command::MoveAbsolute(Pulses(to)),
+            at.map(Pulses),
+            None,
+        );
+        a
+    }
+
     #[test]
     fn no_estimate_without_a_target_a_start_an_acceleration_time_or_progress() {
         let mut a = Approach::NONE;
@@ -483,17 +496,6 @@ mod tests {
         // rt-bench's moves: 4000 pulses, 268.18 ms in all.
         let (distance, speed, ramp) = (4_000.0, 20.0, 68.18);
         let end = distance / speed + ramp;
-        let moving = |to: i32, at: Option<i32>| {
-            let mut a = Approach::NONE;
-            a.command_accepted(Instant(0), &bench_v(), None, None);
-            a.command_accepted(
-                Instant(0),
-                &Command::MoveAbsolute(Pulses(to)),
-                at.map(Pulses),
-                None,
-            );
-            a
-        };
         for t in [40.0, 70.0, 120.0, 180.0] {
             let mut a = moving(4_000, Some(0));
             // Half an acceleration into the cruise (102 ms), not at its start.
@@ -566,14 +568,7 @@ mod tests {
     fn a_read_in_the_braking_gives_no_estimate() {
         let (distance, speed, ramp) = (4_000.0, 20.0, 68.18);
         let read = |t: f64| {
-            let mut a = Approach::NONE;
-            a.command_accepted(Instant(0), &bench_v(), None, None);
-            a.command_accepted(
-                Instant(0),
-                &Command::MoveAbsolute(Pulses(4_000)),
-                Some(Pulses(0)),
-                None,
-            );
+            let mut a = moving(4_000, Some(0));
             let at = Pulses(trapezoid(distance, speed, ramp, t));
             a.position_read(Instant((t * 1_000.0) as u64), at, None, SLOW);
             a.eta()
@@ -592,14 +587,7 @@ mod tests {
         let (distance, speed, ramp) = (4_000.0, 20.0, 68.18);
         let end = distance / speed + ramp;
         let aim = |transaction: Duration| {
-            let mut a = Approach::NONE;
-            a.command_accepted(Instant(0), &bench_v(), None, None);
-            a.command_accepted(
-                Instant(0),
-                &Command::MoveAbsolute(Pulses(4_000)),
-                Some(Pulses(0)),
-                None,
-            );
+            let mut a = moving(4_000, Some(0));
             let read = Pulses(trapezoid(distance, speed, ramp, 100.0));
             a.position_read(Instant(100 * MS), read, None, transaction);
             a.eta().map_or(f64::NAN, |eta| end - eta.0 as f64 / 1_000.0)

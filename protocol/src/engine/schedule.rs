@@ -63,8 +63,8 @@
 //! are the one short of bus: a move there costs 5.2 T (`v`, `a`, the estimate's read, one
 //! status poll or two, the read at rest), a round of four movers and the PLC's reaction about
 //! 37 T, and twelve idle axes within two cycles need 12 of every 32 T: the movers' ends and
-//! starts come together, and the idle axes wait 2.2 cycles at p99. Two ways were measured and
-//! not taken:
+//! starts come together, and the idle axes wait 2.05-2.13 cycles at p99. Two ways were
+//! measured and not taken:
 //! - idle axes 7/4 cycles old before job frames: every idle p99 under 1.9, but movers at RTIM 3
 //!   at 3.6-3.8 T (a move's start waits, and arrivals meet);
 //! - no `v` when the axis' execution area holds that velocity already (an experiment): idle 1.9

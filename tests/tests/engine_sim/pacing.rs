@@ -175,16 +175,10 @@ fn a_move_to_a_point_whose_position_the_job_carries_is_seen_within_three_transac
     assert!(unknown > known, "unknown {unknown:.2}, known {known:.2}");
 }
 
-/// The estimate's position read comes once the mover's acceleration is over, not right after
-/// its command: a read in the first milliseconds of the acceleration tells its speed least
-/// well (the transaction's part of the time weighs most), and cost every move a transaction.
-#[test]
-fn a_movers_estimate_read_waits_until_its_acceleration_is_over() {
-    let (mut h, positions) = fast_bus();
-    let mover = axis(MOVERS[0]);
-    let (velocity, acceleration) = motion(&h);
-    // 2 x velocity / acceleration ms (engine::approach).
-    let ramp = 2_000 * u64::from(velocity.get()) / u64::from(acceleration.get());
+/// The first mover goes to its far end by a direct move (`v` then `a`, as the PLC's direct-move
+/// registers give it), to the end; returns when it started.
+fn far_move(h: &mut Harness, positions: [[i32; 2]; 4]) -> u64 {
+    let (velocity, acceleration) = motion(h);
     let from = h.now;
     let [_, far] = positions[0];
     let kind = JobKind::DirectMove {
@@ -193,7 +187,23 @@ fn a_movers_estimate_read_waits_until_its_acceleration_is_over() {
         velocity,
         acceleration,
     };
-    run_job(&mut h, Job { axis: mover, kind }, 5 * S).expect("the move");
+    let mover = axis(MOVERS[0]);
+    run_job(h, Job { axis: mover, kind }, 5 * S).expect("the move");
+    from
+}
+
+/// The estimate's position read comes after the mover's acceleration (half an acceleration into
+/// its cruise: `engine::approach`), not right after its command: a read in the first
+/// milliseconds of the acceleration tells its speed least well (the transaction's part of the
+/// time weighs most), and cost every move a transaction.
+#[test]
+fn a_movers_estimate_read_waits_until_its_acceleration_is_over() {
+    let (mut h, positions) = fast_bus();
+    let mover = axis(MOVERS[0]);
+    let (velocity, acceleration) = motion(&h);
+    // 2 x velocity / acceleration ms (engine::approach).
+    let ramp = 2_000 * u64::from(velocity.get()) / u64::from(acceleration.get());
+    let from = far_move(&mut h, positions);
     let sent = |what: &dyn Fn(&Command) -> bool| -> Vec<u64> {
         h.sent
             .iter()
@@ -230,16 +240,7 @@ fn a_movers_estimate_read_waits_until_its_acceleration_is_over() {
 fn a_mover_is_not_polled_before_its_estimate() {
     let (mut h, positions) = fast_bus();
     let mover = axis(MOVERS[0]);
-    let (velocity, acceleration) = motion(&h);
-    let [_, far] = positions[0];
-    let from = h.now;
-    let kind = JobKind::DirectMove {
-        target: Pulses(far),
-        relative: false,
-        velocity,
-        acceleration,
-    };
-    run_job(&mut h, Job { axis: mover, kind }, 5 * S).expect("the move");
+    let from = far_move(&mut h, positions);
     let polls: Vec<u64> = h
         .sent
         .iter()
