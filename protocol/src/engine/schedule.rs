@@ -36,9 +36,10 @@
 //!    stopped until two reads agree (they stop in their position band, short of where they
 //!    rest: [`approach`](super::approach)); at most [`Config::position_reads_per_cycle`] per
 //!    cycle.
-//! 7. **Status (`n`), earliest deadline first**, among the others: an idle axis, a mover
-//!    whose arrival is estimated but not near, and one whose estimate is a read away (the read
-//!    goes first, rule 3), are due [`IDLE_PERIOD_CYCLES`] cycles after their last poll; a mover
+//! 7. **Status (`n`), earliest deadline first**, among the others: an idle axis, and a mover
+//!    whose arrival is estimated but not near, are due [`IDLE_PERIOD_CYCLES`] cycles after
+//!    their last poll; a mover whose estimate is a read away (the read goes first, rule 3)
+//!    twice a cycle (a move too short to reach its speed may end before the read); a mover
 //!    expected within two cycles of its last poll not before its arrival (a poll before it
 //!    would only see it moving, and its status age stays within an idle axis' bound; rule 4
 //!    passes it over too), and until then every other axis goes before it, due or not: the bus
@@ -60,7 +61,7 @@
 //! **The trade-off left** (issue 34, `rt-bench` in docs/performance.md, "Polls that only saw a
 //! mover moving"): movers are seen 2-3 T after they enter their band (p99; a target of 3), and
 //! the idle axes within two cycles in three of `rt-bench`'s four runs. Direct moves at RTIM 7
-//! are the one short of bus: a move there costs 5.2 T (`v`, `a`, the estimate's read, one
+//! are the one short of bus: a move there costs 5.2-5.7 T (`v`, `a`, the estimate's read, one
 //! status poll or two, the read at rest), a round of four movers and the PLC's reaction about
 //! 37 T, and twelve idle axes within two cycles need 12 of every 32 T: the movers' ends and
 //! starts come together, and the idle axes wait 2.05-2.13 cycles at p99. Two ways were
@@ -384,8 +385,9 @@ impl Engine {
                     // Arriving later: supervised as an idle axis until then.
                     Some(eta) if now < eta => last + idle_period,
                     // Its estimate is a position read away (that goes first, half an
-                    // acceleration into the cruise): meanwhile as an idle axis.
-                    None if approach.needs_read() => last + idle_period,
+                    // acceleration into the cruise): meanwhile twice a cycle (a move too short
+                    // to reach its speed may end before the read).
+                    None if approach.needs_read() => last + Duration(cycle.0 / 2),
                     // No estimate possible (a home, a point the gateway holds no row of, a move
                     // too short to reach its speed, a job without a move: `approach`), or past
                     // its estimate: as often as the bus allows.
