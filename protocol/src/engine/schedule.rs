@@ -202,8 +202,6 @@ impl Schedule {
 
     /// One transaction on the line `on`: as measured, or its nominal time until one is (or
     /// after the line changed).
-    // Not inlined: the reply handler calls it too (150 B of the F103's flash).
-    #[inline(never)]
     pub(super) fn transaction(&self, on: (Baud, Rtim)) -> Duration {
         if self.measured_on == Some(on) {
             self.transaction
@@ -479,8 +477,6 @@ impl Engine {
     /// polled in its window longest ago, or whose window opened first if not polled in it (what
     /// shows a move complete soonest: by the last poll alone, a mover polled just after its
     /// estimate, still moving, waited behind every window opened since).
-    // Not inlined: two rules end in it.
-    #[inline(never)]
     fn arriving(&self, arriving: AxisSet) -> Option<Axis> {
         least(arriving.iter(), |a| {
             let eta = self.schedule.approach[a].eta().unwrap_or(Instant::ZERO);
