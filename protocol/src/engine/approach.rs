@@ -83,7 +83,7 @@ pub(super) struct Approach {
 }
 
 /// The position reads a move's estimate may ask for beyond the per-cycle share: one, and one
-/// spare for a read that came too early (the axis started late) or from a move too short.
+/// spare for a read that came too early (the axis had not started yet).
 const ESTIMATE_READS: u8 = 2;
 
 /// The position reads that may follow a stop until two in a row agree, each at least
@@ -204,11 +204,19 @@ impl Approach {
             return;
         }
         let t = u32::try_from(now.0.saturating_sub(self.since.0)).unwrap_or(u32::MAX);
-        if let Some(end) = trapezoid_end(start, position, target, self.ramp, t) {
-            let transaction = u32::try_from(transaction.0).unwrap_or(u32::MAX);
-            let early = (self.ramp / 4).min(transaction.saturating_mul(3));
-            self.eta = self.since + Duration(end - u64::from(early));
-            self.eta_known = true;
+        match trapezoid_end(start, position, target, self.ramp, t) {
+            Some(end) => {
+                let transaction = u32::try_from(transaction.0).unwrap_or(u32::MAX);
+                let early = (self.ramp / 4).min(transaction.saturating_mul(3));
+                self.eta = self.since + Duration(end - u64::from(early));
+                self.eta_known = true;
+            }
+            // Under way a ramp after its command and still no estimate: in its braking, or a
+            // move too short to reach its speed. A later read is no better (deeper in the
+            // braking), so the spare read is not asked for: it went before the idle axes due,
+            // four movers' in a row (`rt-bench`, direct moves at RTIM 7).
+            None if t >= self.ramp && position != start => self.reads = ESTIMATE_READS,
+            None => {}
         }
     }
 
@@ -578,6 +586,22 @@ mod tests {
         for t in [205.0, 230.0, 260.0] {
             assert_eq!(read(t), None, "read at {t} ms");
         }
+    }
+
+    /// A read that found the axis not yet started leaves a spare read; one in the braking
+    /// leaves none, since a later one would be deeper in it (the spare went before the idle
+    /// axes, four movers' in a row).
+    #[test]
+    fn only_a_read_before_the_start_asks_for_a_spare() {
+        let (distance, speed, ramp) = (4_000.0, 20.0, 68.18);
+        let after = |t: f64, at: i32| {
+            let mut a = moving(4_000, Some(0));
+            a.position_read(Instant((t * 1_000.0) as u64), Pulses(at), None, SLOW);
+            a.needs_read()
+        };
+        assert!(after(102.0, 0), "not started: the spare read");
+        let braking = trapezoid(distance, speed, ramp, 230.0);
+        assert!(!after(230.0, braking), "in the braking: no spare");
     }
 
     /// On a fast bus the estimate aims three transactions before the end, not a quarter of
