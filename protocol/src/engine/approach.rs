@@ -25,6 +25,10 @@
 //!   whole distance at that speed plus one acceleration time ([`trapezoid_end`]). A read is timed by its answer, as
 //!   the command is: each is a transaction after its controller took it, so the time between
 //!   them is right (timing the command by its request made every estimate a transaction late).
+//!   The end, though, is counted from the command's answer, which comes RTIM and a reply's wire
+//!   time after the move started: the estimate is late by that much (4.4 ms in the virtual
+//!   bench), and the aim below was measured with that lag inside it (docs/performance.md, "A
+//!   spare read, a rule tried, and where the aim lands").
 //!
 //! The estimate aims a quarter of the acceleration time before the end, or three transactions
 //! (as measured on the bus) if that is less: PFIN comes when the axis enters its position band,

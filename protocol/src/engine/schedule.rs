@@ -59,19 +59,24 @@
 //! Measured by `scripts/bench.sh` (scenario 5: four of 16 axes moving at 115.2 kbit/s).
 //!
 //! **The trade-off left** (issue 34, `rt-bench` in docs/performance.md, "Polls that only saw a
-//! mover moving"): movers are seen 2-3 T after they enter their band (p99; a target of 3), and
-//! the idle axes within two cycles in three of `rt-bench`'s four runs. Direct moves at RTIM 7
+//! mover moving" and the round after it): movers are seen 2-3.1 T after they enter their band
+//! (p99; a target of 3: point moves at RTIM 7 sit on it), and the idle axes within two cycles
+//! in three of `rt-bench`'s four runs. Direct moves at RTIM 7
 //! are the one short of bus: a move there costs 5.2-5.7 T (`v`, `a`, the estimate's read, one
 //! status poll or two, the read at rest), a round of four movers and the PLC's reaction about
 //! 37 T, and twelve idle axes within two cycles need 12 of every 32 T: the movers' ends and
-//! starts come together, and the idle axes wait 2.05-2.13 cycles at p99. Two ways were
+//! starts come together, and the idle axes wait 2.03-2.13 cycles at p99. Three ways were
 //! measured and not taken:
 //! - idle axes 7/4 cycles old before job frames: every idle p99 under 1.9, but movers at RTIM 3
 //!   at 3.6-3.8 T (a move's start waits, and arrivals meet);
 //! - no `v` when the axis' execution area holds that velocity already (an experiment): idle 1.9
 //!   at RTIM 7. The gateway would have to know the area for certain: a point move, a servo-on
 //!   after a reset, a power cycle between two polls, a teaching pendant all change it, and a
-//!   wrong guess moves the axis at a speed the PLC did not ask for.
+//!   wrong guess moves the axis at a speed the PLC did not ask for;
+//! - an idle axis 15/8 cycles old before a job frame: idle 1.90-1.94 at RTIM 7, but the virtual
+//!   bench's movers 3.18 T: it moved two movers' windows onto others', windows that open after
+//!   the band is entered (the arrival's aim, [`approach`](super::approach), is where the next
+//!   step lies).
 //!
 //! [`Config::position_reads_per_cycle`]: super::Config::position_reads_per_cycle
 //! [`Config::probe_interval`]: super::Config::probe_interval
