@@ -22,22 +22,25 @@
 //!   `rt-bench`, point moves at RTIM 7; half an acceleration later the error is halved, and a
 //!   read that lands in the braking is known by the end it gives, and gives none). With the
 //!   acceleration time known, the distance covered gives the speed, and the speed the end: the
-//!   whole distance at that speed plus one acceleration time ([`trapezoid_end`]). A read is timed by its answer, as
-//!   the command is: each is a transaction after its controller took it, so the time between
-//!   them is right (timing the command by its request made every estimate a transaction late).
-//!   The end, though, is counted from the command's answer, which comes RTIM and a reply's wire
-//!   time after the move started: the estimate is late by that much (4.4 ms in the virtual
-//!   bench), and the aim below was measured with that lag inside it (docs/performance.md, "A
-//!   spare read, a rule tried, and where the aim lands").
+//!   whole distance at that speed plus one acceleration time ([`trapezoid_end`]). A read is
+//!   timed by its answer, as the command is: each is a transaction after its controller took
+//!   it, so the time between them is right (timing the command by its request made every
+//!   estimate a transaction late).
 //!
-//! The estimate aims a quarter of the acceleration time before the end, or three transactions
-//! (as measured on the bus) if that is less: PFIN comes when the axis enters its position band,
-//! before the target (§4-3-1), and the schedule polls it from then on. On a fast bus a quarter
-//! of the acceleration is many transactions (17 ms is four at RTIM 3 without wire time), each
-//! poll in them sees the axis still moving, and the idle axes pay for them (`rt-bench`, direct
-//! moves at RTIM 3: 4.2 status polls a move and idle axes at 2.06-2.07 cycles; 3.3-3.4 and
-//! 1.73-1.83 with the three); three are the margin the estimate's errors of a few milliseconds
-//! (the host's timing) need. A move the gateway cannot model (a home, a point whose row it does not hold or whose
+//! The estimate aims where a poll finds PFIN. PFIN comes when the braking enters the position
+//! band, before the target (§4-3-1): `sqrt(2 × band / deceleration)` before the end
+//! ([`band_edge`], a band of [`BAND`]). The end counts from the command's answer, which came
+//! RTIM and a reply's wire time after the controller took the command and started; a poll sees
+//! the status when its request reaches the controller, a request's wire time after it is sent.
+//! Together that is one transaction (as measured on the bus), so the poll is sent a transaction
+//! before the band's edge, and a quarter transaction later for the estimate's errors of a few
+//! milliseconds (the host's timing): a poll too early costs a whole transaction, one too late
+//! only the lateness. The aim before, a quarter of the acceleration time before the end, held
+//! both by chance: it was 4 ms after the band in the virtual bench (a 34 ms acceleration) and a
+//! transaction before it in `rt-bench`'s (68 ms), where a third of the moves at RTIM 7 were
+//! polled twice (docs/performance.md, "A spare read, a rule tried, and where the aim lands").
+//!
+//! A move the gateway cannot model (a home, a point whose row it does not hold or whose
 //! motion comes from the common parameters, a move before any `v`, one too short to reach its
 //! speed) has no estimate, and the schedule polls its axis as often as the bus allows. (An
 //! earlier model took the speed between reads without the acceleration time: a read in the
@@ -202,17 +205,22 @@ impl Approach {
         let Some(start) = self.start else {
             return;
         };
-        // Once it brakes (by the estimate: three quarters of a ramp before the aim) a read
-        // would give a speed too low: the estimate stands.
-        if self.eta_known && now + Duration(u64::from(self.ramp / 4 * 3)) > self.eta {
+        // Once it may brake (a ramp before the end; the aim is before the end) a read would
+        // give a speed too low: the estimate stands.
+        if self.eta_known && now + Duration(u64::from(self.ramp)) > self.eta {
             return;
         }
         let t = u32::try_from(now.0.saturating_sub(self.since.0)).unwrap_or(u32::MAX);
         match trapezoid_end(start, position, target, self.ramp, t) {
             Some(end) => {
-                let transaction = u32::try_from(transaction.0).unwrap_or(u32::MAX);
-                let early = (self.ramp / 4).min(transaction.saturating_mul(3));
-                self.eta = self.since + Duration(end - u64::from(early));
+                let distance = target.0.abs_diff(start.0);
+                let edge = band_edge(distance, self.ramp, end - u64::from(self.ramp));
+                // A poll finds PFIN if its request reaches the controller after the band's
+                // edge: sent a transaction (the command's answer's lag, `since` counts from it,
+                // and the request's wire time) before the edge, and a quarter transaction
+                // later, for the estimate's errors (a poll too early costs a transaction).
+                let early = u64::from(edge) + transaction.0 - transaction.0 / 4;
+                self.eta = self.since + Duration(end.saturating_sub(early));
                 self.eta_known = true;
             }
             // Under way a ramp after its command and still no estimate: in its braking, or a
@@ -306,6 +314,45 @@ impl Approach {
     }
 }
 
+/// The position band the arrival is aimed at, in pulses: 0.1 mm at 100 pulses/mm, the band of
+/// the brief edition's worked example ("Enter New Point in Point Table", 0.1 mm) and of the
+/// controllers' factory parameters as the simulator has them. The gateway neither reads the
+/// axis' INP (complete edition §7-2-1) nor takes a point row's band (§7-2-2). A band twice as
+/// wide is entered `sqrt(2)` times as early, 3.4 ms sooner at 0.3 G: the poll at the aim sees
+/// PFIN that much after it came. A narrower one is entered later, and a poll before it costs
+/// one more.
+const BAND: u64 = 10;
+
+/// How long before the end of a move (µs) its braking enters the position band ([`BAND`]), PFIN
+/// (§4-3-1): `sqrt(2 × band / deceleration)`, the deceleration `distance / at_speed / ramp`
+/// (pulses/µs²; `at_speed`: the whole distance at its speed, µs).
+fn band_edge(distance: u32, ramp: u32, at_speed: u64) -> u32 {
+    let square = div(
+        (2 * BAND * u64::from(ramp)).saturating_mul(at_speed),
+        divisor(distance),
+    );
+    isqrt(u32::try_from(square).unwrap_or(u32::MAX))
+}
+
+/// The integer square root, digit by digit (core's `isqrt` brings a table the F103's flash has
+/// no room for).
+fn isqrt(n: u32) -> u32 {
+    let (mut rest, mut root, mut bit) = (n, 0u32, 1u32 << 30);
+    while bit > n {
+        bit >>= 2;
+    }
+    while bit != 0 {
+        if rest >= root + bit {
+            rest -= root + bit;
+            root = (root >> 1) + bit;
+        } else {
+            root >>= 1;
+        }
+        bit >>= 2;
+    }
+    root
+}
+
 /// The acceleration time (µs) of a move at `velocity` (0.2 rpm) reached at `acceleration`
 /// (0.1 rpm/ms): 2 × velocity / acceleration ms, whatever the lead and the encoder (complete
 /// edition §4-4-20, `v`; the same units as a point's VCMD and ACMD, §7-2-2).
@@ -350,8 +397,22 @@ mod tests {
 
     const MS: u64 = 1_000;
 
-    /// A transaction long enough that the arrival's margin is the quarter acceleration.
-    const SLOW: Duration = Duration(1_000 * MS);
+    /// A bus that takes no time: the arrival is aimed at the band's edge itself.
+    const INSTANT: Duration = Duration(0);
+
+    /// A transaction at RTIM 7 over a pseudo-terminal (`rt-bench`).
+    const RTIM_7: Duration = Duration(8_400);
+
+    /// How long before the end a trapezoid at `speed` (pulses/ms) reached in `ramp` ms enters
+    /// a band of [`BAND`] pulses, ms: found by walking the braking, not by `band_edge`'s formula.
+    fn band_entry(speed: f64, ramp: f64) -> f64 {
+        let deceleration = speed / ramp;
+        let mut before = 0.0;
+        while deceleration * before * before / 2.0 <= BAND as f64 {
+            before += 0.01;
+        }
+        before
+    }
 
     /// Where a trapezoidal move from 0 to `distance` is at `t` ms: accelerating evenly for
     /// `ramp` ms to `speed` pulses/ms, cruising, braking as long as it accelerated.
@@ -404,7 +465,7 @@ mod tests {
         let mut a = Approach::NONE;
         let point = Command::MoveToPoint(crate::PositionNo::MIN);
         a.command_accepted(Instant(0), &point, Some(Pulses(0)), None);
-        a.position_read(Instant(80 * MS), Pulses(1_000), None, SLOW);
+        a.position_read(Instant(80 * MS), Pulses(1_000), None, INSTANT);
         assert_eq!(a.eta(), None, "a point's position is unknown here");
         // Known to its job (the gateway's cached row), but its motion from the common
         // parameters: no acceleration time.
@@ -415,14 +476,14 @@ mod tests {
             })
         };
         a.command_accepted(Instant(0), &point, Some(Pulses(0)), row(None));
-        a.position_read(Instant(80 * MS), Pulses(1_000), None, SLOW);
+        a.position_read(Instant(80 * MS), Pulses(1_000), None, INSTANT);
         assert!(a.eta().is_none() && !a.timed());
         // With its own: estimated as an `a` after a `v` is.
         let motion = bench_motion();
         a.clear();
         a.command_accepted(Instant(0), &point, Some(Pulses(0)), row(motion));
         let at = |t| Pulses(trapezoid(4_000.0, 20.0, 68.18, t));
-        a.position_read(Instant(80 * MS), at(80.0), None, SLOW);
+        a.position_read(Instant(80 * MS), at(80.0), None, INSTANT);
         assert!(a.eta().is_some());
         // The same `a` without a start (the axis was not seen at rest): none.
         a.command_accepted(
@@ -431,7 +492,7 @@ mod tests {
             None,
             None,
         );
-        a.position_read(Instant(80 * MS), at(80.0), None, SLOW);
+        a.position_read(Instant(80 * MS), at(80.0), None, INSTANT);
         assert_eq!(a.eta(), None, "no start");
         // From a known start: not while it stands, nor while it moves away.
         a.clear();
@@ -441,9 +502,9 @@ mod tests {
             Some(Pulses(0)),
             None,
         );
-        a.position_read(Instant(80 * MS), Pulses(0), None, SLOW);
+        a.position_read(Instant(80 * MS), Pulses(0), None, INSTANT);
         assert_eq!(a.eta(), None, "standing still");
-        a.position_read(Instant(90 * MS), Pulses(-5), None, SLOW);
+        a.position_read(Instant(90 * MS), Pulses(-5), None, INSTANT);
         assert_eq!(a.eta(), None, "moving away");
         assert!(!a.needs_read(), "two reads spent");
         a.clear();
@@ -452,7 +513,7 @@ mod tests {
 
     /// A position read of a stopped axis at `position`, `before` the read before.
     fn read(a: &mut Approach, position: i32, before: i32) {
-        a.position_read(Instant(0), Pulses(position), Some(Pulses(before)), SLOW)
+        a.position_read(Instant(0), Pulses(position), Some(Pulses(before)), INSTANT)
     }
 
     #[test]
@@ -514,11 +575,16 @@ mod tests {
             assert!(!a.read_due(Instant(100 * MS)), "too near its acceleration");
             assert!(a.read_due(Instant(103 * MS)));
             let now = Instant((t * 1_000.0) as u64);
-            a.position_read(now, Pulses(trapezoid(distance, speed, ramp, t)), None, SLOW);
-            // Aimed a quarter of the ramp before the end, within a millisecond (a pulse read
+            a.position_read(
+                now,
+                Pulses(trapezoid(distance, speed, ramp, t)),
+                None,
+                INSTANT,
+            );
+            // Aimed where the braking enters the band, within a millisecond (a pulse read
             // early in the acceleration weighs most; a transaction takes 4 ms or more).
             let eta = a.eta().map(|eta| eta.0 as f64 / 1_000.0);
-            let aim = end - ramp / 4.0;
+            let aim = end - band_entry(speed, ramp);
             assert!(
                 eta.is_some_and(|eta| (eta - aim).abs() < 1.0),
                 "read at {t} ms: {eta:?}, not {aim}"
@@ -530,7 +596,7 @@ mod tests {
                 late,
                 Pulses(trapezoid(distance, speed, ramp, 250.0)),
                 None,
-                SLOW,
+                INSTANT,
             );
             assert_eq!(a.eta().map(|eta| eta.0 as f64 / 1_000.0), eta);
         }
@@ -547,18 +613,20 @@ mod tests {
             Instant(100 * MS),
             Pulses(4_000 - trapezoid(distance, speed, ramp, 100.0)),
             None,
-            SLOW,
+            INSTANT,
         );
         assert!(a
             .eta()
-            .is_some_and(|eta| (eta.0 as f64 / 1_000.0 - (end - ramp / 4.0)).abs() < 1.0));
+            .is_some_and(
+                |eta| (eta.0 as f64 / 1_000.0 - (end - band_entry(speed, ramp))).abs() < 1.0
+            ));
         // Before half its ramp a read tells too little: no estimate, and another read is due.
         let mut a = moving(4_000, Some(0));
         a.position_read(
             Instant(20 * MS),
             Pulses(trapezoid(distance, speed, ramp, 20.0)),
             None,
-            SLOW,
+            INSTANT,
         );
         assert!(a.eta().is_none() && a.needs_read());
         // A move too short to reach its speed (a triangle: under 1364 pulses) is not a
@@ -568,7 +636,7 @@ mod tests {
             Instant(60 * MS),
             Pulses(trapezoid(distance, speed, ramp, 60.0)),
             None,
-            SLOW,
+            INSTANT,
         );
         assert!(a.eta().is_none());
     }
@@ -582,7 +650,7 @@ mod tests {
         let read = |t: f64| {
             let mut a = moving(4_000, Some(0));
             let at = Pulses(trapezoid(distance, speed, ramp, t));
-            a.position_read(Instant((t * 1_000.0) as u64), at, None, SLOW);
+            a.position_read(Instant((t * 1_000.0) as u64), at, None, INSTANT);
             a.eta()
         };
         // The braking starts at 200 ms.
@@ -600,7 +668,7 @@ mod tests {
         let (distance, speed, ramp) = (4_000.0, 20.0, 68.18);
         let after = |t: f64, at: i32| {
             let mut a = moving(4_000, Some(0));
-            a.position_read(Instant((t * 1_000.0) as u64), Pulses(at), None, SLOW);
+            a.position_read(Instant((t * 1_000.0) as u64), Pulses(at), None, INSTANT);
             a.needs_read()
         };
         assert!(after(102.0, 0), "not started: the spare read");
@@ -608,26 +676,53 @@ mod tests {
         assert!(!after(230.0, braking), "in the braking: no spare");
     }
 
-    /// On a fast bus the estimate aims three transactions before the end, not a quarter of
-    /// the acceleration time: the polls in between would only see the axis moving.
     #[test]
-    fn on_a_fast_bus_the_estimate_aims_three_transactions_before_the_end() {
-        let (distance, speed, ramp) = (4_000.0, 20.0, 68.18);
-        let end = distance / speed + ramp;
-        let aim = |transaction: Duration| {
-            let mut a = moving(4_000, Some(0));
-            let read = Pulses(trapezoid(distance, speed, ramp, 100.0));
-            a.position_read(Instant(100 * MS), read, None, transaction);
-            a.eta().map_or(f64::NAN, |eta| end - eta.0 as f64 / 1_000.0)
-        };
-        // 4.4 ms (RTIM 3 over a pseudo-terminal): 13.2 ms early, not 17.
-        assert!(
-            (aim(Duration(4_400)) - 13.2).abs() < 1.0,
-            "{}",
-            aim(Duration(4_400))
-        );
-        // 8.4 ms (RTIM 7): the quarter acceleration, 17 ms, is less.
-        assert!((aim(Duration(8_400)) - ramp / 4.0).abs() < 1.0);
+    fn isqrt_is_the_floor_of_the_square_root() {
+        for n in (0..70_000u32).chain([u32::MAX, u32::MAX - 1, 1 << 30, (1 << 30) - 1]) {
+            assert_eq!(isqrt(n), n.isqrt(), "{n}");
+        }
+    }
+
+    /// The arrival is aimed so that a poll's request reaches the controller just after the
+    /// braking enters the band: a transaction before the band's edge (the command's answer came
+    /// that much after the move started, and the request takes its wire time), plus a quarter
+    /// transaction. The old aim, a quarter of the acceleration before the end or three
+    /// transactions if less, was 4 ms late in the virtual bench (a 34 ms acceleration) and a
+    /// transaction early in rt-bench's (68 ms).
+    #[test]
+    fn the_arrival_is_aimed_a_transaction_before_the_band_and_a_quarter() {
+        for (speed, ramp) in [(20.0_f64, 68.18_f64), (10.0, 34.09), (2.0, 68.18)] {
+            let distance = 8_000.0;
+            let end = distance / speed + ramp;
+            // Mid-cruise: a pulse's rounding weighs least there.
+            let read_at = end / 2.0;
+            let mut a = Approach::NONE;
+            let mut v = Command::Status;
+            if let (Some(velocity), Some(acceleration)) = (
+                Velocity::new((speed * 375.0) as u16),
+                Acceleration::new((2.0 * speed * 375.0 / ramp).round() as u16),
+            ) {
+                v = Command::SetVelocityAcceleration {
+                    velocity,
+                    acceleration,
+                };
+            }
+            a.command_accepted(Instant(0), &v, None, None);
+            a.command_accepted(
+                Instant(0),
+                &Command::MoveAbsolute(Pulses(8_000)),
+                Some(Pulses(0)),
+                None,
+            );
+            let read = Pulses(trapezoid(distance, speed, ramp, read_at));
+            a.position_read(Instant((read_at * 1_000.0) as u64), read, None, RTIM_7);
+            let aim = end - band_entry(speed, ramp) - 8.4 + 8.4 / 4.0;
+            let eta = a.eta().map_or(f64::NAN, |eta| eta.0 as f64 / 1_000.0);
+            assert!(
+                (eta - aim).abs() < 1.0,
+                "{speed} pulses/ms: {eta} ms, not {aim}"
+            );
+        }
     }
 
     #[test]
@@ -684,12 +779,12 @@ mod tests {
         a.command_accepted(Instant(u64::MAX - 1), &slowest, None, None);
         let far = Command::MoveAbsolute(Pulses(i32::MAX));
         a.command_accepted(Instant(u64::MAX - 1), &far, Some(Pulses(i32::MIN)), None);
-        a.position_read(Instant(u64::MAX), Pulses(i32::MIN + 1), None, SLOW);
+        a.position_read(Instant(u64::MAX), Pulses(i32::MIN + 1), None, INSTANT);
         assert_eq!(a.eta(), None, "a microsecond in: not half its ramp");
         // (At rest again: the start is where it was read.)
         a.clear();
         a.command_accepted(Instant(0), &far, Some(Pulses(i32::MIN)), None);
-        a.position_read(Instant(u64::MAX), Pulses(i32::MIN + 1), None, SLOW);
+        a.position_read(Instant(u64::MAX), Pulses(i32::MIN + 1), None, INSTANT);
         // 2^32 pulses at one every 71 minutes: far ahead, and no overflow on the way.
         let eta = a.eta();
         assert!(eta.is_some_and(|eta| eta.0 > u64::MAX / 2), "{eta:?}");

@@ -58,15 +58,15 @@
 //!
 //! Measured by `scripts/bench.sh` (scenario 5: four of 16 axes moving at 115.2 kbit/s).
 //!
-//! **The trade-off left** (issue 34, `rt-bench` in docs/performance.md, "Polls that only saw a
-//! mover moving" and the round after it): movers are seen 2-3.1 T after they enter their band
-//! (p99; a target of 3: point moves at RTIM 7 sit on it), and the idle axes within two cycles
-//! in three of `rt-bench`'s four runs. Direct moves at RTIM 7
-//! are the one short of bus: a move there costs 5.2-5.7 T (`v`, `a`, the estimate's read, one
-//! status poll or two, the read at rest), a round of four movers and the PLC's reaction about
-//! 37 T, and twelve idle axes within two cycles need 12 of every 32 T: the movers' ends and
-//! starts come together, and the idle axes wait 2.03-2.13 cycles at p99. Three ways were
-//! measured and not taken:
+//! **Where the bus is short** (issue 34, `rt-bench` in docs/performance.md, its rounds from
+//! "Polls that only saw a mover moving" on): direct moves at RTIM 7. A move there costs about
+//! 5.2 T (`v`, `a`, the estimate's read, a status poll, the read at rest), a round of four movers
+//! and the PLC's reaction about 37 T, and twelve idle axes within two cycles need 12 of every
+//! 32 T, while the movers' ends and starts come together. Both targets are met there (movers
+//! 2.1-2.4 T at p99, idle axes 1.88-1.90 cycles) since a mover's arrival poll finds PFIN the
+//! first time in most moves ([`approach`](super::approach): it is aimed a transaction before the
+//! band's edge). Before that, at 1.3 polls a move, the idle axes waited 2.03-2.13 cycles, and
+//! three rules were measured and not taken; they stay out:
 //! - idle axes 7/4 cycles old before job frames: every idle p99 under 1.9, but movers at RTIM 3
 //!   at 3.6-3.8 T (a move's start waits, and arrivals meet);
 //! - no `v` when the axis' execution area holds that velocity already (an experiment): idle 1.9
@@ -74,9 +74,7 @@
 //!   after a reset, a power cycle between two polls, a teaching pendant all change it, and a
 //!   wrong guess moves the axis at a speed the PLC did not ask for;
 //! - an idle axis 15/8 cycles old before a job frame: idle 1.90-1.94 at RTIM 7, but the virtual
-//!   bench's movers 3.18 T: it moved two movers' windows onto others', windows that open after
-//!   the band is entered (the arrival's aim, [`approach`](super::approach), is where the next
-//!   step lies).
+//!   bench's movers 3.18 T (it moved two movers' windows onto others').
 //!
 //! [`Config::position_reads_per_cycle`]: super::Config::position_reads_per_cycle
 //! [`Config::probe_interval`]: super::Config::probe_interval
